@@ -1,0 +1,365 @@
+#include "controller/gcode.hpp"
+
+#include <array>
+#include <cctype>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include <fmt/format.h>
+
+#include "twin/core/error.hpp"
+#include "twin/core/units.hpp"
+
+namespace twin::controller {
+namespace {
+
+/// Arc end radius may differ from the start radius by this much (absolute)
+/// or by this fraction of the radius, whichever is larger.
+constexpr double kArcRadiusTolerance_mm = 0.002;
+constexpr double kArcRadiusTolerance_rel = 1e-3;
+
+struct Word {
+  char letter{};
+  double value{0.0};
+  std::string text;  // as written, for messages
+};
+
+/// One program line: the words it holds, at most one per letter except G/M.
+struct LineWords {
+  std::vector<double> g;
+  std::vector<double> m;
+  std::array<std::optional<double>, 26> by_letter{};
+  std::array<std::string, 26> text_by_letter{};
+  bool has(char c) const { return by_letter[static_cast<std::size_t>(c - 'A')].has_value(); }
+  double get(char c) const { return *by_letter[static_cast<std::size_t>(c - 'A')]; }
+};
+
+class Parser {
+ public:
+  Parser(std::string_view source_name, const AxisArray<double>& start_mm, double rapid_mm_per_min)
+      : name_(source_name), pos_mm_(start_mm), rapid_mm_per_min_(rapid_mm_per_min) {}
+
+  Program run(std::string_view text) {
+    Program program;
+    program.source_name = std::string(name_);
+    std::size_t begin = 0;
+    line_ = 0;
+    while (begin <= text.size() && !ended_) {
+      std::size_t end = text.find('\n', begin);
+      if (end == std::string_view::npos) end = text.size();
+      ++line_;
+      std::string_view raw = text.substr(begin, end - begin);
+      if (!raw.empty() && raw.back() == '\r') raw.remove_suffix(1);
+      parse_line(raw, program);
+      if (end == text.size()) break;
+      begin = end + 1;
+    }
+    program.spindle_rpm_at_end = spindle_rpm();
+    return program;
+  }
+
+ private:
+  [[noreturn]] void fail(const std::string& what, std::string_view word) const {
+    throw ConfigError(fmt::format("{}:{}: {} ({})", name_, line_, what, word));
+  }
+
+  /// Removes comments and blanks; returns the upper-cased word text.
+  std::string clean(std::string_view raw) const {
+    std::string out;
+    bool in_paren = false;
+    for (char c : raw) {
+      if (in_paren) {
+        if (c == ')') in_paren = false;
+        continue;
+      }
+      if (c == '(') {
+        in_paren = true;
+        continue;
+      }
+      if (c == ')') fail("closing parenthesis without opening one", raw);
+      if (c == ';') break;
+      if (std::isspace(static_cast<unsigned char>(c))) continue;
+      out.push_back(static_cast<char>(std::toupper(static_cast<unsigned char>(c))));
+    }
+    if (in_paren) fail("comment not closed", raw);
+    return out;
+  }
+
+  /// Strict number: [+-] digits [. digits] or [+-] . digits.
+  double parse_number(std::string_view s, std::string_view word) const {
+    std::size_t i = 0;
+    if (i < s.size() && (s[i] == '+' || s[i] == '-')) ++i;
+    std::size_t digits = 0;
+    bool dot = false;
+    for (; i < s.size(); ++i) {
+      if (std::isdigit(static_cast<unsigned char>(s[i]))) {
+        ++digits;
+      } else if (s[i] == '.' && !dot) {
+        dot = true;
+      } else {
+        fail("malformed number", word);
+      }
+    }
+    if (digits == 0) fail("malformed number", word);
+    std::string copy(s);
+    std::size_t used = 0;
+    double v = 0.0;
+    try {
+      v = std::stod(copy, &used);
+    } catch (const std::exception&) {
+      fail("malformed number", word);
+    }
+    if (used != copy.size() || !std::isfinite(v)) fail("malformed number", word);
+    return v;
+  }
+
+  LineWords split_words(const std::string& s) const {
+    LineWords w;
+    std::size_t i = 0;
+    while (i < s.size()) {
+      const char letter = s[i];
+      if (letter < 'A' || letter > 'Z') fail("expected a letter", s.substr(i));
+      std::size_t j = i + 1;
+      while (j < s.size() && !(s[j] >= 'A' && s[j] <= 'Z')) ++j;
+      const std::string word = s.substr(i, j - i);
+      const double v = parse_number(std::string_view(word).substr(1), word);
+      if (letter == 'G') {
+        w.g.push_back(v);
+      } else if (letter == 'M') {
+        w.m.push_back(v);
+      } else {
+        const auto idx = static_cast<std::size_t>(letter - 'A');
+        if (w.by_letter[idx].has_value()) fail(fmt::format("word {} given twice", letter), word);
+        w.by_letter[idx] = v;
+        w.text_by_letter[idx] = word;
+      }
+      i = j;
+    }
+    return w;
+  }
+
+  double spindle_rpm() const { return spindle_dir_ * spindle_speed_rpm_; }
+
+  void parse_line(std::string_view raw, Program& program) {
+    std::string s = clean(raw);
+    if (s.empty()) return;
+    if (s.front() == '%') return;
+    const LineWords w = split_words(s);
+    static constexpr std::string_view kSupportedLetters = "FIJKNPRSTXYZ";
+    for (std::size_t idx = 0; idx < 26; ++idx) {
+      if (!w.by_letter[idx].has_value()) continue;
+      if (kSupportedLetters.find(static_cast<char>('A' + idx)) == std::string_view::npos)
+        fail("unsupported word", w.text_by_letter[idx]);
+    }
+
+    std::optional<MotionKind> motion_this_line;
+    bool dwell = false;
+    bool set_g64 = false;
+    for (double g : w.g) {
+      const double gr = std::round(g * 10.0) / 10.0;
+      const std::string word = fmt::format("G{}", g);
+      if (std::abs(g - gr) > 1e-9) fail("unknown G code", word);
+      const int code10 = static_cast<int>(std::lround(gr * 10.0));
+      auto set_motion = [&](MotionKind k) {
+        if (motion_this_line || dwell) fail("two motion codes on one line", word);
+        motion_this_line = k;
+      };
+      switch (code10) {
+        case 0: set_motion(MotionKind::kRapid); break;
+        case 10: set_motion(MotionKind::kLinear); break;
+        case 20: set_motion(MotionKind::kArcCw); break;
+        case 30: set_motion(MotionKind::kArcCcw); break;
+        case 40:
+          if (motion_this_line || dwell) fail("two motion codes on one line", word);
+          dwell = true;
+          break;
+        case 170: break;
+        case 180:
+        case 190: fail("only the XY plane (G17) is supported", word);
+        case 200: mm_per_unit_ = kMmPerInch; break;
+        case 210: mm_per_unit_ = 1.0; break;
+        case 900: incremental_ = false; break;
+        case 910: incremental_ = true; break;
+        case 610: exact_stop_ = true; break;
+        case 640:
+          exact_stop_ = false;
+          set_g64 = true;
+          break;
+        case 400:  // cutter compensation off: it is never on
+        case 490:  // tool length offset cancel: none is applied
+        case 540:  // first work offset: identity in the twin
+        case 800:  // canned cycle cancel: none is supported
+        case 940:  // feed per minute: the only feed mode
+          break;
+        default: fail("unknown G code", word);
+      }
+    }
+    bool program_end = false;
+    for (double m : w.m) {
+      const std::string word = fmt::format("M{}", m);
+      if (m != std::round(m)) fail("unknown M code", word);
+      switch (static_cast<int>(m)) {
+        case 3: spindle_dir_ = 1.0; break;
+        case 4: spindle_dir_ = -1.0; break;
+        case 5: spindle_dir_ = 0.0; break;
+        case 2:
+        case 30: program_end = true; break;
+        case 8:
+        case 9: break;  // coolant: no effect on the twin
+        default: fail("unknown M code", word);
+      }
+    }
+
+    if (w.has('F')) {
+      const double f = w.get('F');
+      if (!(f > 0.0)) fail("feed must be > 0", w.text_by_letter['F' - 'A']);
+      feed_mm_per_min_ = f * mm_per_unit_;
+    }
+    if (w.has('S')) {
+      const double sp = w.get('S');
+      if (sp < 0.0) fail("spindle speed must be >= 0", w.text_by_letter['S' - 'A']);
+      spindle_speed_rpm_ = sp;
+    }
+    if (w.has('P')) {
+      const double p = w.get('P');
+      const std::string& word = w.text_by_letter['P' - 'A'];
+      if (dwell) {
+        if (p < 0.0) fail("dwell must be >= 0", word);
+      } else if (set_g64) {
+        if (p < 0.0) fail("blend tolerance must be >= 0", word);
+        blend_tolerance_mm_ = p * mm_per_unit_;
+      } else {
+        fail("P without G4 or G64", word);
+      }
+    } else if (set_g64) {
+      blend_tolerance_mm_ = 0.0;
+    }
+    if (dwell && !w.has('P')) fail("G4 needs P (seconds)", "G4");
+
+    if (motion_this_line) motion_ = motion_this_line;
+    const bool has_axis = w.has('X') || w.has('Y') || w.has('Z');
+    const bool has_arc_word = w.has('I') || w.has('J') || w.has('K') || w.has('R');
+
+    Block base;
+    base.line = line_;
+    base.start_mm = pos_mm_;
+    base.end_mm = pos_mm_;
+    base.center_mm = pos_mm_;
+    base.spindle_rpm = spindle_rpm();
+    base.exact_stop = exact_stop_;
+    base.blend_tolerance_mm = blend_tolerance_mm_;
+
+    if (dwell) {
+      if (has_axis || has_arc_word) fail("G4 takes no axis or arc words", s);
+      base.kind = MotionKind::kDwell;
+      base.dwell_s = w.get('P');
+      program.blocks.push_back(base);
+    } else if (has_axis || has_arc_word) {
+      if (!motion_) fail("axis words without a motion mode", s);
+      motion_block(*motion_, w, base, program);
+    }
+    if (program_end) {
+      spindle_dir_ = 0.0;
+      ended_ = true;
+    }
+  }
+
+  void motion_block(MotionKind kind, const LineWords& w, Block b, Program& program) {
+    b.kind = kind;
+    static constexpr std::array<char, kNumAxes> kAxisLetters{'X', 'Y', 'Z'};
+    for (std::size_t a = 0; a < kNumAxes; ++a) {
+      if (!w.has(kAxisLetters[a])) continue;
+      const double v_mm = w.get(kAxisLetters[a]) * mm_per_unit_;
+      b.end_mm[a] = incremental_ ? pos_mm_[a] + v_mm : v_mm;
+    }
+    const bool is_arc = kind == MotionKind::kArcCw || kind == MotionKind::kArcCcw;
+    if (!is_arc && (w.has('I') || w.has('J') || w.has('K') || w.has('R')))
+      fail("arc words on a straight move", w.has('R') ? w.text_by_letter['R' - 'A'] : "I/J/K");
+    if (kind == MotionKind::kRapid) {
+      b.feed_mm_per_min = rapid_mm_per_min_;
+    } else {
+      if (!(feed_mm_per_min_ > 0.0)) fail("feed move with no F in force", fmt::format("G{}", static_cast<int>(kind)));
+      b.feed_mm_per_min = feed_mm_per_min_;
+    }
+    if (is_arc) arc_center(w, b);
+    program.blocks.push_back(b);
+    pos_mm_ = b.end_mm;
+  }
+
+  void arc_center(const LineWords& w, Block& b) const {
+    const double x0 = b.start_mm[0], y0 = b.start_mm[1];
+    const double x1 = b.end_mm[0], y1 = b.end_mm[1];
+    b.center_mm[2] = b.start_mm[2];
+    if (w.has('R')) {
+      const std::string& word = w.text_by_letter['R' - 'A'];
+      if (w.has('I') || w.has('J')) fail("arc with both R and I/J", word);
+      const double r = w.get('R') * mm_per_unit_;
+      const double dx = x1 - x0, dy = y1 - y0;
+      const double chord = std::hypot(dx, dy);
+      if (!(std::abs(r) > 0.0)) fail("arc radius must not be 0", word);
+      if (chord < 1e-9) fail("R arc with the same start and end point is impossible", word);
+      const double half = 0.5 * chord;
+      if (half > std::abs(r) * (1.0 + 1e-9) + 1e-9)
+        fail(fmt::format("R arc impossible: chord {:.6g} mm longer than the diameter", chord), word);
+      const double h = std::sqrt(std::max(0.0, r * r - half * half));
+      // Left normal of the chord; a counter-clockwise short arc has its centre on the left.
+      const double nx = -dy / chord, ny = dx / chord;
+      double side = (b.kind == MotionKind::kArcCcw) ? 1.0 : -1.0;
+      if (r < 0.0) side = -side;
+      b.center_mm[0] = x0 + 0.5 * dx + side * h * nx;
+      b.center_mm[1] = y0 + 0.5 * dy + side * h * ny;
+    } else {
+      if (!(w.has('I') || w.has('J'))) fail("arc without I/J or R", "G2/G3");
+      const double i = w.has('I') ? w.get('I') * mm_per_unit_ : 0.0;
+      const double j = w.has('J') ? w.get('J') * mm_per_unit_ : 0.0;
+      b.center_mm[0] = x0 + i;
+      b.center_mm[1] = y0 + j;
+      const double r0 = std::hypot(x0 - b.center_mm[0], y0 - b.center_mm[1]);
+      const double r1 = std::hypot(x1 - b.center_mm[0], y1 - b.center_mm[1]);
+      const std::string ij = fmt::format("I{} J{} r_start {:.6g} mm r_end {:.6g} mm", i, j, r0, r1);
+      if (!(r0 > 1e-9)) fail("arc radius must not be 0", ij);
+      if (std::abs(r1 - r0) > std::max(kArcRadiusTolerance_mm, kArcRadiusTolerance_rel * r0))
+        fail("arc end not on its circle", ij);
+    }
+  }
+
+  std::string_view name_;
+  int line_{0};
+  AxisArray<double> pos_mm_;
+  double rapid_mm_per_min_;
+  std::optional<MotionKind> motion_;
+  double mm_per_unit_{1.0};
+  bool incremental_{false};
+  bool exact_stop_{false};
+  double blend_tolerance_mm_{0.0};
+  double feed_mm_per_min_{0.0};
+  double spindle_speed_rpm_{0.0};
+  double spindle_dir_{0.0};
+  bool ended_{false};
+};
+
+}  // namespace
+
+Program parse_gcode(std::string_view text, std::string_view source_name,
+                    const AxisArray<double>& start_mm, double rapid_mm_per_min) {
+  for (std::size_t a = 0; a < kNumAxes; ++a)
+    if (!std::isfinite(start_mm[a]))
+      throw ConfigError(fmt::format("{}: start position {} = {} must be finite", source_name, axis_name(a), start_mm[a]));
+  if (!(rapid_mm_per_min > 0.0) || !std::isfinite(rapid_mm_per_min))
+    throw ConfigError(fmt::format("{}: rapid rate {} mm/min must be > 0", source_name, rapid_mm_per_min));
+  Parser parser(source_name, start_mm, rapid_mm_per_min);
+  return parser.run(text);
+}
+
+Program load_gcode(const std::string& path, const AxisArray<double>& start_mm,
+                   double rapid_mm_per_min) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw IoError(fmt::format("{}: cannot open G-code file", path));
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  if (in.bad()) throw IoError(fmt::format("{}: read error", path));
+  return parse_gcode(ss.str(), path, start_mm, rapid_mm_per_min);
+}
+
+}  // namespace twin::controller

@@ -1,0 +1,630 @@
+#include "feeddrive/drive_bank.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <string>
+
+#include <fmt/format.h>
+
+#include "feeddrive/ode_solver.hpp"
+#include "twin/core/axis.hpp"
+#include "twin/core/check.hpp"
+#include "twin/core/error.hpp"
+#include "twin/core/units.hpp"
+
+namespace twin::feeddrive {
+namespace {
+
+// State layout of one axis inside an integrator vector. Positions are
+// deviations from the axis's base position at the last restart, so the
+// absolute tolerance applies to microns of motion, not hundreds of mm.
+//   rigid:     [dx_mm, w, q_damping_J, q_friction_J]
+//   compliant: [dx_motor_mm, w_motor, dx_load_mm, w_load, q_damping_J, q_friction_J]
+constexpr std::size_t kRigidSize = 4;
+constexpr std::size_t kCompliantSize = 6;
+// Root functions per axis: 0 stop (s w = 0) or breakaway (+), 1 breakaway (-),
+// 2 and 3 the ends of the position-dependent friction band.
+constexpr std::size_t kRootsPerAxis = 4;
+constexpr int kMaxEventsPerTick = 1000;
+
+// Everything about one axis that is fixed for its life in the bank.
+struct AxisConst {
+  DriveParams p;
+  bool compliant{false};
+  double Jm_kg_m2{0.0};  // motor side inertia (all of J when rigid)
+  double Jl_kg_m2{0.0};  // load side inertia (compliance only)
+  std::size_t delay_ticks{0};
+};
+
+// Per-tick and per-segment values of one axis, set by the bank.
+struct AxisRun {
+  double u_applied_V{0.0};
+  double i_A{0.0};
+  double Tm_Nm{0.0};
+  double Tload_Nm{0.0};  // Td + constant load, opposing + motion
+  double x0_mm{0.0};     // base position (motor) of the current segment
+  double xl0_mm{0.0};    // base position (load) of the current segment
+  double damping_base_J{0.0};
+  double friction_base_J{0.0};
+  int mode{0};           // friction-side sliding direction: +1, -1, 0 = held
+  bool frozen{true};     // rigid axis held for the rest of the tick: not integrated
+  int prev_mode{2};      // mode at the previous tick start (2 = unknown)
+  bool prev_frozen{false};
+};
+
+double position_friction_Nm(const DriveParams& p, double x_mm) {
+  const auto& e = p.effects.position_dependent_friction;
+  if (!e.enabled) return 0.0;
+  return (x_mm >= e.x_start_mm && x_mm <= e.x_end_mm) ? e.dTc_Nm : 0.0;
+}
+
+// Coulomb level moving in direction s.
+double coulomb_Nm(const DriveParams& p, int s, double x_mm) {
+  return (s > 0 ? p.Tc_pos_Nm : p.Tc_neg_Nm) + position_friction_Nm(p, x_mm);
+}
+
+// Static friction that must be exceeded to start moving in direction s.
+double breakaway_Nm(const DriveParams& p, int s, double x_mm) {
+  if (p.effects.stribeck.enabled) return p.effects.stribeck.Ts_static_Nm + position_friction_Nm(p, x_mm);
+  return coulomb_Nm(p, s, x_mm);
+}
+
+// Friction magnitude while sliding in direction s at speed w.
+double sliding_friction_Nm(const DriveParams& p, int s, double w, double x_mm) {
+  double T = coulomb_Nm(p, s, x_mm);
+  const auto& st = p.effects.stribeck;
+  if (st.enabled) {
+    const double r = w / st.ws_rad_per_s;
+    T += (st.Ts_static_Nm - (s > 0 ? p.Tc_pos_Nm : p.Tc_neg_Nm)) * std::exp(-r * r);
+  }
+  return T;
+}
+
+double cogging_Nm(const DriveParams& p, double x_motor_mm) {
+  const auto& c = p.effects.cogging;
+  if (!c.enabled) return 0.0;
+  return c.amplitude_Nm * std::sin(c.cycles_per_rev * x_motor_mm / p.rg_mm_per_rad + c.phase_rad);
+}
+
+// Work done against the cogging torque from motor position xa to xb (exact:
+// the integral of A sin(n theta + phi) d theta).
+double cogging_work_J(const DriveParams& p, double xa_mm, double xb_mm) {
+  const auto& c = p.effects.cogging;
+  if (!c.enabled) return 0.0;
+  const double n = c.cycles_per_rev;
+  const double ta = xa_mm / p.rg_mm_per_rad;
+  const double tb = xb_mm / p.rg_mm_per_rad;
+  return -(c.amplitude_Nm / n) * (std::cos(n * tb + c.phase_rad) - std::cos(n * ta + c.phase_rad));
+}
+
+double spring_torque_Nm(const DriveParams& p, double xm_mm, double xl_mm, double wm, double wl) {
+  const auto& c = p.effects.compliance;
+  return c.K_Nm_per_rad * (xm_mm - xl_mm) / p.rg_mm_per_rad + c.C_Nm_s_per_rad * (wm - wl);
+}
+
+// Net torque on the friction side of an axis at rest (w of that side = 0),
+// with the values of the state s.
+double rest_torque_Nm(const AxisConst& a, const AxisRun& r, const DriveState& s) {
+  if (a.compliant) return spring_torque_Nm(a.p, s.x_mm, s.x_load_mm, s.w_rad_per_s, 0.0) - r.Tload_Nm;
+  return r.Tm_Nm - r.Tload_Nm - cogging_Nm(a.p, s.x_mm);
+}
+
+// Karnopp decision at rest: +1 / -1 to slip in the direction of the net
+// torque, 0 to stick while |net| <= breakaway of that direction.
+int rest_decision(const AxisConst& a, double net_Nm, double x_friction_mm) {
+  if (net_Nm > 0.0 && net_Nm > breakaway_Nm(a.p, +1, x_friction_mm)) return +1;
+  if (net_Nm < 0.0 && -net_Nm > breakaway_Nm(a.p, -1, x_friction_mm)) return -1;
+  return 0;
+}
+
+void axis_rhs(const AxisConst& a, const AxisRun& r, const double* y, double* yd) {
+  const DriveParams& p = a.p;
+  if (!a.compliant) {
+    if (r.frozen) {
+      std::fill(yd, yd + kRigidSize, 0.0);
+      return;
+    }
+    const double w = y[1];
+    const double x_mm = r.x0_mm + y[0];
+    const double Tf = r.mode * sliding_friction_Nm(p, r.mode, w, x_mm);
+    yd[0] = p.rg_mm_per_rad * w;
+    yd[1] = (r.Tm_Nm - p.B_kg_m2_per_s * w - Tf - r.Tload_Nm - cogging_Nm(p, x_mm)) / a.Jm_kg_m2;
+    yd[2] = p.B_kg_m2_per_s * w * w;
+    yd[3] = Tf * w;
+    return;
+  }
+  const double wm = y[1];
+  const double wl = y[3];
+  const double xm_mm = r.x0_mm + y[0];
+  const double xl_mm = r.xl0_mm + y[2];
+  const double Tk = spring_torque_Nm(p, xm_mm, xl_mm, wm, wl);
+  yd[0] = p.rg_mm_per_rad * wm;
+  yd[1] = (r.Tm_Nm - p.B_kg_m2_per_s * wm - Tk - cogging_Nm(p, xm_mm)) / a.Jm_kg_m2;
+  double Tf = 0.0;
+  if (r.mode == 0) {
+    yd[2] = 0.0;
+    yd[3] = 0.0;
+  } else {
+    Tf = r.mode * sliding_friction_Nm(p, r.mode, wl, xl_mm);
+    yd[2] = p.rg_mm_per_rad * wl;
+    yd[3] = (Tk - Tf - r.Tload_Nm) / a.Jl_kg_m2;
+  }
+  const double dw = wm - wl;
+  yd[4] = p.B_kg_m2_per_s * wm * wm + p.effects.compliance.C_Nm_s_per_rad * dw * dw;
+  yd[5] = Tf * wl;
+}
+
+void axis_roots(const AxisConst& a, const AxisRun& r, const double* y, double* g) {
+  g[0] = g[1] = g[2] = g[3] = 1.0;
+  if (r.frozen) return;
+  const auto& pf = a.p.effects.position_dependent_friction;
+  double x_friction_mm = 0.0;
+  if (!a.compliant) {
+    x_friction_mm = r.x0_mm + y[0];
+    g[0] = r.mode * y[1];
+  } else {
+    x_friction_mm = r.xl0_mm + y[2];
+    if (r.mode != 0) {
+      g[0] = r.mode * y[3];
+    } else {
+      const double net = spring_torque_Nm(a.p, r.x0_mm + y[0], x_friction_mm, y[1], 0.0) - r.Tload_Nm;
+      g[0] = breakaway_Nm(a.p, +1, x_friction_mm) - net;
+      g[1] = net + breakaway_Nm(a.p, -1, x_friction_mm);
+    }
+  }
+  if (pf.enabled && pf.dTc_Nm > 0.0) {
+    g[2] = x_friction_mm - pf.x_start_mm;
+    g[3] = x_friction_mm - pf.x_end_mm;
+  }
+}
+
+// Fastest linearised rate of an axis [1/s], to bound a fixed explicit step.
+double fastest_rate_per_s(const AxisConst& a) {
+  const DriveParams& p = a.p;
+  double rate = p.B_kg_m2_per_s / a.Jm_kg_m2;
+  if (p.effects.stribeck.enabled) {
+    // max |d/dw (Ts - Tc) exp(-(w/ws)^2)| = (Ts - Tc) sqrt(2/e) / ws
+    const double slope = (p.effects.stribeck.Ts_static_Nm - std::min(p.Tc_pos_Nm, p.Tc_neg_Nm)) *
+                         std::sqrt(2.0 / std::exp(1.0)) / p.effects.stribeck.ws_rad_per_s;
+    rate += slope / (a.compliant ? a.Jl_kg_m2 : a.Jm_kg_m2);
+  }
+  if (a.compliant) {
+    const auto& c = p.effects.compliance;
+    const double inv = 1.0 / a.Jm_kg_m2 + 1.0 / a.Jl_kg_m2;
+    rate += std::sqrt(c.K_Nm_per_rad * inv) + c.C_Nm_s_per_rad * inv;
+  }
+  return rate;
+}
+
+}  // namespace
+
+struct DriveBank::Impl {
+  // A set of axes integrated by one SUNDIALS instance.
+  struct Group : OdeSystem {
+    Impl* bank{nullptr};
+    std::vector<std::size_t> axes;
+    std::vector<std::size_t> offset;
+    std::size_t size{0};
+    std::vector<double> y;
+    std::unique_ptr<OdeSolver> solver;
+    bool dirty{true};        // solver state does not match the bank: restart
+    double t_solver_s{0.0};  // time the solver state belongs to
+
+    void rhs(double, const double* yv, double* yd) override {
+      for (std::size_t k = 0; k < axes.size(); ++k)
+        axis_rhs(bank->consts[axes[k]], bank->runs[axes[k]], yv + offset[k], yd + offset[k]);
+    }
+    void roots(double, const double* yv, double* g) override {
+      for (std::size_t k = 0; k < axes.size(); ++k)
+        axis_roots(bank->consts[axes[k]], bank->runs[axes[k]], yv + offset[k], g + kRootsPerAxis * k);
+    }
+  };
+
+  double Ts_s{0.0};
+  IntegratorOptions options;
+  std::vector<AxisConst> consts;
+  std::vector<AxisRun> runs;
+  std::vector<DriveState> states;
+  std::vector<std::unique_ptr<Group>> groups;
+
+  void build_groups();
+  void pack(Group& g);
+  void unpack(Group& g, double t_s);
+  void start_tick_mode(std::size_t i);
+  void handle_roots(Group& g, double t_s);
+  void advance_group(Group& g, double t_from_s, double t_to_s);
+};
+
+void DriveBank::Impl::build_groups() {
+  groups.clear();
+  std::vector<std::vector<std::size_t>> sets;
+  if (options.one_instance_for_all_axes) {
+    std::vector<std::size_t> all(consts.size());
+    for (std::size_t i = 0; i < all.size(); ++i) all[i] = i;
+    sets.push_back(all);
+  } else {
+    for (std::size_t i = 0; i < consts.size(); ++i) sets.push_back({i});
+  }
+  for (const auto& set : sets) {
+    auto g = std::make_unique<Group>();
+    g->bank = this;
+    g->axes = set;
+    std::vector<double> atol;
+    double rate = 0.0;
+    for (std::size_t i : set) {
+      g->offset.push_back(g->size);
+      const bool c = consts[i].compliant;
+      const std::size_t n = c ? kCompliantSize : kRigidSize;
+      g->size += n;
+      atol.push_back(options.atol_mm);
+      atol.push_back(options.atol_rad_per_s);
+      if (c) {
+        atol.push_back(options.atol_mm);
+        atol.push_back(options.atol_rad_per_s);
+      }
+      // Energy quadratures ride along without steering the step size.
+      atol.push_back(1e6);
+      atol.push_back(1e6);
+      rate = std::max(rate, fastest_rate_per_s(consts[i]));
+    }
+    double fixed_step_s = 0.0;
+    if (options.method == IntegratorOptions::Method::kArkodeErk && options.erk_fixed_steps_per_tick > 0) {
+      const double n_rate = std::ceil(Ts_s * rate / 0.25);
+      const double n = std::max(static_cast<double>(options.erk_fixed_steps_per_tick), n_rate);
+      fixed_step_s = Ts_s / n;
+    }
+    g->y.assign(g->size, 0.0);
+    g->solver = std::make_unique<OdeSolver>(*g, g->size, kRootsPerAxis * set.size(), options, atol,
+                                            fixed_step_s);
+    groups.push_back(std::move(g));
+  }
+}
+
+void DriveBank::Impl::pack(Group& g) {
+  for (std::size_t k = 0; k < g.axes.size(); ++k) {
+    const std::size_t i = g.axes[k];
+    const DriveState& s = states[i];
+    AxisRun& r = runs[i];
+    double* y = g.y.data() + g.offset[k];
+    r.x0_mm = s.x_mm;
+    r.xl0_mm = s.x_load_mm;
+    r.damping_base_J = s.work_damping_J;
+    r.friction_base_J = s.work_friction_J;
+    y[0] = 0.0;
+    y[1] = s.w_rad_per_s;
+    if (consts[i].compliant) {
+      y[2] = 0.0;
+      y[3] = s.w_load_rad_per_s;
+      y[4] = y[5] = 0.0;
+    } else {
+      y[2] = y[3] = 0.0;
+    }
+  }
+}
+
+void DriveBank::Impl::unpack(Group& g, double t_s) {
+  for (std::size_t k = 0; k < g.axes.size(); ++k) {
+    const std::size_t i = g.axes[k];
+    const AxisConst& a = consts[i];
+    const AxisRun& r = runs[i];
+    DriveState& s = states[i];
+    const double* y = g.y.data() + g.offset[k];
+    s.x_mm = r.x0_mm + y[0];
+    s.w_rad_per_s = y[1];
+    double x_drive_mm = s.x_mm;
+    if (a.compliant) {
+      s.x_load_mm = r.xl0_mm + y[2];
+      s.w_load_rad_per_s = y[3];
+      s.work_damping_J = r.damping_base_J + y[4];
+      s.work_friction_J = r.friction_base_J + y[5];
+      x_drive_mm = s.x_load_mm;
+    } else {
+      s.x_load_mm = s.x_mm;
+      s.w_load_rad_per_s = s.w_rad_per_s;
+      s.work_damping_J = r.damping_base_J + y[2];
+      s.work_friction_J = r.friction_base_J + y[3];
+    }
+    if (a.p.effects.backlash.enabled) {
+      const double half_mm = 0.5 * a.p.effects.backlash.gap_mm;
+      if (x_drive_mm - s.x_table_mm > half_mm) s.x_table_mm = x_drive_mm - half_mm;
+      if (s.x_table_mm - x_drive_mm > half_mm) s.x_table_mm = x_drive_mm + half_mm;
+    } else {
+      s.x_table_mm = x_drive_mm;
+    }
+    if (!all_finite(s.x_mm, s.w_rad_per_s, s.x_load_mm, s.w_load_rad_per_s, s.work_damping_J,
+                    s.work_friction_J))
+      throw ModelError(fmt::format("feeddrive: axis {} state became non-finite at t = {} s (x = {} mm, w = {} rad/s)",
+                                   i < kNumAxes ? axis_name(i) : std::string_view("?"), t_s, s.x_mm,
+                                   s.w_rad_per_s));
+  }
+}
+
+// Mode of axis i at the start of a tick, from its state and this tick's inputs.
+void DriveBank::Impl::start_tick_mode(std::size_t i) {
+  const AxisConst& a = consts[i];
+  AxisRun& r = runs[i];
+  DriveState& s = states[i];
+  if (!a.compliant) {
+    if (s.w_rad_per_s != 0.0) {
+      r.mode = s.w_rad_per_s > 0.0 ? +1 : -1;
+      r.frozen = false;
+    } else {
+      r.mode = rest_decision(a, rest_torque_Nm(a, r, s), s.x_mm);
+      r.frozen = r.mode == 0;
+    }
+    s.stuck = r.frozen;
+    return;
+  }
+  r.frozen = false;
+  if (s.w_load_rad_per_s != 0.0) {
+    r.mode = s.w_load_rad_per_s > 0.0 ? +1 : -1;
+  } else {
+    r.mode = rest_decision(a, rest_torque_Nm(a, r, s), s.x_load_mm);
+  }
+  s.load_stuck = r.mode == 0;
+  s.stuck = s.load_stuck;
+}
+
+void DriveBank::Impl::handle_roots(Group& g, double t_s) {
+  const std::vector<int>& found = g.solver->roots_found();
+  for (std::size_t k = 0; k < g.axes.size(); ++k) {
+    const std::size_t i = g.axes[k];
+    const AxisConst& a = consts[i];
+    AxisRun& r = runs[i];
+    DriveState& s = states[i];
+    const int* f = found.data() + kRootsPerAxis * k;
+    if (f[0] == 0 && f[1] == 0) continue;  // band edges only need the restart
+    if (!a.compliant) {
+      // The axis came to rest: stick, or slip back if the net torque breaks away.
+      s.w_rad_per_s = 0.0;
+      r.mode = rest_decision(a, rest_torque_Nm(a, r, s), s.x_mm);
+      r.frozen = r.mode == 0;
+      s.stuck = r.frozen;
+      continue;
+    }
+    if (r.mode != 0) {
+      s.w_load_rad_per_s = 0.0;
+      r.mode = rest_decision(a, rest_torque_Nm(a, r, s), s.x_load_mm);
+    } else {
+      r.mode = f[0] != 0 ? +1 : -1;
+    }
+    s.load_stuck = r.mode == 0;
+    s.stuck = s.load_stuck;
+  }
+  (void)t_s;
+}
+
+void DriveBank::Impl::advance_group(Group& g, double t_from_s, double t_to_s) {
+  bool restart = options.reinit_every_tick || g.dirty ||
+                 std::abs(g.t_solver_s - t_from_s) > 1e-12 * std::max(1.0, std::abs(t_from_s));
+  bool any_moving = false;
+  for (std::size_t i : g.axes) {
+    AxisRun& r = runs[i];
+    start_tick_mode(i);
+    if (r.mode != r.prev_mode || r.frozen != r.prev_frozen) restart = true;
+    r.prev_mode = r.mode;
+    r.prev_frozen = r.frozen;
+    if (!r.frozen) any_moving = true;
+  }
+  if (!any_moving) {
+    g.dirty = true;
+    return;
+  }
+  double t_s = t_from_s;
+  if (restart) {
+    pack(g);
+    g.solver->restart(t_s, g.y);
+  }
+  for (int events = 0;; ++events) {
+    if (events > kMaxEventsPerTick)
+      throw ModelError(fmt::format("feeddrive: more than {} stick/slip events in the tick at t = {} s",
+                                   kMaxEventsPerTick, t_from_s));
+    const OdeSolver::Stop stop = g.solver->advance(t_to_s, g.y, t_s);
+    unpack(g, t_s);
+    if (stop == OdeSolver::Stop::kReachedEnd) break;
+    handle_roots(g, t_s);
+    bool moving = false;
+    for (std::size_t i : g.axes) moving = moving || !runs[i].frozen;
+    if (!moving) {
+      g.dirty = true;
+      return;
+    }
+    pack(g);
+    g.solver->restart(t_s, g.y);
+    // Later ticks compare against the mode the axis ends this tick in.
+    for (std::size_t i : g.axes) {
+      runs[i].prev_mode = runs[i].mode;
+      runs[i].prev_frozen = runs[i].frozen;
+    }
+  }
+  g.dirty = false;
+  g.t_solver_s = t_to_s;
+}
+
+DriveBank::DriveBank(std::vector<DriveParams> axes, double Ts_s, IntegratorOptions options)
+    : impl_(std::make_unique<Impl>()) {
+  if (!(std::isfinite(Ts_s) && Ts_s > 0.0))
+    throw ConfigError(fmt::format("feeddrive: Ts_s = {} must be finite and > 0", Ts_s));
+  if (axes.empty()) throw ConfigError("feeddrive: the drive bank needs at least one axis (got 0)");
+  if (!(std::isfinite(options.rtol) && options.rtol > 0.0))
+    throw ConfigError(fmt::format("feeddrive: IntegratorOptions rtol = {} must be > 0", options.rtol));
+  if (!(std::isfinite(options.atol_mm) && options.atol_mm > 0.0))
+    throw ConfigError(fmt::format("feeddrive: IntegratorOptions atol_mm = {} must be > 0", options.atol_mm));
+  if (!(std::isfinite(options.atol_rad_per_s) && options.atol_rad_per_s > 0.0))
+    throw ConfigError(
+        fmt::format("feeddrive: IntegratorOptions atol_rad_per_s = {} must be > 0", options.atol_rad_per_s));
+  if (options.erk_fixed_steps_per_tick < 0)
+    throw ConfigError(fmt::format("feeddrive: IntegratorOptions erk_fixed_steps_per_tick = {} must be >= 0",
+                                  options.erk_fixed_steps_per_tick));
+  Impl& m = *impl_;
+  m.Ts_s = Ts_s;
+  m.options = options;
+  for (std::size_t i = 0; i < axes.size(); ++i) {
+    const std::string where = fmt::format("feeddrive axis {}", i < kNumAxes ? axis_name(i) : "?");
+    axes[i].validate(where);
+    AxisConst a;
+    a.p = axes[i];
+    a.compliant = a.p.effects.compliance.enabled;
+    if (a.compliant) {
+      a.Jl_kg_m2 = a.p.J_kg_m2 * a.p.effects.compliance.load_fraction;
+      a.Jm_kg_m2 = a.p.J_kg_m2 - a.Jl_kg_m2;
+    } else {
+      a.Jm_kg_m2 = a.p.J_kg_m2;
+    }
+    if (a.p.effects.delay.enabled) a.delay_ticks = static_cast<std::size_t>(std::llround(a.p.effects.delay.delay_s / Ts_s));
+    m.consts.push_back(a);
+  }
+  m.runs.resize(m.consts.size());
+  m.states.resize(m.consts.size());
+  m.build_groups();
+  reset(std::vector<double>(m.consts.size(), 0.0));
+}
+
+DriveBank::~DriveBank() = default;
+DriveBank::DriveBank(DriveBank&& other) noexcept = default;
+DriveBank& DriveBank::operator=(DriveBank&& other) noexcept = default;
+
+std::size_t DriveBank::size() const noexcept { return impl_->consts.size(); }
+
+void DriveBank::reset(const std::vector<double>& x0_mm) {
+  Impl& m = *impl_;
+  if (x0_mm.size() != m.consts.size())
+    throw ConfigError(fmt::format("feeddrive: reset got {} positions for {} axes", x0_mm.size(), m.consts.size()));
+  for (std::size_t i = 0; i < x0_mm.size(); ++i) {
+    if (!std::isfinite(x0_mm[i]))
+      throw ConfigError(fmt::format("feeddrive: reset position of axis {} = {} mm must be finite", i, x0_mm[i]));
+    DriveState s;
+    s.x_mm = s.x_load_mm = s.x_table_mm = x0_mm[i];
+    s.u_delay_V.assign(m.consts[i].delay_ticks, 0.0);
+    m.states[i] = s;
+    m.runs[i] = AxisRun{};
+  }
+  for (auto& g : m.groups) g->dirty = true;
+}
+
+void DriveBank::advance(double t_from_s, double t_to_s, const std::vector<DriveInput>& inputs) {
+  Impl& m = *impl_;
+  if (inputs.size() != m.consts.size())
+    throw ConfigError(fmt::format("feeddrive: advance got {} inputs for {} axes", inputs.size(), m.consts.size()));
+  if (!(std::isfinite(t_from_s) && std::isfinite(t_to_s) && t_to_s > t_from_s))
+    throw InternalError(fmt::format("feeddrive: advance from t = {} s to t = {} s is not a forward interval",
+                                    t_from_s, t_to_s));
+  for (std::size_t i = 0; i < inputs.size(); ++i) {
+    const AxisConst& a = m.consts[i];
+    AxisRun& r = m.runs[i];
+    DriveState& s = m.states[i];
+    if (!all_finite(inputs[i].u_V, inputs[i].Td_Nm))
+      throw ModelError(fmt::format("feeddrive: axis {} input at t = {} s is non-finite (u = {} V, Td = {} N m)",
+                                   i < kNumAxes ? axis_name(i) : "?", t_from_s, inputs[i].u_V, inputs[i].Td_Nm));
+    double u_V = inputs[i].u_V;
+    if (a.delay_ticks > 0) {
+      const double oldest_V = s.u_delay_V[s.u_delay_head];
+      s.u_delay_V[s.u_delay_head] = u_V;
+      s.u_delay_head = (s.u_delay_head + 1) % a.delay_ticks;
+      u_V = oldest_V;
+    }
+    r.u_applied_V = u_V;
+    r.i_A = a.p.Ka_A_per_V * u_V;
+    if (a.p.effects.current_saturation.enabled) {
+      const double lim = a.p.effects.current_saturation.i_max_A;
+      r.i_A = std::clamp(r.i_A, -lim, lim);
+    }
+    r.Tm_Nm = a.p.Kt_Nm_per_A * r.i_A;
+    r.Tload_Nm = inputs[i].Td_Nm + (a.p.effects.constant_load.enabled ? a.p.effects.constant_load.torque_Nm : 0.0);
+  }
+  // Tick-start positions for the exact electrical and load work.
+  std::vector<std::array<double, 2>> start(m.consts.size());
+  for (std::size_t i = 0; i < m.consts.size(); ++i) start[i] = {m.states[i].x_mm, m.states[i].x_load_mm};
+
+  for (auto& g : m.groups) m.advance_group(*g, t_from_s, t_to_s);
+
+  for (std::size_t i = 0; i < m.consts.size(); ++i) {
+    const AxisConst& a = m.consts[i];
+    const AxisRun& r = m.runs[i];
+    DriveState& s = m.states[i];
+    const double rg = a.p.rg_mm_per_rad;
+    s.work_electrical_J += r.Tm_Nm * (s.x_mm - start[i][0]) / rg;
+    s.work_load_J += r.Tload_Nm * (s.x_load_mm - start[i][1]) / rg + cogging_work_J(a.p, start[i][0], s.x_mm);
+  }
+}
+
+DriveOutput DriveBank::output(std::size_t i) const {
+  const Impl& m = *impl_;
+  TWIN_DEMAND(i < m.consts.size());
+  const AxisConst& a = m.consts[i];
+  const AxisRun& r = m.runs[i];
+  const DriveState& s = m.states[i];
+  const DriveParams& p = a.p;
+  DriveOutput o;
+  o.x_mm = p.effects.backlash.enabled ? s.x_table_mm : (a.compliant ? s.x_load_mm : s.x_mm);
+  const double sensor_mm = a.compliant ? s.x_mm : o.x_mm;
+  o.x_meas_mm = sensor_mm;
+  if (p.effects.screw_pitch_error.enabled) {
+    const auto& e = p.effects.screw_pitch_error;
+    o.x_meas_mm += e.amplitude_mm * std::sin(2.0 * kPi * o.x_mm / e.period_mm + e.phase_rad);
+  }
+  o.w_rad_per_s = s.w_rad_per_s;
+  o.v_mm_per_s = p.rg_mm_per_rad * (a.compliant ? s.w_load_rad_per_s : s.w_rad_per_s);
+  o.i_A = r.i_A;
+  o.Tm_Nm = r.Tm_Nm;
+  return o;
+}
+
+const DriveState& DriveBank::state(std::size_t i) const {
+  TWIN_DEMAND(i < impl_->states.size());
+  return impl_->states[i];
+}
+
+const std::vector<DriveState>& DriveBank::states() const { return impl_->states; }
+
+void DriveBank::set_states(const std::vector<DriveState>& states) {
+  Impl& m = *impl_;
+  if (states.size() != m.consts.size())
+    throw ConfigError(fmt::format("feeddrive: set_states got {} states for {} axes", states.size(), m.consts.size()));
+  for (std::size_t i = 0; i < states.size(); ++i) {
+    const DriveState& s = states[i];
+    if (s.u_delay_V.size() != m.consts[i].delay_ticks ||
+        (m.consts[i].delay_ticks > 0 && s.u_delay_head >= m.consts[i].delay_ticks))
+      throw ConfigError(fmt::format("feeddrive: set_states axis {}: delay buffer of {} (head {}) must hold {} commands",
+                                    i, s.u_delay_V.size(), s.u_delay_head, m.consts[i].delay_ticks));
+    if (!all_finite(s.x_mm, s.w_rad_per_s, s.x_load_mm, s.w_load_rad_per_s, s.x_table_mm))
+      throw ConfigError(fmt::format("feeddrive: set_states axis {}: non-finite state (x = {} mm, w = {} rad/s)", i,
+                                    s.x_mm, s.w_rad_per_s));
+  }
+  m.states = states;
+  for (auto& r : m.runs) r.prev_mode = 2;
+  for (auto& g : m.groups) g->dirty = true;
+}
+
+const DriveParams& DriveBank::params(std::size_t i) const {
+  TWIN_DEMAND(i < impl_->consts.size());
+  return impl_->consts[i].p;
+}
+
+long DriveBank::num_steps() const noexcept {
+  long n = 0;
+  for (const auto& g : impl_->groups) n += g->solver->num_steps();
+  return n;
+}
+
+long DriveBank::num_rhs_evals() const noexcept {
+  long n = 0;
+  for (const auto& g : impl_->groups) n += g->solver->num_rhs_evals();
+  return n;
+}
+
+double kinetic_energy_J(const DriveParams& p, const DriveState& s) {
+  if (!p.effects.compliance.enabled) return 0.5 * p.J_kg_m2 * s.w_rad_per_s * s.w_rad_per_s;
+  const double Jl = p.J_kg_m2 * p.effects.compliance.load_fraction;
+  const double Jm = p.J_kg_m2 - Jl;
+  return 0.5 * Jm * s.w_rad_per_s * s.w_rad_per_s + 0.5 * Jl * s.w_load_rad_per_s * s.w_load_rad_per_s;
+}
+
+double spring_energy_J(const DriveParams& p, const DriveState& s) {
+  if (!p.effects.compliance.enabled) return 0.0;
+  const double dtheta = (s.x_mm - s.x_load_mm) / p.rg_mm_per_rad;
+  return 0.5 * p.effects.compliance.K_Nm_per_rad * dtheta * dtheta;
+}
+
+}  // namespace twin::feeddrive

@@ -1,0 +1,102 @@
+#pragma once
+/// Parameters of one feed drive (Ozcan et al. 2017, Fig. 1 and Table 1, after
+/// Erkorkmaz): i = Ka u, Tm = Kt i, J dw/dt = Tm - B w - Tf(w) - Td,
+/// dx/dt = rg w. Units are those of the FADAL tables.
+///
+/// DriveEffects holds the optional drive terms of the effect catalogue of
+/// spec/measured-data.md. Each is off by default; when on, it is a real term
+/// of the drive model (see feeddrive/README.md for the equations).
+#include <string_view>
+
+namespace twin::feeddrive {
+
+/// Friction above the Coulomb level at low speed:
+/// Tf(w) = sign(w) (Tc + (Ts_static - Tc) exp(-(w/ws)^2)); breakaway at Ts_static.
+struct StribeckEffect {
+  bool enabled{false};
+  double Ts_static_Nm{0.0};    ///< static (breakaway) friction, > Tc
+  double ws_rad_per_s{1.0};    ///< Stribeck speed
+};
+/// Torque ripple periodic in motor angle theta = x/rg:
+/// T_cog = amplitude sin(cycles_per_rev theta + phase), added to the load.
+struct CoggingEffect {
+  bool enabled{false};
+  double amplitude_Nm{0.0};
+  double cycles_per_rev{1.0};
+  double phase_rad{0.0};
+};
+/// Ballscrew lead error: the measured position is
+/// x_meas = x + amplitude sin(2 pi x / period + phase). Not seen in torque.
+struct ScrewPitchErrorEffect {
+  bool enabled{false};
+  double amplitude_mm{0.0};
+  double period_mm{10.0};
+  double phase_rad{0.0};
+};
+/// Lost motion at reversal: the measured (table) position follows the motor
+/// position through a play operator of total width gap_mm.
+struct BacklashEffect {
+  bool enabled{false};
+  double gap_mm{0.0};
+};
+/// A constant load torque on the motor shaft (gravity, unbalance, cable),
+/// same sign convention as Td (positive opposes motion in +).
+struct ConstantLoadEffect {
+  bool enabled{false};
+  double torque_Nm{0.0};
+};
+/// Coulomb friction raised by dTc_Nm (both directions) while
+/// x_start_mm <= x <= x_end_mm.
+struct PositionDependentFrictionEffect {
+  bool enabled{false};
+  double dTc_Nm{0.0};
+  double x_start_mm{0.0};
+  double x_end_mm{0.0};
+};
+/// Pure time delay of the amplifier command, rounded to whole ticks.
+struct DelayEffect {
+  bool enabled{false};
+  double delay_s{0.0};
+};
+/// Two-mass compliance: the motor (J (1 - load_fraction)) and the load
+/// (J load_fraction) joined by a torsional spring K and damper C; the encoder
+/// is on the motor. Friction and load torques act on the load side, B on the motor.
+struct ComplianceEffect {
+  bool enabled{false};
+  double K_Nm_per_rad{0.0};
+  double C_Nm_s_per_rad{0.0};
+  double load_fraction{0.5};
+};
+/// An undeclared current limit: i = clamp(Ka u, -i_max, i_max).
+struct CurrentSaturationEffect {
+  bool enabled{false};
+  double i_max_A{0.0};
+};
+
+struct DriveEffects {
+  StribeckEffect stribeck;
+  CoggingEffect cogging;
+  ScrewPitchErrorEffect screw_pitch_error;
+  BacklashEffect backlash;
+  ConstantLoadEffect constant_load;
+  PositionDependentFrictionEffect position_dependent_friction;
+  DelayEffect delay;
+  ComplianceEffect compliance;
+  CurrentSaturationEffect current_saturation;
+};
+
+struct DriveParams {
+  double Ka_A_per_V{0.0};         ///< current amplifier gain
+  double Kt_Nm_per_A{0.0};        ///< motor torque constant
+  double J_kg_m2{0.0};            ///< inertia reflected to the motor shaft
+  double B_kg_m2_per_s{0.0};      ///< viscous damping
+  double rg_mm_per_rad{0.0};      ///< transmission (lead / 2 pi)
+  double Tc_pos_Nm{0.0};          ///< Coulomb friction moving in +
+  double Tc_neg_Nm{0.0};          ///< Coulomb friction moving in - (positive number)
+  DriveEffects effects;
+
+  /// Throws ConfigError naming `where`, the field, the value and the limit.
+  void validate(std::string_view where) const;
+};
+
+}  // namespace twin::feeddrive

@@ -1,0 +1,49 @@
+#pragma once
+/// The model an exported FMU carries in resources/model.json: the machine
+/// (every parameter by its table name, spec/interfaces.md), the part program,
+/// where the axes start, and the process section of the scenario (JSON, or
+/// null for an air cut). The twin executable writes it (model_to_json) and
+/// the FMU reads it back (model_from_json); both build the variable table
+/// and modelDescription.xml from the model read back, so the two agree by
+/// construction.
+#include <memory>
+#include <string>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "process/process_model.hpp"
+#include "twin/core/axis.hpp"
+#include "twin/sim/machine.hpp"
+
+namespace twin::fmu {
+
+struct FmuModel {
+  std::string scenario_name;
+  sim::MachineDefinition machine;
+  std::string program_name;     ///< file name of the part program (messages)
+  std::string program_text;     ///< G-code; empty: mode 2 is not available
+  AxisArray<double> start_mm{};
+  double settle_s{0.0};
+  std::string process_json;     ///< the scenario's process section as JSON text; empty for an air cut
+  std::string model_json;       ///< the exact text this model was read from (hashed into the GUID)
+
+  bool has_program() const noexcept { return !program_text.empty(); }
+  bool has_process() const noexcept { return !process_json.empty(); }
+  /// Cycle time of the program plus settle_s, s (0 without a program).
+  double program_duration_s() const;
+  /// A fresh process model at its initial state (null for an air cut).
+  /// @throws ConfigError when the process section cannot be built.
+  std::unique_ptr<process::ProcessModel> make_process() const;
+};
+
+/// JSON text of the model (format "twin-fmu-model", version 1).
+/// `process` is the scenario's process section (null: air cut).
+std::string model_to_json(const std::string& scenario_name, const sim::MachineDefinition& machine,
+                          const std::string& program_name, const std::string& program_text,
+                          const AxisArray<double>& start_mm, double settle_s, const nlohmann::json& process);
+
+/// Reads a model written by model_to_json. `where` names the file in messages.
+/// @throws ConfigError naming `where` and the key for a missing or bad entry.
+FmuModel model_from_json(const std::string& text, const std::string& where);
+
+}  // namespace twin::fmu

@@ -1,0 +1,180 @@
+#include "fmu/variables.hpp"
+
+#include <array>
+#include <string_view>
+
+namespace twin::fmu {
+namespace {
+
+struct AxisOutputSpec {
+  const char* suffix;
+  const char* unit;
+  const char* doc;
+  double (*get)(const sim::AxisSnapshot&);
+};
+struct OutputSpec {
+  const char* name;
+  const char* unit;
+  const char* doc;
+  double (*get)(const sim::Snapshot&);
+};
+
+const std::array<AxisOutputSpec, 10> kAxisOutputs{{
+    {"_mm", "mm", "measured (encoder) position", [](const sim::AxisSnapshot& s) { return s.x_mm; }},
+    {"_ref_out_mm", "mm", "reference the position loop followed", [](const sim::AxisSnapshot& s) { return s.x_ref_mm; }},
+    {"_u_V", "V", "amplifier command", [](const sim::AxisSnapshot& s) { return s.u_V; }},
+    {"_i_A", "A", "motor current", [](const sim::AxisSnapshot& s) { return s.i_A; }},
+    {"_err_mm", "mm", "tracking error reference - measured", [](const sim::AxisSnapshot& s) { return s.e_mm; }},
+    {"_true_mm", "mm", "true tool position on the axis", [](const sim::AxisSnapshot& s) { return s.x_true_mm; }},
+    {"_v_mm_per_s", "mm/s", "true axis speed", [](const sim::AxisSnapshot& s) { return s.v_mm_per_s; }},
+    {"_Tm_Nm", "N m", "motor torque", [](const sim::AxisSnapshot& s) { return s.Tm_Nm; }},
+    {"_Td_Nm", "N m", "cutting load torque", [](const sim::AxisSnapshot& s) { return s.Td_Nm; }},
+    {"_saturated", "1", "1 when the command is clamped at u_max", [](const sim::AxisSnapshot& s) { return s.saturated ? 1.0 : 0.0; }},
+}};
+
+const std::array<OutputSpec, 15> kOutputs{{
+    {"fx_N", "N", "force on the workpiece, x, at the tick", [](const sim::Snapshot& s) { return s.F_N[0]; }},
+    {"fy_N", "N", "force on the workpiece, y, at the tick", [](const sim::Snapshot& s) { return s.F_N[1]; }},
+    {"fz_N", "N", "force on the workpiece, z, at the tick", [](const sim::Snapshot& s) { return s.F_N[2]; }},
+    {"fx_avg_N", "N", "force on the workpiece, x, tick average", [](const sim::Snapshot& s) { return s.F_avg_N[0]; }},
+    {"fy_avg_N", "N", "force on the workpiece, y, tick average", [](const sim::Snapshot& s) { return s.F_avg_N[1]; }},
+    {"fz_avg_N", "N", "force on the workpiece, z, tick average", [](const sim::Snapshot& s) { return s.F_avg_N[2]; }},
+    {"spindle_speed_rpm", "rpm", "spindle speed in use", [](const sim::Snapshot& s) { return s.spindle_rpm; }},
+    {"feed_programmed_mm_per_min", "mm/min", "programmed feed of the current block", [](const sim::Snapshot& s) { return s.feed_programmed_mm_per_min; }},
+    {"feed_ref_mm_per_min", "mm/min", "speed of the reference along the path", [](const sim::Snapshot& s) { return s.feed_ref_mm_per_min; }},
+    {"feed_mm_per_min", "mm/min", "speed of the real tool", [](const sim::Snapshot& s) { return s.feed_real_mm_per_min; }},
+    {"contour_error_mm", "mm", "distance of the real tool from the reference path", [](const sim::Snapshot& s) { return s.contour_error_mm; }},
+    {"engagement_deg", "deg", "engaged arc of the tool", [](const sim::Snapshot& s) { return s.engagement_deg; }},
+    {"chip_mm", "mm", "largest uncut chip thickness", [](const sim::Snapshot& s) { return s.chip_mm; }},
+    {"spindle_torque_Nm", "N m", "cutting torque about the tool axis", [](const sim::Snapshot& s) { return s.spindle_torque_Nm; }},
+    {"cutting_power_W", "W", "cutting power", [](const sim::Snapshot& s) { return s.cutting_power_W; }},
+}};
+
+}  // namespace
+
+double get_parameter(const Variable& v, const sim::MachineDefinition& machine) {
+  if (v.kind == VarKind::kMachineParam) return v.machine_param->ref(const_cast<sim::MachineDefinition&>(machine));
+  return sim::get_axis_param(machine.axes[v.axis], *v.axis_param);
+}
+
+bool is_tunable_axis_param(const sim::AxisParamSpec& spec) {
+  const std::string_view n = spec.name;
+  return n == "Kp" || n == "Ki" || n == "Kd" || n == "K1" || n == "K2";
+}
+
+std::vector<Variable> make_variables(const sim::MachineDefinition& machine) {
+  std::vector<Variable> v;
+  const std::vector<Axis> axes = machine.present_axes();
+  {
+    Variable m;
+    m.name = "mode";
+    m.type = VarType::kInteger;
+    m.causality = Causality::kParameter;
+    m.variability = Variability::kFixed;
+    m.description = "1: follow the x_ref_mm inputs; 2: run the built-in part program";
+    m.kind = VarKind::kMode;
+    v.push_back(m);
+  }
+  for (const auto& spec : sim::machine_param_specs()) {
+    Variable p;
+    p.name = std::string(spec.name);
+    p.causality = Causality::kParameter;
+    p.variability = Variability::kFixed;
+    p.unit = std::string(spec.unit);
+    p.description = std::string(spec.doc);
+    p.kind = VarKind::kMachineParam;
+    p.machine_param = &spec;
+    v.push_back(p);
+  }
+  for (Axis a : axes) {
+    for (const auto& spec : sim::axis_param_specs()) {
+      Variable p;
+      p.name = std::string(axis_name(a)) + "." + std::string(spec.name);
+      p.causality = Causality::kParameter;
+      p.variability = is_tunable_axis_param(spec) ? Variability::kTunable : Variability::kFixed;
+      p.unit = std::string(spec.unit);
+      p.description = std::string(spec.doc);
+      p.kind = VarKind::kAxisParam;
+      p.axis = index(a);
+      p.axis_param = &spec;
+      v.push_back(p);
+    }
+  }
+  for (Axis a : axes) {
+    Variable in;
+    in.name = std::string(axis_name(a)) + "_ref_mm";
+    in.causality = Causality::kInput;
+    in.unit = "mm";
+    in.description = "position reference of the axis (mode 1), held over each communication step";
+    in.kind = VarKind::kRefInput;
+    in.axis = index(a);
+    v.push_back(in);
+  }
+  {
+    Variable in;
+    in.name = "spindle_override";
+    in.type = VarType::kBoolean;
+    in.causality = Causality::kInput;
+    in.variability = Variability::kDiscrete;
+    in.description = "true: the spindle turns at spindle_rpm instead of the program's speed";
+    in.kind = VarKind::kSpindleOverride;
+    v.push_back(in);
+    in = Variable{};
+    in.name = "spindle_rpm";
+    in.causality = Causality::kInput;
+    in.unit = "rpm";
+    in.description = "spindle speed used when spindle_override is true (> 0 clockwise)";
+    in.kind = VarKind::kSpindleInput;
+    v.push_back(in);
+  }
+  for (std::size_t i = 0; i < 3; ++i) {
+    Variable in;
+    in.name = "f" + std::string(axis_name(i)) + "_ext_N";
+    in.causality = Causality::kInput;
+    in.unit = "N";
+    in.description = "external force on the workpiece, added to the cutting force";
+    in.kind = VarKind::kForceInput;
+    in.axis = i;
+    v.push_back(in);
+  }
+  for (Axis a : axes) {
+    for (const auto& o : kAxisOutputs) {
+      Variable out;
+      out.name = std::string(axis_name(a)) + o.suffix;
+      out.unit = o.unit;
+      out.description = o.doc;
+      out.kind = VarKind::kAxisOutput;
+      out.axis = index(a);
+      out.axis_output = o.get;
+      v.push_back(out);
+    }
+  }
+  for (const auto& o : kOutputs) {
+    Variable out;
+    out.name = o.name;
+    out.unit = o.unit;
+    out.description = o.doc;
+    out.kind = VarKind::kOutput;
+    out.output = o.get;
+    v.push_back(out);
+  }
+  {
+    Variable out;
+    out.name = "block";
+    out.type = VarType::kInteger;
+    out.variability = Variability::kDiscrete;
+    out.description = "index of the program block in progress (-1 none)";
+    out.kind = VarKind::kBlockOutput;
+    v.push_back(out);
+    out = Variable{};
+    out.name = "reference_done";
+    out.type = VarType::kBoolean;
+    out.variability = Variability::kDiscrete;
+    out.description = "true once the program's motion has finished";
+    out.kind = VarKind::kDoneOutput;
+    v.push_back(out);
+  }
+  return v;
+}
+
+}  // namespace twin::fmu

@@ -1,0 +1,116 @@
+#include "process/milling_process.hpp"
+
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "twin/core/check.hpp"
+#include "twin/core/error.hpp"
+#include "twin/core/units.hpp"
+
+namespace twin::process {
+
+std::string ProcessSetup::summary() const {
+  return fmt::format("{} ({} D{} mm, {} flutes, helix {} deg, r {} mm), {}, lead {} deg, tilt {} deg",
+                     tool.name, tool_shape_name(tool.shape), tool.diameter_mm, tool.flutes, tool.helix_deg,
+                     tool.corner_radius_mm, coefficients.name, lead_deg, tilt_deg);
+}
+
+MillingProcess::MillingProcess(const ProcessSetup& setup)
+    : model_(setup.tool, setup.coefficients, setup.lead_deg, setup.options),
+      stock_(setup.stock),
+      phi_rad_(setup.spindle_angle0_deg * kRadPerDeg) {
+  if (!std::isfinite(setup.tilt_deg) || std::abs(setup.tilt_deg) >= 60.0)
+    throw ConfigError(fmt::format("process: tilt_deg = {} must be in (-60, 60) deg", setup.tilt_deg));
+  if (!std::isfinite(phi_rad_)) throw ConfigError("process: spindle_angle0_deg is not finite");
+}
+
+std::unique_ptr<ProcessModel> MillingProcess::clone() const { return std::make_unique<MillingProcess>(*this); }
+
+double MillingProcess::remove_swept(const std::array<double, 3>& p0_mm, const std::array<double, 3>& p1_mm) {
+  const double v = stock_.remove_sweep(model_.tool(), p0_mm, p1_mm, true);
+  swept_once_ = true;
+  last_removed_mm_ = p1_mm;
+  return v;
+}
+
+ProcessOutput MillingProcess::step(const ProcessInput& in) {
+  const auto& p = in.p_mm;
+  const auto& v = in.v_mm_per_s;
+  if (!all_finite(p[0], p[1], p[2], v[0], v[1], v[2], in.spindle_rpm, in.Ts_s) || !(in.Ts_s > 0.0))
+    throw ModelError(fmt::format("process: non-finite or invalid input at t = {} s (tick {}): p = ({}, {}, {}) mm, "
+                                 "v = ({}, {}, {}) mm/s, spindle {} rpm, Ts {} s",
+                                 in.t_s, in.k, p[0], p[1], p[2], v[0], v[1], v[2], in.spindle_rpm, in.Ts_s));
+  if (in.spindle_rpm < 0.0)
+    throw ModelError(fmt::format("process: counter-clockwise spindle (M4, {} rpm) at t = {} s is not modelled",
+                                 in.spindle_rpm, in.t_s));
+  const ToolGeometry& tool = model_.tool();
+  const auto material = [this](double x, double y, double z) { return stock_.has_material(x, y, z); };
+  const double probe = probe_mm();
+  const double z_top = stock_.top_z_mm();
+  const double speed_xy = std::hypot(v[0], v[1]);
+  const std::array<double, 2> v_dir =
+      speed_xy > 0.0 ? std::array<double, 2>{v[0] / speed_xy, v[1] / speed_xy} : std::array<double, 2>{0.0, 0.0};
+  ProcessOutput out;
+  const double omega_rad_per_s = in.spindle_rpm * kRadPerSPerRpm;
+  if (in.spindle_rpm == 0.0) {
+    if (speed_xy > 0.0 && p[2] < z_top) {
+      for (int q = 0; q < 8; ++q) {
+        const ForceSample probe_cut =
+            model_.sample(phi_rad_ + q * kPi / 4.0, p, {v_dir[0], v_dir[1]}, z_top, probe, material);
+        if (probe_cut.cutting_elements > 0)
+          throw ModelError(fmt::format("process: the tool feeds into material with the spindle stopped at t = {} s, "
+                                       "p = ({:.4f}, {:.4f}, {:.4f}) mm",
+                                       in.t_s, p[0], p[1], p[2]));
+      }
+    }
+  } else if (p[2] < z_top) {
+    const double n_rev_per_s = in.spindle_rpm / kSPerMin;
+    const std::array<double, 2> f_mm{v[0] / (tool.flutes * n_rev_per_s), v[1] / (tool.flutes * n_rev_per_s)};
+    const double dphi_tick = omega_rad_per_s * in.Ts_s;
+    const int n_sub =
+        std::max(1, static_cast<int>(std::ceil(dphi_tick / (model_.options().angle_step_deg * kRadPerDeg) - 1e-9)));
+    const double dt = in.Ts_s / n_sub;
+    std::array<double, 3> F_sum{};
+    double T_sum = 0.0;
+    for (int s = 0; s < n_sub; ++s) {
+      const std::array<double, 3> ps{p[0] + v[0] * s * dt, p[1] + v[1] * s * dt, p[2] + v[2] * s * dt};
+      const ForceSample fs = model_.sample(phi_rad_ + omega_rad_per_s * s * dt, ps, f_mm, z_top, probe, material);
+      for (std::size_t a = 0; a < 3; ++a) F_sum[a] += fs.F_tool_N[a];
+      T_sum += fs.torque_Nm;
+      out.chip_mm = std::max(out.chip_mm, fs.chip_max_mm);
+      if (s == 0)
+        for (std::size_t a = 0; a < 3; ++a) out.F_N[a] = -fs.F_tool_N[a];
+    }
+    for (std::size_t a = 0; a < 3; ++a) out.F_avg_N[a] = -F_sum[a] / n_sub;
+    out.spindle_torque_Nm = T_sum / n_sub;
+    out.power_W = out.spindle_torque_Nm * omega_rad_per_s;
+    if (speed_xy > 0.0) {
+      const double depth_mm = std::min(z_top - p[2], tool.flute_length_mm);
+      out.engagement_deg =
+          model_.engaged_arc_deg(p, v_dir, model_.disk_height_nearest_mm(0.5 * depth_mm), probe, material);
+    }
+  }
+  phi_rad_ = std::fmod(phi_rad_ + omega_rad_per_s * in.Ts_s, kRadPerRev);
+
+  const std::array<double, 3> p_next{p[0] + v[0] * in.Ts_s, p[1] + v[1] * in.Ts_s, p[2] + v[2] * in.Ts_s};
+  if (!swept_once_) {
+    out.removed_mm3 += stock_.remove_sweep(tool, p, p, true);
+    swept_once_ = true;
+    last_removed_mm_ = p;
+  }
+  const double moved = std::hypot(p_next[0] - last_removed_mm_[0], p_next[1] - last_removed_mm_[1]);
+  if (moved >= 2.0 * stock_.cell_mm() || p_next[2] < last_removed_mm_[2] - 1e-6) {
+    out.removed_mm3 += stock_.remove_sweep(tool, last_removed_mm_, p_next, false);
+    last_removed_mm_ = p_next;
+  }
+  for (double f : {out.F_avg_N[0], out.F_avg_N[1], out.F_avg_N[2], out.F_N[0], out.F_N[1], out.F_N[2], out.power_W})
+    if (!std::isfinite(f)) throw ModelError(fmt::format("process: non-finite force at t = {} s", in.t_s));
+  return out;
+}
+
+std::unique_ptr<ProcessModel> make_process(const ProcessSetup& setup) {
+  return std::make_unique<MillingProcess>(setup);
+}
+
+}  // namespace twin::process

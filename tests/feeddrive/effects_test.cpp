@@ -1,0 +1,288 @@
+// Each drive effect checked against its own closed form.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <vector>
+
+#include "fadal_fixture.hpp"
+#include "feeddrive/drive_bank.hpp"
+
+namespace twin::feeddrive {
+namespace {
+
+using testing::fadal_x;
+using testing::fadal_y;
+using testing::HandPid;
+
+constexpr double kTs_s = 1e-4;
+
+void run_constant(DriveBank& bank, double u_V, int n, int k0 = 0) {
+  for (int k = k0; k < k0 + n; ++k) bank.advance(k * kTs_s, (k + 1) * kTs_s, {{u_V, 0.0}});
+}
+
+// Oracle: under the PID (integral action, no quantisation) at a constant
+// reference speed, the steady command balances u = (B w + Tc + T_load)/(Ka Kt),
+// so a constant load shifts it by exactly T_load/(Ka Kt). Tolerance 1e-5 V
+// (1e-4 relative): the integral pole (Ki/Kp = 0.14 1/s) leaves a slowly
+// decaying remainder of the load step, measured 1.3e-6 V at 1.5 s.
+TEST(ConstantLoad, ShiftsSteadyCommandByLoadOverKaKt) {
+  auto steady_u = [](bool load_on) {
+    DriveParams p = fadal_y();
+    p.effects.constant_load.enabled = load_on;
+    p.effects.constant_load.torque_Nm = 0.4;
+    DriveBank bank({p}, kTs_s);
+    bank.reset({0.0});
+    HandPid pid(testing::fadal_y_gains(), kTs_s);
+    double u = 0.0;
+    for (int k = 0; k < 15000; ++k) {
+      u = pid.step(50.0 * k * kTs_s, bank.output(0).x_meas_mm);
+      bank.advance(k * kTs_s, (k + 1) * kTs_s, {{u, 0.0}});
+    }
+    return u;
+  };
+  const DriveParams p = fadal_y();
+  EXPECT_NEAR(steady_u(true) - steady_u(false), 0.4 / (p.Ka_A_per_V * p.Kt_Nm_per_A), 1e-5);
+}
+
+// Oracle: i = clamp(Ka u, +-i_max); from rest with a saturated command the
+// speed follows w = (Kt i_max - Tc)/B (1 - exp(-B t/J)). Tolerance 1e-7 relative.
+TEST(CurrentSaturation, CapsCurrentAndAcceleration) {
+  DriveParams p = fadal_x();
+  p.effects.current_saturation.enabled = true;
+  p.effects.current_saturation.i_max_A = 5.0;
+  DriveBank bank({p}, kTs_s);
+  bank.reset({0.0});
+  run_constant(bank, 10.0, 2000);
+  EXPECT_DOUBLE_EQ(bank.output(0).i_A, 5.0);
+  EXPECT_DOUBLE_EQ(bank.output(0).Tm_Nm, 5.0 * p.Kt_Nm_per_A);
+  const double t = 0.2;
+  const double w = (p.Kt_Nm_per_A * 5.0 - p.Tc_pos_Nm) / p.B_kg_m2_per_s *
+                   (1.0 - std::exp(-p.B_kg_m2_per_s * t / p.J_kg_m2));
+  EXPECT_NEAR(bank.output(0).w_rad_per_s, w, 1e-7 * w);
+}
+
+// Oracle: a delay of n ticks shifts the open-loop response by exactly n
+// ticks. The same u sequence runs with and without the delay; x_delay[k + n]
+// equals x[k]. Tolerance 1e-12 mm: identical fixed-step arithmetic except
+// for the absolute time values handed to the integrator.
+TEST(Delay, ShiftsResponseByWholeTicks) {
+  DriveParams p = fadal_y();
+  DriveParams pd = p;
+  pd.effects.delay.enabled = true;
+  pd.effects.delay.delay_s = 3.2e-4;  // rounds to 3 ticks
+  DriveBank plain({p}, kTs_s);
+  DriveBank delayed({pd}, kTs_s);
+  plain.reset({0.0});
+  delayed.reset({0.0});
+  std::vector<double> x_plain;
+  std::vector<double> x_delayed;
+  for (int k = 0; k < 2000; ++k) {
+    const double u = 3.0 * std::sin(2.0 * std::numbers::pi * 7.0 * k * kTs_s);
+    plain.advance(k * kTs_s, (k + 1) * kTs_s, {{u, 0.0}});
+    delayed.advance(k * kTs_s, (k + 1) * kTs_s, {{u, 0.0}});
+    x_plain.push_back(plain.output(0).x_mm);
+    x_delayed.push_back(delayed.output(0).x_mm);
+  }
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(x_delayed[k], 0.0);
+  double worst = 0.0;
+  for (int k = 0; k + 3 < 2000; ++k) worst = std::max(worst, std::abs(x_delayed[k + 3] - x_plain[k]));
+  EXPECT_LT(worst, 1e-12);
+  EXPECT_GT(std::abs(x_plain[1000]), 0.1);
+}
+
+// Oracle: the two-mass free oscillation (friction, B and C off) has angular
+// frequency sqrt(K (1/Jm + 1/Jl)). Zero crossings of x_motor - x_load are
+// interpolated linearly between ticks over 20 periods; tolerance 0.2% covers
+// the interpolation (about 1e-6 s per crossing over 0.067 s).
+TEST(Compliance, FreeResponseResonanceFrequency) {
+  DriveParams p = fadal_x();
+  p.Tc_pos_Nm = p.Tc_neg_Nm = 0.0;
+  p.B_kg_m2_per_s = 0.0;
+  p.effects.compliance.enabled = true;
+  p.effects.compliance.K_Nm_per_rad = 7000.0;
+  p.effects.compliance.C_Nm_s_per_rad = 0.0;
+  p.effects.compliance.load_fraction = 0.6;
+  const double Jl = p.J_kg_m2 * 0.6;
+  const double Jm = p.J_kg_m2 - Jl;
+  const double omega = std::sqrt(7000.0 * (1.0 / Jm + 1.0 / Jl));
+  for (int method = 0; method < 2; ++method) {
+    IntegratorOptions o;
+    o.method = method == 0 ? IntegratorOptions::Method::kCvodeAdams : IntegratorOptions::Method::kArkodeErk;
+    DriveBank bank({p}, kTs_s, o);
+    bank.reset({0.0});
+    DriveState s = bank.state(0);
+    s.x_mm = 0.002;
+    bank.set_states({s});
+    std::vector<double> crossings;
+    double prev = 0.002;
+    for (int k = 0; k < 1000; ++k) {
+      run_constant(bank, 0.0, 1, k);
+      const double d = bank.state(0).x_mm - bank.state(0).x_load_mm;
+      if ((prev > 0.0) != (d > 0.0)) crossings.push_back((k + prev / (prev - d)) * kTs_s);
+      prev = d;
+    }
+    ASSERT_GE(crossings.size(), 41u);
+    const double period = 2.0 * (crossings[40] - crossings[0]) / 40.0;
+    EXPECT_NEAR(2.0 * std::numbers::pi / period, omega, 2e-3 * omega) << "method " << method;
+  }
+}
+
+// Oracle: backlash is a play operator of width gap on the table position.
+// Moving + the table trails the motor by gap/2; after reversal the table stays
+// put until the motor has come back by the gap (lost motion = gap), then
+// leads by gap/2. Tolerance 1e-12 mm where both sides are the same state.
+TEST(Backlash, LostMotionAtReversalEqualsGap) {
+  DriveParams p = fadal_y();
+  p.effects.backlash.enabled = true;
+  p.effects.backlash.gap_mm = 0.02;
+  DriveBank bank({p}, kTs_s);
+  bank.reset({0.0});
+  run_constant(bank, 1.0, 1000);
+  EXPECT_NEAR(bank.output(0).x_mm, bank.state(0).x_mm - 0.01, 1e-12);
+  EXPECT_NEAR(bank.output(0).x_meas_mm, bank.state(0).x_mm - 0.01, 1e-12);
+  // Reverse; the motor turns at its largest position x_turn.
+  int k = 1000;
+  double x_turn = bank.state(0).x_mm;
+  while (bank.state(0).x_mm > x_turn - 0.015) {
+    run_constant(bank, -1.0, 1, k++);
+    x_turn = std::max(x_turn, bank.state(0).x_mm);
+  }
+  // Back by 15 um < gap: the table has not moved since the turn. x_turn is
+  // sampled at ticks while the play follows the true turn (located by the
+  // stop event), which lies at most a Ts^2 / 8 = 1.5e-6 mm beyond it
+  // (a = 1170 mm/s^2 here): tolerance 2e-6 mm, one-sided.
+  EXPECT_GE(bank.output(0).x_mm, x_turn - 0.01);
+  EXPECT_NEAR(bank.output(0).x_mm, x_turn - 0.01, 2e-6);
+  run_constant(bank, -1.0, 1000, k);
+  EXPECT_NEAR(bank.output(0).x_mm, bank.state(0).x_mm + 0.01, 1e-12);
+}
+
+// Oracle: the lead error enters only the measured position,
+// x_meas - x = A sin(2 pi x / P + phase), and never the dynamics (bit-equal
+// states with and without). Tolerance 1e-12 mm: formula evaluation.
+TEST(ScrewPitchError, ShowsInMeasuredPositionOnly) {
+  DriveParams p = fadal_y();
+  DriveParams pe = p;
+  pe.effects.screw_pitch_error = {true, 0.003, 7.0, 0.4};
+  DriveBank a({p}, kTs_s);
+  DriveBank b({pe}, kTs_s);
+  a.reset({1.0});
+  b.reset({1.0});
+  for (int k = 0; k < 3000; ++k) {
+    a.advance(k * kTs_s, (k + 1) * kTs_s, {{2.0, 0.0}});
+    b.advance(k * kTs_s, (k + 1) * kTs_s, {{2.0, 0.0}});
+    const double x = b.output(0).x_mm;
+    ASSERT_EQ(x, a.output(0).x_mm);
+    ASSERT_NEAR(b.output(0).x_meas_mm - x, 0.003 * std::sin(2.0 * std::numbers::pi * x / 7.0 + 0.4), 1e-12);
+  }
+  EXPECT_GT(b.output(0).x_mm, 10.0);
+}
+
+// Oracle: with friction and B off, J dw/dt = Tm - A sin(n theta + phase) has
+// the energy integral 0.5 J w^2 = Tm theta + (A/n)(cos(n theta + phase) - cos(phase)).
+// Tolerance 1e-9 relative on the energy, floor 1e-15 J: one fixed ERK step
+// of Ts per tick is exact to roundoff for this smooth, slowly varying torque.
+TEST(Cogging, SpeedFollowsEnergyIntegral) {
+  DriveParams p = fadal_x();
+  p.Tc_pos_Nm = p.Tc_neg_Nm = 0.0;
+  p.B_kg_m2_per_s = 0.0;
+  p.effects.cogging = {true, 0.15, 6.0, 0.3};
+  DriveBank bank({p}, kTs_s);
+  bank.reset({0.0});
+  const double u = 0.3;
+  const double Tm = p.Ka_A_per_V * p.Kt_Nm_per_A * u;
+  for (int k = 0; k < 3000; ++k) {
+    run_constant(bank, u, 1, k);
+    const double theta = bank.state(0).x_mm / p.rg_mm_per_rad;
+    const double energy = Tm * theta + 0.15 / 6.0 * (std::cos(6.0 * theta + 0.3) - std::cos(0.3));
+    const double w = bank.output(0).w_rad_per_s;
+    ASSERT_NEAR(0.5 * p.J_kg_m2 * w * w, energy, 1e-9 * energy + 1e-15) << "k = " << k;
+  }
+  EXPECT_GT(bank.state(0).x_mm / p.rg_mm_per_rad, 4.0 * 2.0 * std::numbers::pi / 6.0);  // 4 ripple periods
+}
+
+// Oracle: cogging is part of the static balance. At theta = 0 with phase pi/2
+// the ripple torque is +A; a motor torque of Tc + A/2 is then held (net
+// Tc - A/2 < Tc), while without cogging it slips. Exact equality: no motion.
+TEST(Cogging, HoldsAgainstBreakawayAtRest) {
+  DriveParams p = fadal_x();
+  p.effects.cogging = {true, 0.1, 8.0, std::numbers::pi / 2.0};
+  const double u = (p.Tc_pos_Nm + 0.05) / (p.Ka_A_per_V * p.Kt_Nm_per_A);
+  DriveBank bank({p}, kTs_s);
+  bank.reset({0.0});
+  run_constant(bank, u, 1000);
+  EXPECT_EQ(bank.output(0).x_mm, 0.0);
+  p.effects.cogging.enabled = false;
+  DriveBank plain({p}, kTs_s);
+  plain.reset({0.0});
+  run_constant(plain, u, 1000);
+  EXPECT_GT(plain.output(0).x_mm, 0.0);
+}
+
+// Oracle: Stribeck friction. Breakaway is Ts_static: a torque between Tc and
+// Ts_static holds (exactly), one above slips. At steady sliding the speed
+// satisfies Ka Kt u = B w + Tc + (Ts - Tc) exp(-(w/ws)^2); the residual of
+// that equation at the final speed must be below 1e-7 N m.
+TEST(Stribeck, BreakawayAtStaticLevelAndSteadyBalance) {
+  DriveParams p = fadal_y();
+  p.effects.stribeck = {true, 0.5, 2.0};
+  const double KaKt = p.Ka_A_per_V * p.Kt_Nm_per_A;
+  DriveBank held({p}, kTs_s);
+  held.reset({0.0});
+  run_constant(held, 0.45 / KaKt, 2000);
+  EXPECT_EQ(held.output(0).x_mm, 0.0);
+  DriveBank slip({p}, kTs_s);
+  slip.reset({0.0});
+  const double u = 0.505 / KaKt;
+  run_constant(slip, u, 8000);
+  const double w = slip.output(0).w_rad_per_s;
+  EXPECT_GT(w, 0.0);
+  const double residual =
+      KaKt * u - (p.B_kg_m2_per_s * w + p.Tc_pos_Nm + (0.5 - p.Tc_pos_Nm) * std::exp(-(w / 2.0) * (w / 2.0)));
+  EXPECT_LT(std::abs(residual), 1e-7);
+}
+
+// Oracle: inside the band the Coulomb level is Tc + dTc, so the steady speed
+// there is (Ka Kt u - Tc - dTc)/B, and (Ka Kt u - Tc)/B before it.
+// Y axis, J/B = 0.034 s; 0.5 s in the band = 14 time constants. Tolerance 1e-6 relative.
+TEST(PositionDependentFriction, SteadySpeedInsideAndOutsideBand) {
+  DriveParams p = fadal_y();
+  p.effects.position_dependent_friction = {true, 0.1, 20.0, 1000.0};
+  const double KaKt = p.Ka_A_per_V * p.Kt_Nm_per_A;
+  const double u = 1.0;
+  DriveBank bank({p}, kTs_s);
+  bank.reset({0.0});
+  int k = 0;
+  const double w_out = (KaKt * u - p.Tc_pos_Nm) / p.B_kg_m2_per_s;
+  while (bank.state(0).x_mm < 19.0) run_constant(bank, u, 1, k++);
+  EXPECT_NEAR(bank.output(0).w_rad_per_s, w_out, 1e-6 * w_out);
+  run_constant(bank, u, 5000, k);
+  const double w_in = (KaKt * u - p.Tc_pos_Nm - 0.1) / p.B_kg_m2_per_s;
+  EXPECT_NEAR(bank.output(0).w_rad_per_s, w_in, 1e-6 * w_in);
+}
+
+// Oracle: energy balance with the spring, damper, cogging and a constant
+// load: work_electrical = friction + damping + load + delta(kinetic + spring).
+// Tolerance 1e-6 of the electrical work.
+TEST(Energy, BalanceClosesWithComplianceCoggingAndLoad) {
+  DriveParams p = fadal_x();
+  p.effects.compliance = {true, 3000.0, 0.05, 0.5};
+  p.effects.cogging = {true, 0.05, 4.0, 0.0};
+  p.effects.constant_load = {true, 0.1};
+  DriveBank bank({p}, kTs_s);
+  bank.reset({0.0});
+  for (int k = 0; k < 10000; ++k) {
+    const double u = 2.0 * std::sin(2.0 * std::numbers::pi * 3.0 * k * kTs_s);
+    bank.advance(k * kTs_s, (k + 1) * kTs_s, {{u, 0.0}});
+  }
+  const DriveState& s = bank.state(0);
+  const double rhs = s.work_friction_J + s.work_damping_J + s.work_load_J + kinetic_energy_J(p, s) +
+                     spring_energy_J(p, s);
+  EXPECT_GT(s.work_friction_J, 0.0);
+  EXPECT_NEAR(s.work_electrical_J, rhs, 1e-6 * std::abs(s.work_electrical_J));
+}
+
+}  // namespace
+}  // namespace twin::feeddrive

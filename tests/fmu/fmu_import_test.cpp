@@ -1,0 +1,536 @@
+// The exported FMU loaded as a real shared library (dlopen, RTLD_NOW) and
+// driven through the FMI 2.0 Co-Simulation call sequence, as a system-level
+// master does.
+//
+// Oracle: a native twin::sim::CoSimulation built in this test from the same
+// scenario file, stepped tick by tick with the same inputs. The FMU runs the
+// same code on the same numbers, so every output must be EXACTLY equal (no
+// tolerance: any difference means the FMU's model, inputs or step logic drift
+// from the native run).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "controller/interpolator.hpp"
+#include "fmu_importer.hpp"
+#include "twin/core/units.hpp"
+#include "twin/io/scenario_file.hpp"
+#include "twin/sim/cosimulation.hpp"
+#include "twin/sim/reference.hpp"
+
+namespace twin::fmu_test {
+namespace {
+
+std::string export_error(const std::string& fmu) {
+  std::ifstream e(fmu + ".error");
+  if (!e) return {};
+  std::stringstream s;
+  s << e.rdbuf();
+  return s.str();
+}
+
+#define REQUIRE_EXPORTED(path)                                                     \
+  do {                                                                             \
+    const std::string err = export_error(path);                                    \
+    ASSERT_TRUE(err.empty()) << err;                                               \
+    ASSERT_TRUE(std::filesystem::exists(path)) << path << " was not exported";     \
+  } while (false)
+
+/// Output name -> the Snapshot field it must equal, written out here
+/// independently of fmu/variables.cpp.
+std::map<std::string, std::function<double(const sim::Snapshot&)>> expected_outputs(const std::vector<Axis>& axes) {
+  std::map<std::string, std::function<double(const sim::Snapshot&)>> m;
+  for (Axis a : axes) {
+    const std::string n(axis_name(a));
+    const std::size_t i = index(a);
+    m[n + "_mm"] = [i](const sim::Snapshot& s) { return s.axes[i].x_mm; };
+    m[n + "_ref_out_mm"] = [i](const sim::Snapshot& s) { return s.axes[i].x_ref_mm; };
+    m[n + "_u_V"] = [i](const sim::Snapshot& s) { return s.axes[i].u_V; };
+    m[n + "_i_A"] = [i](const sim::Snapshot& s) { return s.axes[i].i_A; };
+    m[n + "_err_mm"] = [i](const sim::Snapshot& s) { return s.axes[i].e_mm; };
+    m[n + "_true_mm"] = [i](const sim::Snapshot& s) { return s.axes[i].x_true_mm; };
+    m[n + "_v_mm_per_s"] = [i](const sim::Snapshot& s) { return s.axes[i].v_mm_per_s; };
+    m[n + "_Tm_Nm"] = [i](const sim::Snapshot& s) { return s.axes[i].Tm_Nm; };
+    m[n + "_Td_Nm"] = [i](const sim::Snapshot& s) { return s.axes[i].Td_Nm; };
+  }
+  m["fx_N"] = [](const sim::Snapshot& s) { return s.F_N[0]; };
+  m["fy_N"] = [](const sim::Snapshot& s) { return s.F_N[1]; };
+  m["fz_N"] = [](const sim::Snapshot& s) { return s.F_N[2]; };
+  m["fx_avg_N"] = [](const sim::Snapshot& s) { return s.F_avg_N[0]; };
+  m["spindle_speed_rpm"] = [](const sim::Snapshot& s) { return s.spindle_rpm; };
+  m["feed_mm_per_min"] = [](const sim::Snapshot& s) { return s.feed_real_mm_per_min; };
+  m["feed_ref_mm_per_min"] = [](const sim::Snapshot& s) { return s.feed_ref_mm_per_min; };
+  m["contour_error_mm"] = [](const sim::Snapshot& s) { return s.contour_error_mm; };
+  m["engagement_deg"] = [](const sim::Snapshot& s) { return s.engagement_deg; };
+  m["cutting_power_W"] = [](const sim::Snapshot& s) { return s.cutting_power_W; };
+  return m;
+}
+
+/// The reference a master feeds in mode 1: a smooth excursion of 0.2 mm
+/// on every axis from the start position.
+double ref_input_mm(double start_mm, std::size_t axis, double t_s) {
+  return start_mm + 0.2 * (1.0 - std::cos(2.0 * kPi * (15.0 + 5.0 * static_cast<double>(axis)) * t_s));
+}
+
+/// Communication steps in ticks: irregular, 500 ticks (0.05 s) in all.
+const std::vector<int> kStepTicks{1, 7, 10, 10, 3, 50, 19, 100, 100, 100, 100};
+
+struct Outputs {
+  std::vector<std::vector<double>> rows;  // outputs after each step, in `names` order
+  std::vector<std::string> names;
+};
+
+/// Native: the scenario through CoSimulation, tick by tick.
+Outputs native_run(const std::string& scenario_path, int mode, const std::vector<std::string>& names) {
+  const io::Scenario sc = io::load_scenario(scenario_path);
+  std::shared_ptr<sim::ExternalReference> ext;
+  std::shared_ptr<const sim::ReferenceSource> ref;
+  if (mode == 2) {
+    ref = std::make_shared<sim::ProgramReference>(
+        controller::plan_trajectory(io::parse_program(sc), sc.machine.motion_limits(), sc.machine.Ts_s));
+  } else {
+    ext = std::make_shared<sim::ExternalReference>(sc.start_mm);
+    ref = ext;
+  }
+  sim::CoSimulation cosim(sc.machine, ref, sc.make_process ? sc.make_process() : nullptr, sc.start_mm);
+  const auto outs = expected_outputs(cosim.axes());
+  Outputs r;
+  r.names = names;
+  std::int64_t k = 0;
+  for (int n : kStepTicks) {
+    const double t = static_cast<double>(k) * sc.machine.Ts_s;
+    if (ext) {
+      AxisArray<double> x{};
+      for (std::size_t i = 0; i < 3; ++i) x[i] = ref_input_mm(sc.start_mm[i], i, t);
+      ext->set(x);
+    }
+    for (int i = 0; i < n; ++i) cosim.step();
+    k += n;
+    std::vector<double> row;
+    for (const auto& name : names) row.push_back(outs.at(name)(cosim.last()));
+    r.rows.push_back(row);
+  }
+  return r;
+}
+
+/// The FMU: instantiate, set mode, initialise, DoStep with the same inputs.
+Outputs fmu_run(LoadedFmu& fmu, int mode, const std::vector<std::string>& names, const std::vector<double>& start_mm,
+            double Ts_s) {
+  const auto& f = fmu.fn();
+  fmi2Component c = fmu.instantiate("run");
+  EXPECT_NE(c, nullptr);
+  Outputs r;
+  r.names = names;
+  if (c == nullptr) return r;
+  EXPECT_EQ(f.fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0), fmi2OK);
+  const fmi2ValueReference mode_vr = fmu.var("mode").vr;
+  const fmi2Integer mode_value = mode;
+  EXPECT_EQ(f.fmi2SetInteger(c, &mode_vr, 1, &mode_value), fmi2OK);
+  EXPECT_EQ(f.fmi2EnterInitializationMode(c), fmi2OK);
+  EXPECT_EQ(f.fmi2ExitInitializationMode(c), fmi2OK);
+  std::vector<fmi2ValueReference> vrs;
+  for (const auto& n : names) vrs.push_back(fmu.var(n).vr);
+  std::int64_t k = 0;
+  for (int n : kStepTicks) {
+    const double t = static_cast<double>(k) * Ts_s;
+    for (std::size_t i = 0; i < 3; ++i) {
+      const std::string in = std::string(axis_name(i)) + "_ref_mm";
+      if (!fmu.has(in)) continue;
+      const fmi2ValueReference vr = fmu.var(in).vr;
+      const fmi2Real v = ref_input_mm(start_mm[i], i, t);
+      EXPECT_EQ(f.fmi2SetReal(c, &vr, 1, &v), fmi2OK);
+    }
+    EXPECT_EQ(f.fmi2DoStep(c, t, static_cast<double>(n) * Ts_s, fmi2True), fmi2OK) << "t = " << t << ", n = " << n;
+    k += n;
+    std::vector<double> row(names.size());
+    EXPECT_EQ(f.fmi2GetReal(c, vrs.data(), vrs.size(), row.data()), fmi2OK);
+    r.rows.push_back(row);
+  }
+  EXPECT_EQ(f.fmi2Terminate(c), fmi2OK);
+  f.fmi2FreeInstance(c);
+  return r;
+}
+
+void expect_identical(const Outputs& a, const Outputs& b) {
+  ASSERT_EQ(a.rows.size(), b.rows.size());
+  for (std::size_t r = 0; r < a.rows.size(); ++r)
+    for (std::size_t i = 0; i < a.names.size(); ++i)
+      ASSERT_EQ(a.rows[r][i], b.rows[r][i]) << a.names[i] << " after step " << r;
+}
+
+class FmuImport : public ::testing::Test {
+ protected:
+  void load(const std::string& fmu_path, const std::string& scenario) {
+    fmu_ = std::make_unique<LoadedFmu>(fmu_path);
+    const io::Scenario sc = io::load_scenario(scenario);
+    Ts_s_ = sc.machine.Ts_s;
+    start_mm_.assign(sc.start_mm.begin(), sc.start_mm.end());
+    for (const auto& [name, fn] : expected_outputs(sc.machine.present_axes())) {
+      ASSERT_TRUE(fmu_->has(name)) << "the FMU has no output " << name;
+      EXPECT_EQ(fmu_->var(name).causality, "output") << name;
+      names_.push_back(name);
+    }
+  }
+  std::unique_ptr<LoadedFmu> fmu_;
+  std::vector<std::string> names_;
+  std::vector<double> start_mm_;
+  double Ts_s_{1e-4};
+};
+
+TEST_F(FmuImport, AirCutMode2EqualsNativeRunBitForBit) {
+  REQUIRE_EXPORTED(TWIN_FMU_AIRCUT);
+  load(TWIN_FMU_AIRCUT, TWIN_FMU_AIRCUT_SCENARIO);
+  const Outputs native = native_run(TWIN_FMU_AIRCUT_SCENARIO, 2, names_);
+  const Outputs fmu = fmu_run(*fmu_, 2, names_, start_mm_, Ts_s_);
+  expect_identical(native, fmu);
+  // The run must actually move (a frozen model would also agree with itself).
+  const auto x = std::find(names_.begin(), names_.end(), "x_true_mm") - names_.begin();
+  EXPECT_GT(std::abs(native.rows.back()[x] - start_mm_[0]), 0.1);
+}
+
+TEST_F(FmuImport, AirCutMode1EqualsNativeRunBitForBit) {
+  REQUIRE_EXPORTED(TWIN_FMU_AIRCUT);
+  load(TWIN_FMU_AIRCUT, TWIN_FMU_AIRCUT_SCENARIO);
+  const Outputs native = native_run(TWIN_FMU_AIRCUT_SCENARIO, 1, names_);
+  const Outputs fmu = fmu_run(*fmu_, 1, names_, start_mm_, Ts_s_);
+  expect_identical(native, fmu);
+}
+
+TEST_F(FmuImport, DefaultScenarioMode2EqualsNativeRunBitForBit) {
+  REQUIRE_EXPORTED(TWIN_FMU_DEFAULT);
+  load(TWIN_FMU_DEFAULT, io::default_scenario_path().string());
+  const Outputs native = native_run(io::default_scenario_path().string(), 2, names_);
+  const Outputs fmu = fmu_run(*fmu_, 2, names_, start_mm_, Ts_s_);
+  expect_identical(native, fmu);
+}
+
+TEST_F(FmuImport, DefaultScenarioMode1EqualsNativeRunBitForBit) {
+  REQUIRE_EXPORTED(TWIN_FMU_DEFAULT);
+  load(TWIN_FMU_DEFAULT, io::default_scenario_path().string());
+  const Outputs native = native_run(io::default_scenario_path().string(), 1, names_);
+  const Outputs fmu = fmu_run(*fmu_, 1, names_, start_mm_, Ts_s_);
+  expect_identical(native, fmu);
+}
+
+TEST_F(FmuImport, DefaultScenarioWhileCuttingEqualsNativeAndRestoresState) {
+  // 1.2 s of the pocket corner: the tool enters the stock after ~0.9 s, so the
+  // process (forces, stock removal, their load on the drives) is in the
+  // comparison. Then FMU state get/set in mid-cut (the stock is cloned).
+  REQUIRE_EXPORTED(TWIN_FMU_DEFAULT);
+  const std::string path = io::default_scenario_path().string();
+  load(TWIN_FMU_DEFAULT, path);
+  const io::Scenario sc = io::load_scenario(path);
+  auto ref = std::make_shared<sim::ProgramReference>(
+      controller::plan_trajectory(io::parse_program(sc), sc.machine.motion_limits(), sc.machine.Ts_s));
+  sim::CoSimulation cosim(sc.machine, ref, sc.make_process(), sc.start_mm);
+  const auto outs = expected_outputs(cosim.axes());
+  const auto& f = fmu_->fn();
+  fmi2Component c = fmu_->instantiate("cut");
+  ASSERT_NE(c, nullptr);
+  ASSERT_EQ(f.fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0), fmi2OK);
+  ASSERT_EQ(f.fmi2EnterInitializationMode(c), fmi2OK);
+  ASSERT_EQ(f.fmi2ExitInitializationMode(c), fmi2OK);
+  std::vector<fmi2ValueReference> vrs;
+  for (const auto& n : names_) vrs.push_back(fmu_->var(n).vr);
+  const int ticks_per_step = 100;
+  double peak_N = 0.0;
+  std::vector<double> row(names_.size());
+  const int n_steps = 120;
+  for (int s = 0; s < n_steps; ++s) {
+    ASSERT_EQ(f.fmi2DoStep(c, s * ticks_per_step * Ts_s_, ticks_per_step * Ts_s_, fmi2True), fmi2OK);
+    for (int i = 0; i < ticks_per_step; ++i) {
+      const sim::Snapshot& r = cosim.step();
+      peak_N = std::max(peak_N, std::abs(r.F_N[0]) + std::abs(r.F_N[1]));
+    }
+    ASSERT_EQ(f.fmi2GetReal(c, vrs.data(), vrs.size(), row.data()), fmi2OK);
+    for (std::size_t i = 0; i < names_.size(); ++i) ASSERT_EQ(row[i], outs.at(names_[i])(cosim.last())) << names_[i];
+  }
+  EXPECT_GT(peak_N, 1.0) << "the run must reach the cut";
+  fmi2FMUstate st = nullptr;
+  ASSERT_EQ(f.fmi2GetFMUstate(c, &st), fmi2OK);
+  auto run_on = [&]() {
+    std::vector<double> all;
+    for (int s = n_steps; s < n_steps + 5; ++s) {
+      EXPECT_EQ(f.fmi2DoStep(c, s * ticks_per_step * Ts_s_, ticks_per_step * Ts_s_, fmi2False), fmi2OK);
+      EXPECT_EQ(f.fmi2GetReal(c, vrs.data(), vrs.size(), row.data()), fmi2OK);
+      all.insert(all.end(), row.begin(), row.end());
+    }
+    return all;
+  };
+  const auto a = run_on();
+  ASSERT_EQ(f.fmi2SetFMUstate(c, st), fmi2OK);
+  EXPECT_EQ(run_on(), a);
+  // canSerializeFMUstate is false with a process: serialising is refused cleanly.
+  std::size_t size = 0;
+  EXPECT_EQ(f.fmi2SerializedFMUstateSize(c, st, &size), fmi2Error);
+  EXPECT_NE(fmu_->xml().find("canSerializeFMUstate=\"false\""), std::string::npos);
+  f.fmi2FreeFMUstate(c, &st);
+  f.fmi2FreeInstance(c);
+}
+
+// ---- call sequence and misuse ------------------------------------------------
+
+class FmuCalls : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    REQUIRE_EXPORTED(TWIN_FMU_AIRCUT);
+    fmu_ = std::make_unique<LoadedFmu>(TWIN_FMU_AIRCUT);
+    Ts_s_ = 1e-4;
+    const std::string Ts = fmu_->var("Ts").start;
+    ASSERT_FALSE(Ts.empty());
+    Ts_s_ = std::stod(Ts);
+  }
+  void TearDown() override {
+    for (fmi2Component c : instances_) fmu_->fn().fmi2FreeInstance(c);
+  }
+  fmi2Component initialised(const std::string& name = "calls") {
+    const auto& f = fmu_->fn();
+    fmi2Component c = fmu_->instantiate(name);
+    EXPECT_NE(c, nullptr);
+    if (c == nullptr) return c;
+    instances_.push_back(c);
+    EXPECT_EQ(f.fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0), fmi2OK);
+    EXPECT_EQ(f.fmi2EnterInitializationMode(c), fmi2OK);
+    EXPECT_EQ(f.fmi2ExitInitializationMode(c), fmi2OK);
+    return c;
+  }
+  /// n_steps steps of 10 ticks from tick k0; every output after each.
+  std::vector<double> steps(fmi2Component c, std::int64_t k0, int n_steps) {
+    const auto& f = fmu_->fn();
+    std::vector<fmi2ValueReference> vrs;
+    for (const auto& v : fmu_->variables())
+      if (v.causality == "output" && v.type == "Real") vrs.push_back(v.vr);
+    std::vector<double> all;
+    for (int s = 0; s < n_steps; ++s) {
+      EXPECT_EQ(f.fmi2DoStep(c, static_cast<double>(k0 + 10 * s) * Ts_s_, 10.0 * Ts_s_, fmi2False), fmi2OK);
+      std::vector<double> row(vrs.size());
+      EXPECT_EQ(f.fmi2GetReal(c, vrs.data(), vrs.size(), row.data()), fmi2OK);
+      all.insert(all.end(), row.begin(), row.end());
+    }
+    return all;
+  }
+  std::unique_ptr<LoadedFmu> fmu_;
+  std::vector<fmi2Component> instances_;
+  double Ts_s_{1e-4};
+};
+
+TEST_F(FmuCalls, VersionAndPlatform) {
+  // Oracle: the FMI 2.0 standard's fixed strings.
+  EXPECT_STREQ(fmu_->fn().fmi2GetVersion(), "2.0");
+  EXPECT_STREQ(fmu_->fn().fmi2GetTypesPlatform(), "default");
+}
+
+TEST_F(FmuCalls, WrongGuidGivesNoInstanceAndALogLine) {
+  fmi2Component c = fmu_->instantiate("bad", "{00000000-0000-0000-0000-000000000000}");
+  EXPECT_EQ(c, nullptr);
+  ASSERT_FALSE(fmu_->log().empty());
+  EXPECT_NE(fmu_->log().back().find("GUID"), std::string::npos) << fmu_->log().back();
+}
+
+TEST_F(FmuCalls, BadResourceLocationGivesNoInstance) {
+  const auto& f = fmu_->fn();
+  fmi2CallbackFunctions cb{};
+  EXPECT_EQ(f.fmi2Instantiate("x", fmi2CoSimulation, fmu_->guid().c_str(), "file:///nonexistent/resources", &cb,
+                              fmi2False, fmi2False),
+            nullptr);
+  EXPECT_EQ(f.fmi2Instantiate("x", fmi2ModelExchange, fmu_->guid().c_str(), fmu_->resource_uri().c_str(), &cb,
+                              fmi2False, fmi2False),
+            nullptr);
+}
+
+TEST_F(FmuCalls, ResourceLocationWithTrailingSlashWorks) {
+  const auto& f = fmu_->fn();
+  fmi2CallbackFunctions cb{};
+  const std::string uri = fmu_->resource_uri() + "/";
+  fmi2Component c = f.fmi2Instantiate("x", fmi2CoSimulation, fmu_->guid().c_str(), uri.c_str(), &cb, fmi2False, fmi2False);
+  EXPECT_NE(c, nullptr);
+  f.fmi2FreeInstance(c);
+}
+
+TEST_F(FmuCalls, UnknownValueReferenceIsAnError) {
+  const auto& f = fmu_->fn();
+  const fmi2ValueReference bad = static_cast<fmi2ValueReference>(fmu_->variables().size() + 1000);
+  fmi2Real r = 0.0;
+  fmi2Integer i = 0;
+  fmi2Boolean b = 0;
+  fmi2String s = nullptr;
+  EXPECT_EQ(f.fmi2GetReal(initialised(), &bad, 1, &r), fmi2Error);
+  EXPECT_EQ(f.fmi2SetReal(initialised(), &bad, 1, &r), fmi2Error);
+  EXPECT_EQ(f.fmi2GetInteger(initialised(), &bad, 1, &i), fmi2Error);
+  EXPECT_EQ(f.fmi2SetInteger(initialised(), &bad, 1, &i), fmi2Error);
+  EXPECT_EQ(f.fmi2GetBoolean(initialised(), &bad, 1, &b), fmi2Error);
+  EXPECT_EQ(f.fmi2SetBoolean(initialised(), &bad, 1, &b), fmi2Error);
+  EXPECT_EQ(f.fmi2GetString(initialised(), &bad, 1, &s), fmi2Error);
+  EXPECT_EQ(f.fmi2SetString(initialised(), &bad, 1, &s), fmi2Error);
+  // A Real read through the Integer function is refused too.
+  const fmi2ValueReference x_mm = fmu_->var("x_mm").vr;
+  EXPECT_EQ(f.fmi2GetInteger(initialised(), &x_mm, 1, &i), fmi2Error);
+}
+
+TEST_F(FmuCalls, DoStepBeforeInitialisationIsAnError) {
+  const auto& f = fmu_->fn();
+  fmi2Component c = fmu_->instantiate("early");
+  ASSERT_NE(c, nullptr);
+  instances_.push_back(c);
+  EXPECT_EQ(f.fmi2DoStep(c, 0.0, 10 * Ts_s_, fmi2False), fmi2Error);
+  fmi2Component d = fmu_->instantiate("early2");
+  instances_.push_back(d);
+  EXPECT_EQ(f.fmi2EnterInitializationMode(d), fmi2OK);
+  EXPECT_EQ(f.fmi2DoStep(d, 0.0, 10 * Ts_s_, fmi2False), fmi2Error);
+  fmi2Component x = fmu_->instantiate("x");
+  instances_.push_back(x);
+  EXPECT_EQ(f.fmi2Terminate(x), fmi2Error) << "Terminate before initialisation";
+  EXPECT_EQ(f.fmi2ExitInitializationMode(x), fmi2Error) << "Exit before Enter";
+}
+
+TEST_F(FmuCalls, BadStepSizesAreErrorsWithTheNumbers) {
+  const auto& f = fmu_->fn();
+  EXPECT_EQ(f.fmi2DoStep(initialised(), 0.0, -10 * Ts_s_, fmi2False), fmi2Error);
+  EXPECT_EQ(f.fmi2DoStep(initialised(), 0.0, 0.0, fmi2False), fmi2Error);
+  EXPECT_EQ(f.fmi2DoStep(initialised(), 0.0, 1.5 * Ts_s_, fmi2False), fmi2Error);
+  ASSERT_FALSE(fmu_->log().empty());
+  EXPECT_NE(fmu_->log().back().find("1.5 ticks"), std::string::npos) << fmu_->log().back();
+  EXPECT_EQ(f.fmi2DoStep(initialised(), 0.0, 0.4 * Ts_s_, fmi2False), fmi2Error);
+  EXPECT_EQ(f.fmi2DoStep(initialised(), 0.0, std::nan(""), fmi2False), fmi2Error);
+  // Wrong communication point: the FMU is at t = 0, the master says 1 ms.
+  EXPECT_EQ(f.fmi2DoStep(initialised(), 1e-3, 10 * Ts_s_, fmi2False), fmi2Error);
+  EXPECT_NE(fmu_->log().back().find("expected"), std::string::npos) << fmu_->log().back();
+}
+
+TEST_F(FmuCalls, StepSizesWithinToleranceOfWholeTicksAreAccepted) {
+  // Accumulated communication points drift by a few ulps; h = 10 Ts computed
+  // as 0.001 and t as a sum of such steps must still be accepted.
+  const auto& f = fmu_->fn();
+  fmi2Component c = initialised();
+  double t = 0.0;
+  for (int i = 0; i < 30; ++i) {
+    ASSERT_EQ(f.fmi2DoStep(c, t, 0.001, fmi2False), fmi2OK) << "t = " << t;
+    t += 0.001;
+  }
+  ASSERT_EQ(f.fmi2DoStep(c, t, 0.001 + 1e-13, fmi2False), fmi2OK);
+}
+
+TEST_F(FmuCalls, CallsAfterAnErrorAreRefusedUntilReset) {
+  const auto& f = fmu_->fn();
+  fmi2Component c = initialised();
+  const auto first = steps(c, 0, 3);
+  ASSERT_EQ(f.fmi2DoStep(c, 3e-3, -1.0, fmi2False), fmi2Error);
+  EXPECT_EQ(f.fmi2DoStep(c, 3e-3, 10 * Ts_s_, fmi2False), fmi2Error);
+  const fmi2ValueReference kp = fmu_->var("x.Kp").vr;
+  const fmi2Real v = 400.0;
+  EXPECT_EQ(f.fmi2SetReal(c, &kp, 1, &v), fmi2Error);
+  EXPECT_EQ(f.fmi2Terminate(c), fmi2Error);
+  fmi2Real r = 0.0;
+  const fmi2ValueReference x_mm = fmu_->var("x_mm").vr;
+  EXPECT_EQ(f.fmi2GetReal(c, &x_mm, 1, &r), fmi2OK) << "outputs stay readable in the error state";
+  // fmi2Reset: a fresh run that repeats the first exactly.
+  ASSERT_EQ(f.fmi2Reset(c), fmi2OK);
+  ASSERT_EQ(f.fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0), fmi2OK);
+  ASSERT_EQ(f.fmi2EnterInitializationMode(c), fmi2OK);
+  ASSERT_EQ(f.fmi2ExitInitializationMode(c), fmi2OK);
+  EXPECT_EQ(steps(c, 0, 3), first);
+}
+
+TEST_F(FmuCalls, UnsupportedFunctionsReturnErrorAndLog) {
+  const auto& f = fmu_->fn();
+  fmi2Component c = initialised();
+  fmi2Status st = fmi2OK;
+  fmi2Integer i = 0;
+  fmi2String s = nullptr;
+  EXPECT_EQ(f.fmi2CancelStep(c), fmi2Error);
+  EXPECT_EQ(f.fmi2GetStatus(c, fmi2DoStepStatus, &st), fmi2Error);
+  EXPECT_EQ(f.fmi2GetIntegerStatus(c, fmi2DoStepStatus, &i), fmi2Error);
+  EXPECT_EQ(f.fmi2GetStringStatus(c, fmi2PendingStatus, &s), fmi2Error);
+  EXPECT_EQ(f.fmi2GetDirectionalDerivative(c, nullptr, 0, nullptr, 0, nullptr, nullptr), fmi2Error);
+  EXPECT_EQ(f.fmi2SetRealInputDerivatives(c, nullptr, 0, nullptr, nullptr), fmi2Error);
+  EXPECT_EQ(f.fmi2GetRealOutputDerivatives(c, nullptr, 0, nullptr, nullptr), fmi2Error);
+  EXPECT_NE(fmu_->log().back().find("not supported"), std::string::npos);
+  EXPECT_EQ(f.fmi2DoStep(nullptr, 0.0, 1e-3, fmi2False), fmi2Error) << "a null instance";
+  fmi2Real t = -1.0;
+  EXPECT_EQ(f.fmi2DoStep(c, 0.0, 10 * Ts_s_, fmi2False), fmi2OK);
+  EXPECT_EQ(f.fmi2GetRealStatus(c, fmi2LastSuccessfulTime, &t), fmi2OK);
+  EXPECT_DOUBLE_EQ(t, 10 * Ts_s_);
+}
+
+TEST_F(FmuCalls, FixedParametersCannotChangeInStepModeTunableOnesCan) {
+  const auto& f = fmu_->fn();
+  fmi2Component c = initialised();
+  const fmi2ValueReference Ts = fmu_->var("Ts").vr;
+  const fmi2Real Ts_new = 2e-4;
+  EXPECT_EQ(f.fmi2SetReal(c, &Ts, 1, &Ts_new), fmi2Error);
+  fmi2Component d = initialised("tunable");
+  const fmi2ValueReference kp = fmu_->var("x.Kp").vr;
+  EXPECT_EQ(fmu_->var("x.Kp").variability, "tunable");
+  fmi2Real kp_old = 0.0;
+  ASSERT_EQ(f.fmi2GetReal(d, &kp, 1, &kp_old), fmi2OK);
+  const fmi2Real kp_new = 0.8 * kp_old;
+  ASSERT_EQ(f.fmi2SetReal(d, &kp, 1, &kp_new), fmi2OK);
+  fmi2Real back = 0.0;
+  ASSERT_EQ(f.fmi2GetReal(d, &kp, 1, &back), fmi2OK);
+  EXPECT_EQ(back, kp_new);
+  // The new gain acts: the run departs from an untouched instance's.
+  fmi2Component e = initialised("untouched");
+  EXPECT_NE(steps(d, 0, 20), steps(e, 0, 20));
+}
+
+TEST_F(FmuCalls, SaveStepRestoreStepGivesIdenticalOutputs) {
+  const auto& f = fmu_->fn();
+  fmi2Component c = initialised();
+  steps(c, 0, 5);
+  fmi2FMUstate st = nullptr;
+  ASSERT_EQ(f.fmi2GetFMUstate(c, &st), fmi2OK);
+  const auto a = steps(c, 50, 5);
+  ASSERT_EQ(f.fmi2SetFMUstate(c, st), fmi2OK);
+  const auto b = steps(c, 50, 5);
+  EXPECT_EQ(a, b);
+  // Serialised, freed, deserialised: the same again.
+  std::size_t size = 0;
+  ASSERT_EQ(f.fmi2SerializedFMUstateSize(c, st, &size), fmi2OK);
+  std::vector<fmi2Byte> bytes(size);
+  ASSERT_EQ(f.fmi2SerializeFMUstate(c, st, bytes.data(), size), fmi2OK);
+  ASSERT_EQ(f.fmi2FreeFMUstate(c, &st), fmi2OK);
+  EXPECT_EQ(st, nullptr);
+  fmi2FMUstate st2 = nullptr;
+  ASSERT_EQ(f.fmi2DeSerializeFMUstate(c, bytes.data(), bytes.size(), &st2), fmi2OK);
+  ASSERT_EQ(f.fmi2SetFMUstate(c, st2), fmi2OK);
+  EXPECT_EQ(steps(c, 50, 5), a);
+  // A deserialised state restores into a second instance too.
+  fmi2Component d = initialised("other");
+  ASSERT_EQ(f.fmi2SetFMUstate(d, st2), fmi2OK);
+  EXPECT_EQ(steps(d, 50, 5), a);
+  ASSERT_EQ(f.fmi2FreeFMUstate(c, &st2), fmi2OK);
+  // Truncated bytes are refused, never read past.
+  fmi2FMUstate st3 = nullptr;
+  EXPECT_EQ(f.fmi2DeSerializeFMUstate(c, bytes.data(), bytes.size() / 2, &st3), fmi2Error);
+}
+
+TEST_F(FmuCalls, TwoInstancesDoNotSeeEachOther) {
+  const auto& f = fmu_->fn();
+  fmi2Component solo = initialised("solo");
+  const auto alone = steps(solo, 0, 10);
+  fmi2Component a = initialised("a");
+  fmi2Component b = initialised("b");
+  // b gets a different reference mode input and force; a must not notice.
+  const fmi2ValueReference fx = fmu_->var("fx_ext_N").vr;
+  const fmi2Real force = 50.0;
+  ASSERT_EQ(f.fmi2SetReal(b, &fx, 1, &force), fmi2OK);
+  std::vector<double> ra;
+  for (int s = 0; s < 10; ++s) {
+    const auto x = steps(a, 10 * s, 1);
+    steps(b, 10 * s, 1);
+    ra.insert(ra.end(), x.begin(), x.end());
+  }
+  EXPECT_EQ(ra, alone);
+}
+
+}  // namespace
+}  // namespace twin::fmu_test

@@ -1,0 +1,142 @@
+// Signal processing of calibration against closed forms.
+#include <cmath>
+#include <numbers>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "twin/analysis/signal.hpp"
+#include "twin/core/error.hpp"
+
+namespace twin::analysis {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+std::vector<double> sine(double f_Hz, double fs_Hz, std::size_t n, double phase = 0.0) {
+  std::vector<double> x(n);
+  for (std::size_t k = 0; k < n; ++k) x[k] = std::sin(2 * kPi * f_Hz * static_cast<double>(k) / fs_Hz + phase);
+  return x;
+}
+
+// Forward-backward filtering squares the magnitude of the bilinear Butterworth:
+// |H(f)|^2 = 1 / (1 + (tan(pi f / fs) / tan(pi fc / fs))^8), and adds no phase.
+// Measured on the middle of a long sine (ends excluded), so the tolerance is
+// the leakage of a finite record: 1e-3 of the amplitude.
+TEST(Signal, FiltfiltMagnitudeIsSquaredButterworthAndPhaseIsZero) {
+  const double fs = 10000.0, fc = 200.0;
+  for (double f : {20.0, 100.0, 200.0, 300.0}) {
+    const auto x = sine(f, fs, 40000, 0.3);
+    const auto y = lowpass(x, fc, fs);
+    const double r = std::tan(kPi * f / fs) / std::tan(kPi * fc / fs);
+    const double g = 1.0 / (1.0 + std::pow(r, 8));
+    double err = 0.0;
+    for (std::size_t k = 10000; k < 30000; ++k) err = std::max(err, std::abs(y[k] - g * x[k]));
+    EXPECT_LT(err, 1e-3) << "f = " << f;
+  }
+}
+
+// A constant passes unchanged (steady-state start) and a ramp too (odd
+// reflection at the ends): exact up to rounding.
+TEST(Signal, ConstantAndRampPassWithoutEndTransients) {
+  std::vector<double> c(5000, 3.5), ramp(5000);
+  for (std::size_t k = 0; k < ramp.size(); ++k) ramp[k] = 0.01 * static_cast<double>(k);
+  const auto yc = lowpass(c, 50.0, 10000.0);
+  const auto yr = lowpass(ramp, 50.0, 10000.0);
+  for (std::size_t k = 0; k < c.size(); ++k) {
+    EXPECT_NEAR(yc[k], 3.5, 1e-9);
+    EXPECT_NEAR(yr[k], ramp[k], 1e-6 * (1.0 + ramp[k]));
+  }
+}
+
+TEST(Signal, CutoffOutsideNyquistIsAConfigError) {
+  EXPECT_THROW(butterworth_lowpass4(600.0, 1000.0), ConfigError);
+  EXPECT_THROW(butterworth_lowpass4(0.0, 1000.0), ConfigError);
+}
+
+// Central differences of a quadratic are exact inside.
+TEST(Signal, DerivativeOfQuadraticIsExact) {
+  std::vector<double> x(100);
+  const double dt = 0.01;
+  for (std::size_t k = 0; k < x.size(); ++k) x[k] = 2.0 * std::pow(static_cast<double>(k) * dt, 2);
+  const auto d = derivative(x, dt);
+  for (std::size_t k = 1; k + 1 < x.size(); ++k) EXPECT_NEAR(d[k], 4.0 * static_cast<double>(k) * dt, 1e-9);
+}
+
+// y = 2 a - 0.5 b + 0.1 + noise (sigma 0.01): the estimate must lie within
+// 4 of its own standard errors and the standard errors must match the
+// textbook sigma / sqrt(n var) within 20 %.
+TEST(Signal, LeastSquaresRecoversLinearModelWithHonestErrors) {
+  std::mt19937 rng(7);
+  std::normal_distribution<double> n01(0.0, 1.0);
+  const std::size_t n = 20000;
+  std::vector<double> a(n), b(n), one(n, 1.0), y(n);
+  std::vector<std::size_t> rows(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    a[k] = n01(rng);
+    b[k] = n01(rng);
+    y[k] = 2.0 * a[k] - 0.5 * b[k] + 0.1 + 0.01 * n01(rng);
+    rows[k] = k;
+  }
+  const auto r = least_squares({&a, &b, &one}, y, rows);
+  ASSERT_TRUE(r.ok);
+  EXPECT_NEAR(r.theta[0], 2.0, 4 * r.stderr_theta[0]);
+  EXPECT_NEAR(r.theta[1], -0.5, 4 * r.stderr_theta[1]);
+  EXPECT_NEAR(r.theta[2], 0.1, 4 * r.stderr_theta[2]);
+  EXPECT_NEAR(r.stderr_theta[0], 0.01 / std::sqrt(static_cast<double>(n)), 0.2 * 0.01 / std::sqrt(static_cast<double>(n)));
+  EXPECT_NEAR(r.residual_rms, 0.01, 0.001);
+}
+
+TEST(Signal, LeastSquaresReportsRankDeficiency) {
+  std::vector<double> a(100), b(100), y(100);
+  std::vector<std::size_t> rows(100);
+  for (std::size_t k = 0; k < 100; ++k) {
+    a[k] = static_cast<double>(k);
+    b[k] = 2.0 * a[k];
+    y[k] = a[k];
+    rows[k] = k;
+  }
+  EXPECT_FALSE(least_squares({&a, &b}, y, rows).ok);
+}
+
+// A sine on a bin reads its amplitude (Hann coherent gain corrected) at its bin.
+TEST(Signal, SpectrumFindsSineAmplitudeAndFrequency) {
+  const double fs = 1000.0;
+  const std::size_t n = 4096;
+  const double f = 125.0 * fs / static_cast<double>(n) * 4.0;  // on bin 500
+  const auto x = sine(f, fs, n);
+  double df = 0.0;
+  const auto s = amplitude_spectrum(x, fs, &df);
+  std::size_t kmax = 0;
+  for (std::size_t k = 0; k < s.size(); ++k)
+    if (s[k] > s[kmax]) kmax = k;
+  EXPECT_NEAR(static_cast<double>(kmax) * df, f, df);
+  EXPECT_NEAR(s[kmax], 1.0, 1e-6);
+}
+
+// NRMS as spec/interfaces.md defines it: rms(a - b) / rms(a).
+TEST(Signal, NrmsMatchesDefinition) {
+  const std::vector<double> a{1.0, -1.0, 1.0, -1.0}, b{0.5, -0.5, 0.5, -0.5};
+  EXPECT_DOUBLE_EQ(nrms(a, b, 0, 4), 0.5);
+  EXPECT_DOUBLE_EQ(nrms(a, a, 0, 4), 0.0);
+}
+
+// Bin means of y = x over [0, 1) in 4 bins are the bin centres.
+TEST(Signal, BinMeans) {
+  std::vector<double> x, y;
+  std::vector<std::size_t> rows;
+  for (int k = 0; k < 400; ++k) {
+    x.push_back((k + 0.5) / 400.0);
+    y.push_back(x.back());
+    rows.push_back(static_cast<std::size_t>(k));
+  }
+  const Bins b = bin_means(x, y, rows, 0.0, 1.0, 4);
+  for (std::size_t i = 0; i < 4; ++i) {
+    EXPECT_EQ(b.count[i], 100u);
+    EXPECT_NEAR(b.mean[i], 0.125 + 0.25 * static_cast<double>(i), 1e-12);
+  }
+}
+
+}  // namespace
+}  // namespace twin::analysis

@@ -1,0 +1,202 @@
+#include "truth_sim.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <random>
+#include <vector>
+
+namespace twin::truth {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// Trapezoidal moves: (distance mm, speed mm/s), dwells between them.
+std::vector<double> make_reference(double Ts, int cycles) {
+  struct Move {
+    double d_mm, v_mm_per_s;
+  };
+  const std::vector<Move> cycle{{20.0, 20.0}, {-10.0, 60.0}, {6.0, 3.0}, {-16.0, 40.0}};
+  const double a = 1000.0, dwell = 0.25;
+  std::vector<double> x;
+  double pos = 2.0;
+  auto hold = [&](double t) {
+    for (int k = 0; k < static_cast<int>(t / Ts); ++k) x.push_back(pos);
+  };
+  hold(0.3);
+  for (int c = 0; c < cycles; ++c)
+    for (const Move& m : cycle) {
+      const double L = std::abs(m.d_mm), s = m.d_mm > 0 ? 1.0 : -1.0;
+      double v = m.v_mm_per_s;
+      if (v * v / a > L) v = std::sqrt(L * a);
+      const double ta = v / a, tc = (L - v * v / a) / v, T = 2 * ta + tc;
+      const double x0 = pos;
+      for (double t = Ts; t < T; t += Ts) {
+        double d;
+        if (t < ta)
+          d = 0.5 * a * t * t;
+        else if (t < ta + tc)
+          d = 0.5 * a * ta * ta + v * (t - ta);
+        else {
+          const double r = T - t;
+          d = L - 0.5 * a * r * r;
+        }
+        x.push_back(x0 + s * d);
+      }
+      pos = x0 + m.d_mm;
+      x.push_back(pos);
+      hold(dwell);
+    }
+  hold(0.2);
+  for (double& v : x) v = std::round(v * 1e4) / 1e4;  // 0.1 um grid
+  return x;
+}
+
+struct State {
+  double th_m{0.0}, w_m{0.0}, th_l{0.0}, w_l{0.0};
+};
+
+}  // namespace
+
+std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec& sp) {
+  const Plant& p = sp.plant;
+  const Effects& e = sp.effects;
+  const double Ts = sp.Ts_s;
+  const auto ref = make_reference(Ts, sp.cycles);
+  const bool two_mass = e.compliance_K > 0.0;
+  const double Jm = two_mass ? p.J * (1.0 - e.compliance_frac) : p.J;
+  const double Jl = two_mass ? p.J * e.compliance_frac : 0.0;
+  std::mt19937 rng(sp.seed);
+  std::normal_distribution<double> noise(0.0, sp.current_noise_A);
+
+  State s;
+  s.th_m = s.th_l = ref[0] / p.rg;
+  double table_mm = ref[0];           // backlash: table behind the play
+  bool stuck = true;                  // friction side held (Karnopp)
+  double I = 0.0, e_prev = 0.0, vref_prev = 0.0;
+  std::vector<double> ring(static_cast<std::size_t>(std::max(1, e.delay_ticks)), 0.0);
+  std::size_t head = 0;
+
+  // Friction on the friction side (load side when two-mass) at speed w and position x.
+  auto coulomb = [&](int dir, double x_mm) {
+    double T = dir > 0 ? p.Tc_pos : p.Tc_neg;
+    if (e.pdf_dTc != 0.0 && x_mm >= e.pdf_x0 && x_mm <= e.pdf_x1) T += e.pdf_dTc;
+    return T;
+  };
+  auto sliding = [&](double w, double x_mm) {
+    const int dir = w > 0 ? 1 : -1;
+    double T = coulomb(dir, x_mm);
+    if (e.stribeck_Ts > 0.0) T += (e.stribeck_Ts - (dir > 0 ? p.Tc_pos : p.Tc_neg)) * std::exp(-std::pow(w / e.stribeck_ws, 2));
+    return dir * T;
+  };
+  auto breakaway = [&](int dir, double x_mm) {
+    return e.stribeck_Ts > 0.0 ? e.stribeck_Ts + coulomb(dir, x_mm) - (dir > 0 ? p.Tc_pos : p.Tc_neg) : coulomb(dir, x_mm);
+  };
+
+  std::filesystem::create_directories(out_dir);
+  std::FILE* f = std::fopen((out_dir / "trace.csv").c_str(), "w");
+  std::fprintf(f, "t_s,x_ref_mm,x_mm,x_u_V,x_i_A\n");
+  const int sub = 20;
+  const double h = Ts / sub;
+  const double dv = 1e-4;  // Karnopp band, rad/s
+  for (std::size_t k = 0; k < ref.size(); ++k) {
+    // Sensor: the encoder on the motor (two-mass) or the table (backlash), screw error, quantiser.
+    const double x_mot = s.th_m * p.rg;
+    double x_sense = e.backlash_mm > 0.0 ? table_mm : x_mot;
+    if (e.screw_A_mm != 0.0) x_sense += e.screw_A_mm * std::sin(2 * kPi * x_sense / e.screw_P_mm);
+    const double x_meas = sp.resolution_mm > 0 ? std::round(x_sense / sp.resolution_mm) * sp.resolution_mm : x_sense;
+    // FADAL law.
+    const double err = ref[k] - x_meas;
+    const double vref = k > 0 ? (ref[k] - ref[k - 1]) / Ts : 0.0;
+    const double aref = (vref - vref_prev) / Ts;
+    I += Ts * err;
+    double u = p.Kp * err + p.Ki * I + p.Kd * (err - e_prev) / Ts + p.K1 * aref + p.K2 * vref;
+    u = std::clamp(u, -p.u_max, p.u_max);
+    e_prev = err;
+    vref_prev = vref;
+    double u_app = u;
+    if (e.delay_ticks > 0) {
+      u_app = ring[head];
+      ring[head] = u;
+      head = (head + 1) % ring.size();
+    }
+    double i = p.Ka * u_app;
+    if (e.i_max_A > 0.0) i = std::clamp(i, -e.i_max_A, e.i_max_A);
+    const double Tm = p.Kt * i;
+    std::fprintf(f, "%.4f,%.4f,%.3f,%.5f,%.4f\n", static_cast<double>(k) * Ts, ref[k], x_meas, u, i + noise(rng));
+
+    for (int j = 0; j < sub; ++j) {
+      // Friction side: the load (two-mass) or the motor.
+      const double x_f = (two_mass ? s.th_l : s.th_m) * p.rg;
+      const double cog_th = s.th_m;
+      const double T_cog = e.cogging_A * std::sin(e.cogging_n * cog_th + e.cogging_phase);
+      if (!two_mass) {
+        const double F = Tm - p.B * s.w_m - e.load_Nm - T_cog;
+        if (stuck) {
+          const int dir = F > 0 ? 1 : -1;
+          if (std::abs(F) <= breakaway(dir, x_f)) continue;
+          stuck = false;
+          s.w_m = dir * 2 * dv;
+        }
+        // RK4 on w with the sliding friction of the current direction.
+        const int dir = s.w_m > 0 ? 1 : -1;
+        auto acc = [&](double w, double th) {
+          const double tc = e.cogging_A * std::sin(e.cogging_n * th + e.cogging_phase);
+          const double ww = dir * std::max(dir * w, 0.0);
+          return (Tm - p.B * w - e.load_Nm - tc - sliding(ww == 0 ? dir * dv : ww, th * p.rg)) / p.J;
+        };
+        const double k1w = acc(s.w_m, s.th_m), k1t = s.w_m;
+        const double k2w = acc(s.w_m + 0.5 * h * k1w, s.th_m + 0.5 * h * k1t), k2t = s.w_m + 0.5 * h * k1w;
+        const double k3w = acc(s.w_m + 0.5 * h * k2w, s.th_m + 0.5 * h * k2t), k3t = s.w_m + 0.5 * h * k2w;
+        const double k4w = acc(s.w_m + h * k3w, s.th_m + h * k3t), k4t = s.w_m + h * k3w;
+        const double w_new = s.w_m + h / 6 * (k1w + 2 * k2w + 2 * k3w + k4w);
+        s.th_m += h / 6 * (k1t + 2 * k2t + 2 * k3t + k4t);
+        s.w_m = w_new;
+        if (w_new * dir <= 0.0) {  // came to rest: Karnopp sticks it
+          s.w_m = 0.0;
+          stuck = true;
+        }
+        s.th_l = s.th_m;
+        s.w_l = s.w_m;
+      } else {
+        // Two-mass: semi-implicit Euler with the small step (spring at a few hundred Hz, h = 5 us).
+        const double Tsp = e.compliance_K * (s.th_m - s.th_l) + e.compliance_C * (s.w_m - s.w_l);
+        s.w_m += h * (Tm - p.B * s.w_m - Tsp - T_cog) / Jm;
+        s.th_m += h * s.w_m;
+        const double Fl = Tsp - e.load_Nm;
+        if (stuck) {
+          const int dir = Fl > 0 ? 1 : -1;
+          if (std::abs(Fl) <= breakaway(dir, x_f)) {
+            s.w_l = 0.0;
+            continue;
+          }
+          stuck = false;
+          s.w_l = dir * 2 * dv;
+        }
+        const int dir = s.w_l > 0 ? 1 : -1;
+        const double wl = s.w_l + h * (Fl - sliding(s.w_l, x_f)) / Jl;
+        if (wl * dir <= 0.0) {
+          s.w_l = 0.0;
+          stuck = true;
+        } else {
+          s.w_l = wl;
+        }
+        s.th_l += h * s.w_l;
+      }
+    }
+    if (e.backlash_mm > 0.0) {
+      const double xm = s.th_m * p.rg, half = 0.5 * e.backlash_mm;
+      if (xm - table_mm > half) table_mm = xm - half;
+      if (table_mm - xm > half) table_mm = xm + half;
+    }
+  }
+  std::fclose(f);
+  std::ofstream meta(out_dir / "meta.json");
+  meta << "{\"machine\": \"fadal2216\", \"axes\": [\"x\"], \"controller_period_s\": " << Ts
+       << ", \"sample_period_s\": " << Ts << ", \"encoder_resolution_mm\": " << sp.resolution_mm
+       << ", \"description\": \"truth simulator of the calibration tests\"}\n";
+  return ref.size();
+}
+
+}  // namespace twin::truth

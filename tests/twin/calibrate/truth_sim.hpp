@@ -1,0 +1,45 @@
+#pragma once
+// A truth simulator for the calibration tests, written apart from the twin's
+// model: the FADAL position law of spec/measured-data.md, a rigid (or
+// two-mass) drive integrated by fixed-step RK4 with Karnopp stick/slip, and
+// each catalogue effect as its own term. It writes a run folder
+// (trace.csv + meta.json) that `calibrate` reads without being told what is in it.
+#include <filesystem>
+#include <string>
+
+namespace twin::truth {
+
+struct Plant {
+  double Ka{6.4898}, Kt{0.4769}, J{0.0077736}, B{0.019811}, rg{1.5915};
+  double Tc_pos{0.2}, Tc_neg{0.18};
+  // FADAL X gains, Ozcan et al. 2017 Table 3.
+  double Kp{500.0}, Ki{70.0}, Kd{0.3}, K1{0.0}, K2{-2.37e-6}, u_max{10.0};
+};
+
+struct Effects {
+  double stribeck_Ts{0.0}, stribeck_ws{1.0};               // on when Ts > 0
+  double cogging_A{0.0}, cogging_n{1.0}, cogging_phase{0.0};
+  double screw_A_mm{0.0}, screw_P_mm{10.0};
+  double backlash_mm{0.0};
+  double load_Nm{0.0};
+  double pdf_dTc{0.0}, pdf_x0{0.0}, pdf_x1{0.0};
+  int delay_ticks{0};
+  double compliance_K{0.0}, compliance_C{0.0}, compliance_frac{0.5};
+  double i_max_A{0.0};
+};
+
+struct RunSpec {
+  Plant plant;
+  Effects effects;
+  double Ts_s{1e-4};
+  double resolution_mm{0.001};
+  double current_noise_A{0.01};
+  int cycles{2};
+  unsigned seed{1};
+};
+
+/// Simulates and writes dir/trace.csv and dir/meta.json for axis x of the
+/// shipped fadal2216 machine. Returns the number of rows.
+std::size_t write_truth_run(const std::filesystem::path& dir, const RunSpec& spec);
+
+}  // namespace twin::truth

@@ -1,0 +1,129 @@
+// The command-line program as a user meets it: every subcommand has --help;
+// every bad input gives exactly one line on stderr, a non-zero exit and no
+// file at a final name in OUT.
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+namespace twin {
+namespace {
+
+using ::testing::HasSubstr;
+
+struct Result {
+  int exit_code{0};
+  std::string out;
+  std::string err;
+};
+
+std::filesystem::path work() {
+  const auto d = std::filesystem::temp_directory_path() / "twin_cli_test";
+  std::filesystem::create_directories(d);
+  return d;
+}
+
+std::string slurp(const std::filesystem::path& p) {
+  std::ifstream f(p);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+Result twin_cmd(const std::string& args) {
+  const auto out = work() / "stdout.txt";
+  const auto err = work() / "stderr.txt";
+  const std::string cmd = std::string(TWIN_BINARY_DIR) + "/bin/twin " + args + " >" + out.string() + " 2>" +
+                          err.string() + " </dev/null";
+  const int rc = std::system(cmd.c_str());
+  Result r;
+  r.exit_code = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+int lines(const std::string& s) {
+  int n = 0;
+  for (char c : s) n += c == '\n';
+  return n;
+}
+
+void expect_one_line_failure(const Result& r, const std::string& what) {
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_EQ(lines(r.err), 1) << r.err;
+  EXPECT_THAT(r.err, HasSubstr(what));
+}
+
+std::filesystem::path file(const std::string& name, const std::string& text) {
+  const auto p = work() / name;
+  std::filesystem::create_directories(p.parent_path());
+  std::ofstream(p) << text;
+  return p;
+}
+
+TEST(Cli, HelpForEverySubcommand) {
+  for (const char* sub : {"", "run", "replay"}) {
+    const Result r = twin_cmd(std::string(sub) + " --help");
+    EXPECT_EQ(r.exit_code, 0) << sub;
+    EXPECT_THAT(r.out, HasSubstr("Usage")) << sub;
+  }
+}
+
+TEST(Cli, BadInputsFailWithOneLineAndNoFiles) {
+  const auto out = work() / "out_bad";
+  std::filesystem::remove_all(out);
+  expect_one_line_failure(twin_cmd("run nosuch_scenario -o " + out.string()), "nosuch_scenario");
+  expect_one_line_failure(twin_cmd("run -o " + out.string() + " --set x.Jay=1"), "Jay");
+  expect_one_line_failure(twin_cmd("run -o " + out.string() + " --set x.J=-1"), "J");
+  expect_one_line_failure(twin_cmd("frobnicate"), "frobnicate");
+  // A malformed program: the message names the file and the line.
+  const auto prog = file("badprog/program.nc", "G21 G90\nG1 X10 F1000\nG1 X1Q0\n");
+  const auto scen = file("badprog/scenario.yaml",
+                         "name: badprog\nmachine: fadal2216\nprogram: program.nc\nstart_mm: [0, 0, 0]\n");
+  expect_one_line_failure(twin_cmd("run " + scen.string() + " -o " + out.string()), prog.string() + ":3");
+  // An unknown scenario key.
+  const auto scen2 = file("badkey/scenario.yaml",
+                          "name: badkey\nmachine: fadal2216\nprogram: ../badprog/program.nc\nspeed: 3\n");
+  expect_one_line_failure(twin_cmd("run " + scen2.string() + " -o " + out.string()), "speed");
+  // A replay of a run with a NaN.
+  file("nanrun/meta.json", R"({"machine": "fadal2216", "controller_period_s": 0.0001})");
+  file("nanrun/trace.csv", "t_s,x_ref_mm\n0,0\n0.0001,NaN\n");
+  expect_one_line_failure(twin_cmd("replay " + (work() / "nanrun").string() + " -o " + out.string()), ":3");
+  // Unstable gains: detected, named, and no trace left behind.
+  const auto prog3 = file("unstable/program.nc", "G21 G90\nG1 X5 F1000\nM30\n");
+  const auto scen3 = file("unstable/scenario.yaml",
+                          "name: unstable\nmachine: fadal2216\nprogram: program.nc\nstart_mm: [0, 0, 0]\n");
+  static_cast<void>(prog3);
+  expect_one_line_failure(twin_cmd("run " + scen3.string() + " -o " + out.string() + " --set x.Ki=2000000"),
+                          "axis x");
+  if (std::filesystem::exists(out)) {
+    for (const auto& e : std::filesystem::directory_iterator(out))
+      ADD_FAILURE() << "left behind: " << e.path();
+  }
+}
+
+TEST(Cli, RunWritesTraceSummaryAndPlots) {
+  const auto prog = file("small/program.nc", "G21 G90 G64 P0.01\nG1 X10 F2000\nY10\nM30\n");
+  static_cast<void>(prog);
+  const auto scen = file("small/scenario.yaml",
+                         "name: small\nmachine: fadal2216\nprogram: program.nc\nstart_mm: [0, 0, 0]\nsettle_s: 0.02\n");
+  const auto out = work() / "out_small";
+  std::filesystem::remove_all(out);
+  const Result r = twin_cmd("run " + scen.string() + " -o " + out.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* f : {"trace.csv", "summary.json", "feedrate.png", "errors.png"})
+    EXPECT_TRUE(std::filesystem::exists(out / f)) << f;
+  const std::string header = slurp(out / "trace.csv").substr(0, 200);
+  EXPECT_THAT(header, HasSubstr("t_s,x_ref_mm,x_mm,x_u_V,x_i_A,y_ref_mm"));
+  EXPECT_THAT(slurp(out / "summary.json"), HasSubstr("\"cycle_time_s\""));
+}
+
+}  // namespace
+}  // namespace twin

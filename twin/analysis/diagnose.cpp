@@ -1,0 +1,647 @@
+#include "twin/analysis/diagnose.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include <fmt/format.h>
+
+#include "twin/analysis/signal.hpp"
+#include "twin/core/error.hpp"
+
+namespace twin::analysis {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+struct Fit {
+  bool ok{false};
+  LsqResult with, without;
+  double gain{0.0};
+  double t_stat{0.0};
+  std::vector<double> extra_Nm;  ///< fitted effect torque at every row
+};
+
+double corr_len(const AxisSignals& s) { return 1.0 / (2.0 * s.fc_Hz * s.dt_s); }
+
+double residual_rms(const std::vector<const std::vector<double>*>& cols, const std::vector<double>& theta,
+                    const std::vector<double>& y, const std::vector<std::size_t>& rows) {
+  if (rows.empty()) return 0.0;
+  double sse = 0.0;
+  for (std::size_t k : rows) {
+    double p = 0.0;
+    for (std::size_t j = 0; j < cols.size(); ++j) p += (*cols[j])[k] * theta[j];
+    sse += (y[k] - p) * (y[k] - p);
+  }
+  return std::sqrt(sse / static_cast<double>(rows.size()));
+}
+
+// Base regressors plus `extra`, fitted on `fit_rows`; gain judged on `held_rows`.
+Fit fit_additive(const AxisSignals& s, const std::vector<double>& T, const BaseRegressors& reg,
+                 const std::vector<const std::vector<double>*>& extra, const std::vector<std::size_t>& fit_rows,
+                 const std::vector<std::size_t>& held_rows) {
+  Fit f;
+  std::vector<const std::vector<double>*> base{&reg.acc, &reg.vel, &reg.pos, &reg.neg};
+  std::vector<const std::vector<double>*> all = base;
+  all.insert(all.end(), extra.begin(), extra.end());
+  f.with = least_squares(all, T, fit_rows, corr_len(s));
+  f.without = least_squares(base, T, fit_rows, corr_len(s));
+  if (!f.with.ok || !f.without.ok || held_rows.size() < 50) return f;
+  const double r0 = residual_rms(base, f.without.theta, T, held_rows);
+  const double r1 = residual_rms(all, f.with.theta, T, held_rows);
+  f.gain = r0 > 0.0 ? 1.0 - r1 / r0 : 0.0;
+  double t2 = 0.0;
+  for (std::size_t j = 0; j < extra.size(); ++j) {
+    const double se = f.with.stderr_theta[4 + j];
+    if (se > 0.0) t2 += std::pow(f.with.theta[4 + j] / se, 2);
+  }
+  f.t_stat = std::sqrt(t2 / static_cast<double>(extra.size()));
+  f.extra_Nm.assign(s.n, 0.0);
+  for (std::size_t k = 0; k < s.n; ++k)
+    for (std::size_t j = 0; j < extra.size(); ++j) f.extra_Nm[k] += (*extra[j])[k] * f.with.theta[4 + j];
+  f.ok = true;
+  return f;
+}
+
+DriveIdentification base_of(const Fit& f, const feeddrive::DriveParams& d) {
+  DriveIdentification id;
+  id.ok = true;
+  id.J_kg_m2 = std::max(0.05 * d.J_kg_m2, f.with.theta[0]);
+  id.B_kg_m2_per_s = std::max(0.0, f.with.theta[1]);
+  id.Tc_pos_Nm = std::max(0.0, f.with.theta[2]);
+  id.Tc_neg_Nm = std::max(0.0, f.with.theta[3]);
+  id.J_stderr = f.with.stderr_theta[0];
+  id.B_stderr = f.with.stderr_theta[1];
+  id.Tc_pos_stderr = f.with.stderr_theta[2];
+  id.Tc_neg_stderr = f.with.stderr_theta[3];
+  id.residual_rms_Nm = f.with.residual_rms;
+  id.samples = f.with.n;
+  return id;
+}
+
+std::vector<double> minus(const std::vector<double>& a, const std::vector<double>& b) {
+  std::vector<double> r(a.size());
+  for (std::size_t k = 0; k < a.size(); ++k) r[k] = a[k] - b[k];
+  return r;
+}
+
+template <class Pred>
+std::vector<std::size_t> filter_rows(const std::vector<std::size_t>& rows, Pred p) {
+  std::vector<std::size_t> r;
+  for (std::size_t k : rows)
+    if (p(k)) r.push_back(k);
+  return r;
+}
+
+// Second-order kinematic regressor: the torque that moving the motor by
+// q(x) (mm) beyond the measured position takes, (J D^2 + B D) lp(q) / rg.
+std::vector<double> kinematic_torque(const AxisSignals& s, const std::vector<double>& q_mm, double J, double B) {
+  const auto ql = lowpass(q_mm, s.fc_Hz, 1.0 / s.dt_s);
+  const auto d1 = derivative(ql, s.dt_s);
+  const auto d2 = derivative(d1, s.dt_s);
+  std::vector<double> r(s.n);
+  for (std::size_t k = 0; k < s.n; ++k) r[k] = (J * d2[k] + B * d1[k]) / s.rg_mm_per_rad;
+  return r;
+}
+
+struct Ctx {
+  const AxisSignals& s;
+  const std::vector<double>& T;
+  const feeddrive::DriveParams& d;
+  BaseRegressors reg;
+  std::vector<std::size_t> fit_moving, held_moving, fit_slow, held_slow;
+  DriveIdentification base;
+  double travel_mm{0.0};  ///< range of x over the fitting rows
+};
+
+void add(std::vector<EffectCandidate>& out, const Ctx& c, const std::string& effect, const Fit& f,
+         std::vector<std::pair<std::string, double>> params, std::string evidence) {
+  EffectCandidate e;
+  e.effect = effect;
+  e.axis = c.s.axis;
+  e.params = std::move(params);
+  e.signal_gain = f.gain;
+  e.t_stat = f.t_stat;
+  e.evidence = std::move(evidence);
+  e.base = base_of(f, c.d);
+  e.T_after_Nm = minus(c.T, f.extra_Nm);
+  out.push_back(std::move(e));
+}
+
+void try_stribeck(const Ctx& c, std::vector<EffectCandidate>& out) {
+  // Scan the Stribeck speed; the torque residual alone places it only roughly
+  // (few samples at the lowest speeds, the filter smears reversals), so the
+  // best fit and two slower ones go to the replay.
+  struct Entry {
+    double ws;
+    Fit fit;
+  };
+  std::vector<Entry> fits;
+  std::vector<double> psi(c.s.n);
+  for (double ws = 0.3; ws < 40.0; ws *= 1.35) {
+    for (std::size_t k = 0; k < c.s.n; ++k) {
+      const double w = c.s.w_rad_per_s[k];
+      psi[k] = (w > 0.0 ? 1.0 : w < 0.0 ? -1.0 : 0.0) * std::exp(-(w / ws) * (w / ws));
+    }
+    const auto held = filter_rows(c.held_slow, [&](std::size_t k) { return std::abs(c.s.w_rad_per_s[k]) < 2.0 * ws; });
+    Fit f = fit_additive(c.s, c.T, c.reg, {&psi}, c.fit_slow, held);
+    if (!f.ok || f.with.theta[4] <= 0.0) continue;
+    fits.push_back({ws, std::move(f)});
+  }
+  if (fits.empty()) return;
+  std::size_t best = 0;
+  for (std::size_t i = 1; i < fits.size(); ++i)
+    if (fits[i].fit.with.residual_rms < fits[best].fit.with.residual_rms) best = i;
+  const double ws_best = fits[best].ws;
+  for (double factor : {1.0, 0.5, 0.25}) {
+    // The fit whose ws is nearest ws_best * factor.
+    std::size_t j = best;
+    for (std::size_t i = 0; i < fits.size(); ++i)
+      if (std::abs(std::log(fits[i].ws / (ws_best * factor))) < std::abs(std::log(fits[j].ws / (ws_best * factor)))) j = i;
+    if (factor != 1.0 && j == best) continue;
+    const Fit& f = fits[j].fit;
+    const double excess = f.with.theta[4];
+    const double Ts_static = excess + 0.5 * (std::max(0.0, f.with.theta[2]) + std::max(0.0, f.with.theta[3]));
+    add(out, c, "stribeck", f, {{"Ts_static", Ts_static}, {"ws", fits[j].ws}},
+        fmt::format("friction excess {:.3f} N m (t = {:.1f}) below ws = {:.2g} rad/s cuts the held-out low-speed "
+                    "torque residual by {:.0f} % (best-fitting ws {:.2g} rad/s)",
+                    excess, f.t_stat, fits[j].ws, 100.0 * f.gain, ws_best));
+    if (factor != 1.0) out.back().signal_gain = fits[best].fit.gain;  // ranked with the best fit
+  }
+}
+
+void try_cogging(const Ctx& c, std::vector<EffectCandidate>& out) {
+  const double fs = 1.0 / c.s.dt_s;
+  double best_rms = 1e300;
+  int best_n = 0;
+  Fit best;
+  std::vector<double> sn(c.s.n), cs(c.s.n);
+  for (int n = 1; n <= 48; ++n) {
+    if (2.0 * kPi * c.s.rg_mm_per_rad / n > 0.5 * c.travel_mm) continue;  // two periods at least
+    for (std::size_t k = 0; k < c.s.n; ++k) {
+      const double th = n * c.s.x_mm[k] / c.s.rg_mm_per_rad;
+      sn[k] = std::sin(th);
+      cs[k] = std::cos(th);
+    }
+    const auto sl = lowpass(sn, c.s.fc_Hz, fs);
+    const auto cl = lowpass(cs, c.s.fc_Hz, fs);
+    Fit f = fit_additive(c.s, c.T, c.reg, {&sl, &cl}, c.fit_moving, c.held_moving);
+    if (f.ok && f.with.residual_rms < best_rms) {
+      best_rms = f.with.residual_rms;
+      best = std::move(f);
+      best_n = n;
+    }
+  }
+  if (!best.ok) return;
+  const double A = std::hypot(best.with.theta[4], best.with.theta[5]);
+  const double phase = std::atan2(best.with.theta[5], best.with.theta[4]);
+  add(out, c, "cogging", best, {{"amplitude", A}, {"cycles_per_rev", best_n}, {"phase", phase}},
+      fmt::format("torque ripple {:.3f} N m at {} cycles per motor revolution (period {:.3g} mm, t = {:.1f}) cuts the "
+                  "held-out torque residual by {:.0f} %",
+                  A, best_n, 2.0 * kPi * c.s.rg_mm_per_rad / best_n, best.t_stat, 100.0 * best.gain));
+}
+
+void try_screw(const Ctx& c, std::vector<EffectCandidate>& out) {
+  double best_rms = 1e300, best_P = 0.0;
+  Fit best;
+  std::vector<double> sn(c.s.n), cs(c.s.n);
+  // A periodic error is told from a slow drift only if the travel holds two periods.
+  const double P_max = 0.5 * c.travel_mm;
+  for (double P = 1.0; P <= P_max; P *= 1.06) {
+    for (std::size_t k = 0; k < c.s.n; ++k) {
+      const double th = 2.0 * kPi * c.s.x_mm[k] / P;
+      sn[k] = std::sin(th);
+      cs[k] = std::cos(th);
+    }
+    // The motor sits at x - A sin(...): its torque lacks (J D^2 + B D) of that.
+    auto ks = kinematic_torque(c.s, sn, c.base.J_kg_m2, c.base.B_kg_m2_per_s);
+    auto kc = kinematic_torque(c.s, cs, c.base.J_kg_m2, c.base.B_kg_m2_per_s);
+    for (auto& v : ks) v = -v;
+    for (auto& v : kc) v = -v;
+    Fit f = fit_additive(c.s, c.T, c.reg, {&ks, &kc}, c.fit_moving, c.held_moving);
+    if (f.ok && f.with.residual_rms < best_rms) {
+      best_rms = f.with.residual_rms;
+      best = std::move(f);
+      best_P = P;
+    }
+  }
+  if (!best.ok) return;
+  const double A = std::hypot(best.with.theta[4], best.with.theta[5]);
+  const double phase = std::atan2(best.with.theta[5], best.with.theta[4]);
+  add(out, c, "screw_pitch_error", best, {{"amplitude", A}, {"period", best_P}, {"phase", phase}},
+      fmt::format("lead error {:.4f} mm with period {:.3g} mm (t = {:.1f}): the torque to follow it cuts the held-out "
+                  "torque residual by {:.0f} %",
+                  A, best_P, best.t_stat, 100.0 * best.gain));
+}
+
+void try_backlash(const Ctx& c, std::vector<EffectCandidate>& out) {
+  // Direction of the last motion of the reference, held through stops.
+  std::vector<double> dir(c.s.n, 0.0);
+  std::vector<std::size_t> reversals;
+  double last = 0.0;
+  for (std::size_t k = 0; k < c.s.n; ++k) {
+    const double v = c.s.v_ref_mm_per_s[k];
+    if (std::abs(v) > 0.05) {
+      const double sg = v > 0.0 ? 1.0 : -1.0;
+      if (last != 0.0 && sg != last) reversals.push_back(k);
+      last = sg;
+    }
+    dir[k] = last;
+  }
+  if (reversals.size() < 4) return;
+  auto psi = kinematic_torque(c.s, dir, c.base.J_kg_m2, c.base.B_kg_m2_per_s);
+  const auto window = static_cast<std::size_t>(0.15 / c.s.dt_s);
+  std::vector<char> near(c.s.n, 0);
+  for (std::size_t r : reversals)
+    for (std::size_t k = r > window ? r - window : 0; k < std::min(c.s.n, r + window); ++k) near[k] = 1;
+  const auto held = filter_rows(c.held_slow, [&](std::size_t k) { return near[k] != 0; });
+  Fit f = fit_additive(c.s, c.T, c.reg, {&psi}, c.fit_slow, held);
+  if (!f.ok || f.with.theta[4] <= 0.0) return;
+  const double gap = 2.0 * f.with.theta[4];
+  add(out, c, "backlash", f, {{"gap", gap}},
+      fmt::format("lost motion {:.4f} mm at {} reversals (t = {:.1f}) cuts the held-out torque residual near "
+                  "reversals by {:.0f} %",
+                  gap, reversals.size(), f.t_stat, 100.0 * f.gain));
+}
+
+void try_position_friction(const Ctx& c, std::vector<EffectCandidate>& out) {
+  const auto& rows = c.fit_moving;
+  if (rows.size() < 500) return;
+  // Residual of the base fit, signed by the direction of motion, binned over x.
+  const LsqResult b = least_squares({&c.reg.acc, &c.reg.vel, &c.reg.pos, &c.reg.neg}, c.T, rows, corr_len(c.s));
+  if (!b.ok) return;
+  std::vector<double> rho(c.s.n, 0.0);
+  double lo = 1e300, hi = -1e300;
+  for (std::size_t k : rows) {
+    const double pred = c.reg.acc[k] * b.theta[0] + c.reg.vel[k] * b.theta[1] + c.reg.pos[k] * b.theta[2] +
+                        c.reg.neg[k] * b.theta[3];
+    rho[k] = (c.T[k] - pred) * (c.s.w_rad_per_s[k] > 0.0 ? 1.0 : -1.0);
+    lo = std::min(lo, c.s.x_mm[k]);
+    hi = std::max(hi, c.s.x_mm[k]);
+  }
+  constexpr std::size_t kBins = 60;
+  const Bins bins = bin_means(c.s.x_mm, rho, rows, lo, hi, kBins);
+  double best = 0.0;
+  std::size_t bi = 0, bj = 0;
+  for (std::size_t i = 0; i < kBins; ++i) {
+    double sum = 0.0;
+    double cnt = 0.0;
+    for (std::size_t j = i; j < kBins; ++j) {
+      sum += bins.mean[j] * static_cast<double>(bins.count[j]);
+      cnt += static_cast<double>(bins.count[j]);
+      if (cnt < 200 || j - i + 1 == kBins) continue;
+      const double score = sum > 0.0 ? sum * sum / cnt : 0.0;
+      if (score > best) {
+        best = score;
+        bi = i;
+        bj = j;
+      }
+    }
+  }
+  if (best <= 0.0) return;
+  const double w = (hi - lo) / static_cast<double>(kBins);
+  const double x0 = lo + w * static_cast<double>(bi), x1 = lo + w * static_cast<double>(bj + 1);
+  std::vector<double> psi(c.s.n, 0.0);
+  for (std::size_t k = 0; k < c.s.n; ++k)
+    if (c.s.x_mm[k] >= x0 && c.s.x_mm[k] <= x1)
+      psi[k] = c.s.w_rad_per_s[k] > 0.0 ? 1.0 : c.s.w_rad_per_s[k] < 0.0 ? -1.0 : 0.0;
+  const auto held = filter_rows(c.held_moving, [&](std::size_t k) { return psi[k] != 0.0; });
+  Fit f = fit_additive(c.s, c.T, c.reg, {&psi}, c.fit_moving, held);
+  if (!f.ok || f.with.theta[4] <= 0.0) return;
+  add(out, c, "position_dependent_friction", f, {{"dTc", f.with.theta[4]}, {"x_start", x0}, {"x_end", x1}},
+      fmt::format("friction {:+.3f} N m (t = {:.1f}) between x = {:.1f} and {:.1f} mm cuts the held-out torque "
+                  "residual there by {:.0f} % ({} held-out samples in the band)",
+                  f.with.theta[4], f.t_stat, x0, x1, 100.0 * f.gain, held.size()));
+}
+
+std::vector<double> shift_by(const std::vector<double>& T, double d_samples) {
+  std::vector<double> r(T.size());
+  const auto n = static_cast<std::ptrdiff_t>(T.size());
+  for (std::ptrdiff_t k = 0; k < n; ++k) {
+    const double pos = static_cast<double>(k) - d_samples;
+    const auto i0 = static_cast<std::ptrdiff_t>(std::floor(pos));
+    const double f = pos - static_cast<double>(i0);
+    const auto a = std::clamp<std::ptrdiff_t>(i0, 0, n - 1);
+    const auto b = std::clamp<std::ptrdiff_t>(i0 + 1, 0, n - 1);
+    r[static_cast<std::size_t>(k)] = (1.0 - f) * T[static_cast<std::size_t>(a)] + f * T[static_cast<std::size_t>(b)];
+  }
+  return r;
+}
+
+void try_delay(const Ctx& c, std::vector<EffectCandidate>& out) {
+  if (!c.s.torque_from_u) return;
+  // u is held over a controller period: the torque follows it by half a period
+  // on average. That is the model's own lag; a delay is what comes on top.
+  const double tick = c.s.controller_period_s / c.s.dt_s;  // controller periods in samples
+  const double base_shift = 0.5 * tick;
+  const auto cols = std::vector<const std::vector<double>*>{&c.reg.acc, &c.reg.vel, &c.reg.pos, &c.reg.neg};
+  const auto T0 = shift_by(c.T, base_shift);
+  const auto r0 = least_squares(cols, T0, c.fit_moving, corr_len(c.s));
+  if (!r0.ok) return;
+  const double max_ticks = std::min(60.0, std::floor(0.01 / c.s.controller_period_s));
+  const double step_ticks = std::max(1.0, std::floor(max_ticks / 60.0));
+  double best_rms = r0.residual_rms, best_ticks = 0.0;
+  for (double d = 1.0; d <= max_ticks; d += step_ticks) {
+    const auto Td = shift_by(c.T, base_shift + d * tick);
+    const auto r = least_squares(cols, Td, c.fit_moving, corr_len(c.s));
+    if (r.ok && r.residual_rms < best_rms) {
+      best_rms = r.residual_rms;
+      best_ticks = d;
+    }
+  }
+  if (best_ticks == 0.0) return;
+  auto Td = shift_by(c.T, base_shift + best_ticks * tick);
+  const LsqResult rs = least_squares(cols, Td, c.fit_moving, corr_len(c.s));
+  if (!rs.ok) return;
+  const double h0 = residual_rms(cols, r0.theta, T0, c.held_moving);
+  const double h1 = residual_rms(cols, rs.theta, Td, c.held_moving);
+  Fit g;
+  g.ok = true;
+  g.with = rs;
+  g.without = r0;
+  g.gain = h0 > 0.0 ? 1.0 - h1 / h0 : 0.0;
+  g.t_stat = r0.residual_rms > 0.0 ? 100.0 * (1.0 - rs.residual_rms / r0.residual_rms) : 0.0;
+  const double delay_s = best_ticks * c.s.controller_period_s;
+  EffectCandidate e;
+  e.effect = "delay";
+  e.axis = c.s.axis;
+  e.params = {{"delay", delay_s}};
+  e.signal_gain = g.gain;
+  e.t_stat = g.t_stat;
+  e.evidence = fmt::format("torque lags the command by {:.2f} ms beyond the hold: shifting it cuts the held-out torque "
+                           "residual by {:.0f} %",
+                           1e3 * delay_s, 100.0 * g.gain);
+  e.base = base_of(g, c.d);
+  e.T_after_Nm = std::move(Td);
+  out.push_back(std::move(e));
+}
+
+void try_saturation(const Ctx& c, std::vector<EffectCandidate>& out) {
+  if (!c.s.has_u) return;
+  const double Ka = c.d.Ka_A_per_V;
+  const double Kt = c.d.Kt_Nm_per_A;
+  const double fs = 1.0 / c.s.dt_s;
+  std::vector<double> iu(c.s.n);
+  for (std::size_t k = 0; k < c.s.n; ++k) iu[k] = Ka * c.s.u_raw_V[k];
+  if (c.s.has_current) {
+    // Direct: the current stops short of Ka u (flat tops).
+    std::vector<double> small;
+    for (std::size_t k = 0; k < c.s.n; ++k)
+      if (std::abs(iu[k]) < 2.0) small.push_back(std::abs(c.s.i_raw_A[k] - iu[k]));
+    std::sort(small.begin(), small.end());
+    const double noise = small.empty() ? 0.01 : 1.4826 * small[small.size() / 2];
+    std::vector<double> tops;
+    for (std::size_t k = 0; k < c.s.n; ++k) {
+      const double i = c.s.i_raw_A[k];
+      if (std::abs(iu[k]) - std::abs(i) > std::max(0.5, 8.0 * noise) && i * iu[k] > 0.0) tops.push_back(std::abs(i));
+    }
+    if (tops.size() < 20) return;
+    std::sort(tops.begin(), tops.end());
+    const double i_max = tops[tops.size() / 2];
+    std::vector<double> Ti(c.s.n);
+    for (std::size_t k = 0; k < c.s.n; ++k) Ti[k] = Kt * std::clamp(iu[k], -i_max, i_max);
+    Ti = lowpass(Ti, c.s.fc_Hz, fs);
+    const auto base_cols = std::vector<const std::vector<double>*>{&c.reg.acc, &c.reg.vel, &c.reg.pos, &c.reg.neg};
+    const auto r0 = least_squares(base_cols, c.T, c.fit_moving, corr_len(c.s));
+    const auto r1 = least_squares(base_cols, Ti, c.fit_moving, corr_len(c.s));
+    if (!r0.ok || !r1.ok) return;
+    Fit g;
+    g.ok = true;
+    g.with = r1;
+    g.without = r0;
+    g.gain = std::min(1.0, static_cast<double>(tops.size()) / std::max<double>(1.0, 0.01 * static_cast<double>(c.s.n)));
+    g.t_stat = static_cast<double>(tops.size());
+    EffectCandidate e;
+    e.effect = "current_saturation";
+    e.axis = c.s.axis;
+    e.params = {{"i_max", i_max}};
+    e.signal_gain = std::max(0.1, g.gain);
+    e.t_stat = g.t_stat;
+    e.evidence = fmt::format("the current is flat at {:.2f} A in {} samples where Ka u asks for more (noise {:.3f} A)",
+                             i_max, tops.size(), noise);
+    e.base = base_of(g, c.d);
+    e.T_after_Nm = Ti;
+    out.push_back(std::move(e));
+    return;
+  }
+  std::vector<double> a = iu;
+  for (auto& v : a) v = std::abs(v);
+  std::sort(a.begin(), a.end());
+  const auto base_cols = std::vector<const std::vector<double>*>{&c.reg.acc, &c.reg.vel, &c.reg.pos, &c.reg.neg};
+  const auto r0 = least_squares(base_cols, c.T, c.fit_moving, corr_len(c.s));
+  if (!r0.ok) return;
+  double best_rms = r0.residual_rms;
+  double best_i = 0.0;
+  std::vector<double> best_T;
+  LsqResult best_r;
+  for (double q : {0.999, 0.995, 0.99, 0.98, 0.97, 0.95, 0.92, 0.9, 0.85, 0.8}) {
+    const double i_max = a[static_cast<std::size_t>(q * static_cast<double>(a.size() - 1))];
+    if (!(i_max > 0.0)) continue;
+    std::vector<double> Ti(c.s.n);
+    for (std::size_t k = 0; k < c.s.n; ++k) Ti[k] = Kt * std::clamp(iu[k], -i_max, i_max);
+    Ti = lowpass(Ti, c.s.fc_Hz, fs);
+    const auto r = least_squares(base_cols, Ti, c.fit_moving, corr_len(c.s));
+    if (r.ok && r.residual_rms < best_rms) {
+      best_rms = r.residual_rms;
+      best_i = i_max;
+      best_T = std::move(Ti);
+      best_r = r;
+    }
+  }
+  if (best_i == 0.0) return;
+  const double h0 = residual_rms(base_cols, r0.theta, c.T, c.held_moving);
+  const double h1 = residual_rms(base_cols, best_r.theta, best_T, c.held_moving);
+  Fit g;
+  g.ok = true;
+  g.with = best_r;
+  g.without = r0;
+  g.gain = h0 > 0.0 ? 1.0 - h1 / h0 : 0.0;
+  g.t_stat = 100.0 * (1.0 - best_rms / r0.residual_rms);
+  EffectCandidate e;
+  e.effect = "current_saturation";
+  e.axis = c.s.axis;
+  e.params = {{"i_max", best_i}};
+  e.signal_gain = g.gain;
+  e.t_stat = g.t_stat;
+  e.evidence = fmt::format("clipping Ka u at {:.2f} A cuts the held-out torque residual by {:.0f} %", best_i,
+                           100.0 * g.gain);
+  e.base = base_of(g, c.d);
+  e.T_after_Nm = std::move(best_T);
+  out.push_back(std::move(e));
+}
+
+void try_constant_load(const Ctx& c, std::vector<EffectCandidate>& out) {
+  // Mean torque over the settled second half of every stop of at least 0.3 s.
+  struct Seg {
+    double mean_Nm;
+    bool held;
+  };
+  std::vector<Seg> segs;
+  const auto min_len = static_cast<std::size_t>(0.2 / c.s.dt_s);
+  std::size_t start = 0;
+  const std::size_t guard = static_cast<std::size_t>(0.05 / c.s.dt_s);
+  for (std::size_t k = 1; k <= c.s.n; ++k) {
+    const bool still = k < c.s.n && std::abs(c.s.x_ref_mm[k] - c.s.x_ref_mm[k - 1]) < 1e-9;
+    if (still) continue;
+    if (k - start >= min_len) {
+      const std::size_t a = start + (k - start) / 2, b = k > guard ? k - guard : k;
+      if (b > a + 10 && a > guard) {
+        double sum = 0.0;
+        for (std::size_t j = a; j < b; ++j) sum += c.T[j];
+        segs.push_back({sum / static_cast<double>(b - a), a >= c.s.n_fit});
+      }
+    }
+    start = k;
+  }
+  if (segs.size() > 1) segs.erase(segs.begin());  // the first stop precedes any motion: it tells nothing
+  std::vector<double> held_m, all_m;
+  for (const auto& sg : segs) {
+    if (sg.held) held_m.push_back(sg.mean_Nm);
+    all_m.push_back(sg.mean_Nm);
+  }
+  if (held_m.size() < 2 || all_m.size() < 4) return;
+  // Moving, a load shifts both Coulomb levels the same way: the base fit reads
+  // it as an asymmetry. Its hypothesis: symmetric friction plus a load of half
+  // the asymmetry, which the stops (holding torque) confirm or refute.
+  const LsqResult b = least_squares({&c.reg.acc, &c.reg.vel, &c.reg.pos, &c.reg.neg}, c.T, c.fit_moving, corr_len(c.s));
+  if (!b.ok) return;
+  const double load = 0.5 * (b.theta[2] - b.theta[3]);
+  double mean = 0.0;
+  for (double m : all_m) mean += m;
+  mean /= static_cast<double>(all_m.size());
+  double var = 0.0;
+  for (double m : all_m) var += (m - mean) * (m - mean);
+  const double se = std::sqrt(var / static_cast<double>(all_m.size() - 1) / static_cast<double>(all_m.size()));
+  if (mean * load <= 0.0) return;
+  double h0 = 0.0, h1 = 0.0;
+  for (double m : held_m) {
+    h0 += m * m;
+    h1 += (m - load) * (m - load);
+  }
+  const double gain = h0 > 0.0 ? 1.0 - std::sqrt(h1 / h0) : 0.0;
+  Fit g;
+  g.ok = true;
+  g.with = b;
+  g.with.theta[2] = g.with.theta[3] = 0.5 * (b.theta[2] + b.theta[3]);
+  g.gain = gain;
+  g.t_stat = se > 0.0 ? std::abs(mean) / se : 0.0;
+  g.extra_Nm.assign(c.s.n, 0.0);
+  add(out, c, "constant_load", g, {{"torque", load}},
+      fmt::format("moving, friction reads {:.3f} N m in + and {:.3f} N m in -: a load of {:+.3f} N m with symmetric "
+                  "friction {:.3f} N m; the {} stops hold {:+.3f} N m on average (t = {:.1f}) and the load explains "
+                  "{:.0f} % of the holding torque in the {} held-out stops",
+                  b.theta[2], b.theta[3], load, g.with.theta[2], all_m.size(), mean, g.t_stat, 100.0 * gain,
+                  held_m.size()));
+  // Moving, a load below the friction asymmetry cannot be told from the
+  // asymmetry itself: only a Coulomb level that would otherwise be under a
+  // quarter of the other direction's lets the stops decide without the replay.
+  const double lo = std::min(b.theta[2], b.theta[3]), hi = std::max(b.theta[2], b.theta[3]);
+  out.back().replay_blind = lo < 0.25 * hi;
+}
+
+void try_compliance(const Ctx& c, const std::vector<double>& e_res, std::vector<EffectCandidate>& out) {
+  if (e_res.size() != c.s.n) return;
+  const double fs = 1.0 / c.s.dt_s;
+  double df = 0.0;
+  const auto spec = amplitude_spectrum(std::span<const double>(e_res).subspan(c.s.n_fit), fs, &df);
+  if (spec.size() < 64 || !(df > 0.0)) return;
+  const auto k_lo = static_cast<std::size_t>(std::ceil(20.0 / df));
+  const auto k_hi = std::min(spec.size() - 1, static_cast<std::size_t>(0.4 * fs / df));
+  if (k_hi <= k_lo + 8) return;
+  std::vector<double> band(spec.begin() + static_cast<std::ptrdiff_t>(k_lo), spec.begin() + static_cast<std::ptrdiff_t>(k_hi));
+  std::vector<double> sorted = band;
+  std::sort(sorted.begin(), sorted.end());
+  const double median = sorted[sorted.size() / 2];
+  // Smooth over a few bins so a peak is a band, not one bin of noise.
+  const std::size_t hw = std::max<std::size_t>(2, static_cast<std::size_t>(2.0 / df));
+  double best = 0.0;
+  std::size_t kb = 0;
+  for (std::size_t k = k_lo + hw; k + hw < k_hi; ++k) {
+    double s2 = 0.0;
+    for (std::size_t j = k - hw; j <= k + hw; ++j) s2 += spec[j] * spec[j];
+    if (s2 > best) {
+      best = s2;
+      kb = k;
+    }
+  }
+  const double peak = std::sqrt(best / static_cast<double>(2 * hw + 1));
+  const double prominence = median > 0.0 ? peak / median : 0.0;
+  if (prominence < 8.0) return;
+  const double f_Hz = static_cast<double>(kb) * df;
+  Fit g;
+  g.ok = true;
+  g.with = least_squares({&c.reg.acc, &c.reg.vel, &c.reg.pos, &c.reg.neg}, c.T, c.fit_moving, corr_len(c.s));
+  if (!g.with.ok) return;
+  g.gain = std::min(0.9, 1.0 - 1.0 / prominence);
+  g.t_stat = prominence;
+  g.extra_Nm.assign(c.s.n, 0.0);
+  // Inside the position loop the peak of the residual sits below the
+  // two-mass resonance sqrt(K / (J f (1 - f))); the replay picks among these.
+  const double J = c.base.J_kg_m2;
+  const double frac = 0.5;
+  const double mu = J * frac * (1.0 - frac);
+  const double zeta = 0.05;
+  for (double ratio : {1.0, 1.8, 2.6}) {
+    const double wr = 2.0 * kPi * f_Hz * ratio;
+    const double K = wr * wr * mu;
+    const double C = 2.0 * zeta * std::sqrt(K * mu);
+    add(out, c, "compliance", g, {{"K", K}, {"C", C}, {"load_fraction", frac}},
+        fmt::format("the held-out tracking-error residual has a resonance at {:.0f} Hz, {:.0f} times the median level "
+                    "of its spectrum; two-mass resonance tried at {:.0f} Hz",
+                    f_Hz, prominence, f_Hz * ratio));
+  }
+}
+
+}  // namespace
+
+std::vector<EffectCandidate> diagnose_axis(const AxisSignals& s, const std::vector<double>& T_Nm,
+                                           const feeddrive::DriveParams& drive,
+                                           const std::vector<std::string>& present,
+                                           const std::vector<double>& e_residual_mm) {
+  std::vector<EffectCandidate> out;
+  if (s.n == 0) return out;
+  Ctx c{s, T_Nm, drive, base_regressors(s), {}, {}, {}, {}, {}, 0.0};
+  c.fit_moving = moving_rows(s, 0, s.n_fit, s.w_moving_rad_per_s);
+  c.held_moving = moving_rows(s, s.n_fit, s.n, s.w_moving_rad_per_s);
+  const double w_slow = 0.15 * s.w_moving_rad_per_s;
+  c.fit_slow = moving_rows(s, 0, s.n_fit, w_slow);
+  c.held_slow = moving_rows(s, s.n_fit, s.n, w_slow);
+  c.base = identify_drive(s, T_Nm, drive);
+  if (!c.fit_moving.empty()) {
+    double lo = s.x_mm[c.fit_moving.front()], hi = lo;
+    for (std::size_t k : c.fit_moving) {
+      lo = std::min(lo, s.x_mm[k]);
+      hi = std::max(hi, s.x_mm[k]);
+    }
+    c.travel_mm = hi - lo;
+  }
+  if (!c.base.ok) return out;
+  auto wanted = [&](const char* e) { return std::find(present.begin(), present.end(), e) == present.end(); };
+  if (wanted("stribeck")) try_stribeck(c, out);
+  if (wanted("cogging")) try_cogging(c, out);
+  if (wanted("screw_pitch_error")) try_screw(c, out);
+  if (wanted("backlash")) try_backlash(c, out);
+  if (wanted("constant_load")) try_constant_load(c, out);
+  if (wanted("position_dependent_friction")) try_position_friction(c, out);
+  if (wanted("delay")) try_delay(c, out);
+  if (wanted("compliance")) try_compliance(c, e_residual_mm, out);
+  if (wanted("current_saturation")) try_saturation(c, out);
+  std::sort(out.begin(), out.end(),
+            [](const EffectCandidate& a, const EffectCandidate& b) { return a.signal_gain > b.signal_gain; });
+  return out;
+}
+
+void apply_candidate(sim::AxisDefinition& axis, const EffectCandidate& c) {
+  axis.drive.J_kg_m2 = c.base.J_kg_m2;
+  axis.drive.B_kg_m2_per_s = c.base.B_kg_m2_per_s;
+  axis.drive.Tc_pos_Nm = c.base.Tc_pos_Nm;
+  axis.drive.Tc_neg_Nm = c.base.Tc_neg_Nm;
+  for (const auto& [name, value] : c.params) {
+    const std::string full = c.effect + "." + name;
+    const sim::AxisParamSpec* spec = sim::find_axis_param(full);
+    if (!spec) throw InternalError(fmt::format("calibrate: no machine parameter {}", full));
+    sim::set_axis_param(axis, *spec, value);
+  }
+}
+
+}  // namespace twin::analysis

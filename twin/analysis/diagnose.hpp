@@ -1,0 +1,43 @@
+#pragma once
+/// Residual diagnosis: for every effect of the catalogue
+/// (spec/measured-data.md), a statistic aimed at its signature in the
+/// inverse-dynamics residual (or the measured current), its parameters fitted
+/// on the fitting part and the reduction of the residual it gives on the
+/// held-out part where the effect acts.
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "twin/analysis/identify.hpp"
+#include "twin/sim/machine.hpp"
+
+namespace twin::analysis {
+
+struct EffectCandidate {
+  std::string effect;  ///< catalogue name
+  Axis axis{Axis::kX};
+  std::vector<std::pair<std::string, double>> params;  ///< parameter names of the table, without "<effect>."
+  double signal_gain{0.0};  ///< 1 - rms(residual with effect) / rms(residual without), held out, where it acts
+  double t_stat{0.0};       ///< fitted size over its standard error
+  std::string evidence;     ///< one line with the figure that decides
+  /// The replay hardly sees it (a reparametrisation of the moving model that
+  /// differs only at standstill): where the replayed errors tie, its signature decides.
+  bool replay_blind{false};
+  DriveIdentification base; ///< J, B, Tc fitted together with the effect
+  std::vector<double> T_after_Nm;  ///< torque with the effect's part taken out (for a second effect)
+};
+
+/// Candidates for one axis, best signal gain first; effects already on the
+/// axis (`present`) are skipped. `T_Nm` is the torque the base model explains.
+/// `e_residual_mm` (measured minus replayed tracking error, may be empty) is
+/// used for the resonance of compliance.
+std::vector<EffectCandidate> diagnose_axis(const AxisSignals& s, const std::vector<double>& T_Nm,
+                                           const feeddrive::DriveParams& drive,
+                                           const std::vector<std::string>& present,
+                                           const std::vector<double>& e_residual_mm);
+
+/// Switches the candidate's effect on in `axis` with its parameters and sets
+/// J, B, Tc to the ones fitted with it.
+void apply_candidate(sim::AxisDefinition& axis, const EffectCandidate& c);
+
+}  // namespace twin::analysis

@@ -1,0 +1,149 @@
+#include "twin/analysis/identify.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "twin/analysis/signal.hpp"
+
+namespace twin::analysis {
+
+AxisSignals prepare_axis_signals(const MeasuredRun& run, Axis axis, const feeddrive::DriveParams& nominal,
+                                 double encoder_resolution_mm, double fit_fraction, std::string* note) {
+  AxisSignals s;
+  s.axis = axis;
+  const std::string a(axis_name(axis));
+  const auto* ref = run.trace.find(a + "_ref_mm");
+  const auto* x = run.trace.find(a + "_mm");
+  const auto* u = run.trace.find(a + "_u_V");
+  const auto* i = run.trace.find(a + "_i_A");
+  if (!ref || !x) {
+    if (note) *note = fmt::format("axis {}: no {}_mm column: the drive cannot be identified", a, a);
+    return s;
+  }
+  if (!u && !i) {
+    if (note) *note = fmt::format("axis {}: neither {}_u_V nor {}_i_A: no torque, the drive cannot be identified", a, a, a);
+    return s;
+  }
+  const std::size_t n = x->size();
+  s.dt_s = run.sample_period_s;
+  s.controller_period_s = run.meta.controller_period_s.value_or(s.dt_s);
+  const double fs = 1.0 / s.dt_s;
+  // 50 Hz keeps the drive's rigid-body motion (S-curves of a few Hz to tens of Hz)
+  // and removes the encoder-count chatter; coarse logs get a fifth of their rate.
+  s.fc_Hz = std::min(50.0, 0.2 * fs);
+  if (n < 50) {
+    if (note) *note = fmt::format("axis {}: {} rows are too few to identify a drive", a, n);
+    return s;
+  }
+  s.n = n;
+  s.n_fit = static_cast<std::size_t>(std::floor(fit_fraction * static_cast<double>(n)));
+  s.rg_mm_per_rad = nominal.rg_mm_per_rad;
+  s.has_u = u != nullptr;
+  s.has_current = i != nullptr;
+  s.torque_from_u = u != nullptr;
+  s.torque_per_unit = s.torque_from_u ? nominal.Kt_Nm_per_A * nominal.Ka_A_per_V : nominal.Kt_Nm_per_A;
+  s.encoder_resolution_mm = encoder_resolution_mm;
+  s.x_ref_mm = *ref;
+  s.x_mm = *x;
+  if (u) s.u_raw_V = *u;
+  if (i) s.i_raw_A = *i;
+  s.cmd_raw = s.torque_from_u ? *u : *i;
+  s.x_lp_mm = lowpass(s.x_mm, s.fc_Hz, fs);
+  const auto v = derivative(s.x_lp_mm, s.dt_s);
+  s.w_rad_per_s.resize(n);
+  for (std::size_t k = 0; k < n; ++k) s.w_rad_per_s[k] = v[k] / s.rg_mm_per_rad;
+  s.a_rad_per_s2 = derivative(s.w_rad_per_s, s.dt_s);
+  std::vector<double> vr(n, 0.0);
+  for (std::size_t k = 1; k < n; ++k) vr[k] = (s.x_ref_mm[k] - s.x_ref_mm[k - 1]) / s.dt_s;
+  s.v_ref_mm_per_s = lowpass(vr, s.fc_Hz, fs);
+  std::vector<double> T(n);
+  for (std::size_t k = 0; k < n; ++k) T[k] = s.torque_per_unit * s.cmd_raw[k];
+  s.T_Nm = lowpass(T, s.fc_Hz, fs);
+  // Moving: faster than 2 mm/s or than 20 encoder counts over the filter's time scale.
+  const double v_min = std::max(2.0, 20.0 * encoder_resolution_mm * s.fc_Hz);
+  s.w_moving_rad_per_s = v_min / s.rg_mm_per_rad;
+  return s;
+}
+
+std::vector<std::size_t> moving_rows(const AxisSignals& s, std::size_t from, std::size_t to, double w_min) {
+  std::vector<std::size_t> rows;
+  to = std::min(to, s.n);
+  // Stay away from the ends, where the filter's padding shapes the signals.
+  const std::size_t guard = static_cast<std::size_t>(std::ceil(0.05 / s.dt_s));
+  to = std::min(to, s.n > guard ? s.n - guard : 0);
+  for (std::size_t k = std::max(from, guard); k < to; ++k)
+    if (std::abs(s.w_rad_per_s[k]) > w_min) rows.push_back(k);
+  return rows;
+}
+
+BaseRegressors base_regressors(const AxisSignals& s) {
+  BaseRegressors r;
+  r.acc = s.a_rad_per_s2;
+  r.vel = s.w_rad_per_s;
+  r.pos.resize(s.n);
+  r.neg.resize(s.n);
+  for (std::size_t k = 0; k < s.n; ++k) {
+    r.pos[k] = s.w_rad_per_s[k] > 0.0 ? 1.0 : 0.0;
+    r.neg[k] = s.w_rad_per_s[k] < 0.0 ? -1.0 : 0.0;
+  }
+  return r;
+}
+
+DriveIdentification identify_drive(const AxisSignals& s, const std::vector<double>& T_Nm,
+                                   const feeddrive::DriveParams& nominal) {
+  DriveIdentification id;
+  id.J_kg_m2 = nominal.J_kg_m2;
+  id.B_kg_m2_per_s = nominal.B_kg_m2_per_s;
+  id.Tc_pos_Nm = nominal.Tc_pos_Nm;
+  id.Tc_neg_Nm = nominal.Tc_neg_Nm;
+  if (s.n == 0) {
+    id.note = "no signals";
+    return id;
+  }
+  const auto rows = moving_rows(s, 0, s.n_fit, s.w_moving_rad_per_s);
+  std::size_t n_pos = 0, n_neg = 0;
+  for (std::size_t k : rows) (s.w_rad_per_s[k] > 0.0 ? n_pos : n_neg)++;
+  const auto reg = base_regressors(s);
+  const double corr = 1.0 / (2.0 * s.fc_Hz * s.dt_s);
+  std::vector<std::string> notes;
+  if (n_pos < 200 || n_neg < 200) {
+    id.note = fmt::format("axis {}: the fitting part moves too little in both directions ({} samples in +, {} in -): "
+                          "nominal J, B, Tc kept",
+                          axis_name(s.axis), n_pos, n_neg);
+    return id;
+  }
+  const LsqResult r = least_squares({&reg.acc, &reg.vel, &reg.pos, &reg.neg}, T_Nm, rows, corr);
+  if (!r.ok) {
+    id.note = fmt::format("axis {}: the motion does not separate inertia, damping and friction (rank-deficient): "
+                          "nominal J, B, Tc kept",
+                          axis_name(s.axis));
+    return id;
+  }
+  id.ok = true;
+  id.samples = r.n;
+  id.residual_rms_Nm = r.residual_rms;
+  id.J_kg_m2 = r.theta[0];
+  id.B_kg_m2_per_s = r.theta[1];
+  id.Tc_pos_Nm = r.theta[2];
+  id.Tc_neg_Nm = r.theta[3];
+  id.J_stderr = r.stderr_theta[0];
+  id.B_stderr = r.stderr_theta[1];
+  id.Tc_pos_stderr = r.stderr_theta[2];
+  id.Tc_neg_stderr = r.stderr_theta[3];
+  auto clamp_min = [&](double& v, double lo, const char* name) {
+    if (v < lo) {
+      notes.push_back(fmt::format("{} = {:.4g} came out below {:.3g} and was set to it", name, v, lo));
+      v = lo;
+    }
+  };
+  clamp_min(id.J_kg_m2, 0.05 * nominal.J_kg_m2, "J");
+  clamp_min(id.B_kg_m2_per_s, 0.0, "B");
+  clamp_min(id.Tc_pos_Nm, 0.0, "Tc_pos");
+  clamp_min(id.Tc_neg_Nm, 0.0, "Tc_neg");
+  for (const auto& n : notes) id.note += (id.note.empty() ? "" : "; ") + fmt::format("axis {}: {}", axis_name(s.axis), n);
+  return id;
+}
+
+}  // namespace twin::analysis

@@ -1,0 +1,70 @@
+#pragma once
+/// Identification of a feed drive's declared parameters (J, B, Tc_pos,
+/// Tc_neg) from a measured run by least squares on the inverse dynamics
+/// (Erkorkmaz and Altintas): Tm = J dw/dt + B w + Tc_pos [w > 0] - Tc_neg [w < 0],
+/// with w and dw/dt from the zero-phase low-passed measured position and Tm
+/// from the equally low-passed command (Tm = Kt Ka u) or current (Tm = Kt i).
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "feeddrive/drive_params.hpp"
+#include "twin/analysis/replay.hpp"
+
+namespace twin::analysis {
+
+/// The signals of one axis prepared for identification and diagnosis.
+struct AxisSignals {
+  Axis axis{Axis::kX};
+  std::size_t n{0};            ///< rows
+  std::size_t n_fit{0};        ///< rows [0, n_fit) are for fitting, the rest is held out
+  double dt_s{0.0};
+  double controller_period_s{0.0};  ///< the loop's period (u is held over it); dt_s when unknown
+  double fc_Hz{0.0};           ///< low-pass cut-off used for the derivatives
+  double rg_mm_per_rad{0.0};
+  double torque_per_unit{0.0}; ///< N m per V of u (Kt Ka) or per A of current (Kt)
+  bool torque_from_u{true};    ///< false: from the current column
+  bool has_current{false};
+  bool has_u{false};
+  double encoder_resolution_mm{0.0};
+  std::vector<double> x_ref_mm, x_mm;  ///< as measured
+  std::vector<double> cmd_raw;         ///< u_V or i_A as measured (what torque is made of)
+  std::vector<double> u_raw_V, i_raw_A;///< each empty when not measured
+  std::vector<double> x_lp_mm;         ///< low-passed measured position
+  std::vector<double> w_rad_per_s;     ///< motor speed from x_lp
+  std::vector<double> a_rad_per_s2;    ///< motor acceleration
+  std::vector<double> v_ref_mm_per_s;  ///< reference speed (backward differences, low-passed)
+  std::vector<double> T_Nm;            ///< low-passed motor torque from the command or current
+  double w_moving_rad_per_s{0.0};      ///< |w| above this counts as moving
+};
+
+/// Prepares the signals of `axis`; nullopt-like: returns n == 0 and a note
+/// when the run lacks what identification needs (position, and u or current).
+AxisSignals prepare_axis_signals(const MeasuredRun& run, Axis axis, const feeddrive::DriveParams& nominal,
+                                 double encoder_resolution_mm, double fit_fraction, std::string* note);
+
+struct DriveIdentification {
+  bool ok{false};
+  double J_kg_m2{0.0}, B_kg_m2_per_s{0.0}, Tc_pos_Nm{0.0}, Tc_neg_Nm{0.0};
+  double J_stderr{0.0}, B_stderr{0.0}, Tc_pos_stderr{0.0}, Tc_neg_stderr{0.0};
+  double residual_rms_Nm{0.0};
+  std::size_t samples{0};
+  std::string note;  ///< what was clamped or could not be identified
+};
+
+/// Rows of the signals in [from, to) where the axis moves (|w| above the threshold).
+std::vector<std::size_t> moving_rows(const AxisSignals& s, std::size_t from, std::size_t to, double w_min_rad_per_s);
+
+/// Least squares of the inverse dynamics on the fitting rows, with the
+/// torque `T_Nm` (the signals' own, or one from which an effect's torque was
+/// taken out). Parameters that come out non-physical are clamped and said.
+DriveIdentification identify_drive(const AxisSignals& s, const std::vector<double>& T_Nm,
+                                   const feeddrive::DriveParams& nominal);
+
+/// The regressor columns of the base model for the signals: a, w, [w>0], -[w<0].
+struct BaseRegressors {
+  std::vector<double> acc, vel, pos, neg;
+};
+BaseRegressors base_regressors(const AxisSignals& s);
+
+}  // namespace twin::analysis

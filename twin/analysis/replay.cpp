@@ -1,0 +1,195 @@
+#include "twin/analysis/replay.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "twin/core/error.hpp"
+#include "twin/io/atomic_file.hpp"
+#include "twin/io/machine_file.hpp"
+#include "twin/sim/cosimulation.hpp"
+#include "twin/sim/reference.hpp"
+
+namespace twin::analysis {
+namespace {
+
+std::optional<double> optional_number(const nlohmann::json& j, const char* key, const std::string& where) {
+  if (!j.contains(key) || j[key].is_null()) return std::nullopt;
+  if (!j[key].is_number()) throw ConfigError(fmt::format("{}: {} must be a number or null", where, key));
+  const double v = j[key].get<double>();
+  if (!std::isfinite(v) || !(v > 0.0)) throw ConfigError(fmt::format("{}: {} = {} must be > 0", where, key, v));
+  return v;
+}
+
+}  // namespace
+
+MeasuredRun load_run(const std::filesystem::path& dir) {
+  MeasuredRun run;
+  run.dir = dir;
+  if (!std::filesystem::is_directory(dir)) throw IoError(fmt::format("{}: not a run folder", dir.string()));
+  const auto meta_path = dir / "meta.json";
+  const std::string where = meta_path.string();
+  nlohmann::json meta;
+  try {
+    meta = nlohmann::json::parse(io::read_file(meta_path));
+  } catch (const nlohmann::json::exception& e) {
+    throw ConfigError(fmt::format("{}: not valid JSON ({})", where, e.what()));
+  }
+  if (!meta.is_object()) throw ConfigError(fmt::format("{}: must be a JSON object", where));
+  if (meta.contains("machine") && !meta["machine"].is_null()) {
+    if (!meta["machine"].is_string()) throw ConfigError(fmt::format("{}: machine must be a string or null", where));
+    run.meta.machine = meta["machine"].get<std::string>();
+  }
+  run.meta.controller_period_s = optional_number(meta, "controller_period_s", where);
+  run.meta.sample_period_s = optional_number(meta, "sample_period_s", where);
+  run.meta.encoder_resolution_mm = optional_number(meta, "encoder_resolution_mm", where);
+  if (meta.contains("description") && meta["description"].is_string())
+    run.meta.description = meta["description"].get<std::string>();
+  if (meta.contains("axes")) {
+    if (!meta["axes"].is_array()) throw ConfigError(fmt::format("{}: axes must be a list", where));
+    for (const auto& a : meta["axes"]) {
+      const auto ax = a.is_string() ? parse_axis(a.get<std::string>()) : std::nullopt;
+      if (!ax) throw ConfigError(fmt::format("{}: axes: unknown axis {}", where, a.dump()));
+      run.meta.axes.push_back(*ax);
+    }
+  }
+  std::filesystem::path trace_path = dir / "trace.csv";
+  if (!std::filesystem::exists(trace_path)) trace_path = dir / "trace.csv.gz";
+  if (!std::filesystem::exists(trace_path))
+    throw IoError(fmt::format("{}: no trace.csv or trace.csv.gz", dir.string()));
+  run.trace = io::read_trace_csv(trace_path);
+  for (Axis a : kAllAxes)
+    if (run.trace.find(std::string(axis_name(a)) + "_ref_mm")) run.axes.push_back(a);
+  if (run.axes.empty()) throw IoError(fmt::format("{}: no <a>_ref_mm column (x_ref_mm, y_ref_mm or z_ref_mm)", run.trace.source));
+  for (Axis a : run.meta.axes)
+    if (std::find(run.axes.begin(), run.axes.end(), a) == run.axes.end())
+      throw IoError(fmt::format("{}: meta.json lists axis {} but the trace has no {}_ref_mm column", run.trace.source,
+                                axis_name(a), axis_name(a)));
+  const auto& t = run.trace.at("t_s");
+  if (t.size() < 3) throw IoError(fmt::format("{}: {} rows are too few to replay", run.trace.source, t.size()));
+  const double dt = (t.back() - t.front()) / static_cast<double>(t.size() - 1);
+  for (std::size_t r = 1; r < t.size(); ++r) {
+    const double d = t[r] - t[r - 1];
+    if (std::abs(d - dt) > 0.01 * dt + 2e-6)
+      throw IoError(fmt::format("{}: sampling is not uniform: rows {} to {} are {} s apart, the mean period is {} s",
+                                run.trace.source, r + 1, r + 2, d, dt));
+  }
+  run.sample_period_s = dt;
+  if (run.meta.sample_period_s && std::abs(*run.meta.sample_period_s - dt) > 0.01 * dt)
+    throw IoError(fmt::format("{}: sample_period_s = {} s but the trace's t_s steps by {} s", where,
+                              *run.meta.sample_period_s, dt));
+  return run;
+}
+
+sim::MachineDefinition machine_for_run(const MeasuredRun& run, const std::string& machine_override,
+                                       std::vector<std::string>* notes) {
+  std::string name = machine_override;
+  if (name.empty()) {
+    if (!run.meta.machine)
+      throw ConfigError(fmt::format("{}: meta.json names no machine: pass --machine FILE", run.dir.string()));
+    name = *run.meta.machine;
+  }
+  const auto path = io::resolve_machine_path(name);
+  if (!std::filesystem::exists(path))
+    throw ConfigError(fmt::format("{}: machine '{}' is not one the twin ships ({} does not exist): pass --machine FILE",
+                                  run.dir.string(), name, path.string()));
+  sim::MachineDefinition m = io::load_machine(path);
+  if (run.meta.controller_period_s && std::abs(*run.meta.controller_period_s - m.Ts_s) > 1e-12) {
+    if (notes)
+      notes->push_back(fmt::format("controller period {} s from meta.json replaces the machine's Ts = {} s",
+                                   *run.meta.controller_period_s, m.Ts_s));
+    m.Ts_s = *run.meta.controller_period_s;
+    for (auto& ax : m.axes) ax.loop.Ts_s = m.Ts_s;
+  }
+  if (run.meta.encoder_resolution_mm) m.encoder_resolution_mm = *run.meta.encoder_resolution_mm;
+  for (Axis a : run.axes)
+    if (!m.axes[index(a)].present)
+      throw ConfigError(fmt::format("{}: the run has axis {} but machine {} does not define it", run.dir.string(),
+                                    axis_name(a), m.name));
+  return m;
+}
+
+ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& machine_in, std::size_t rows,
+                        feeddrive::IntegratorOptions options) {
+  ReplayResult res;
+  res.axes = run.axes;
+  sim::MachineDefinition machine = machine_in;
+  // Only the run's axes are simulated.
+  for (Axis a : kAllAxes)
+    if (std::find(run.axes.begin(), run.axes.end(), a) == run.axes.end()) machine.axes[index(a)].present = false;
+  const double Ts = machine.Ts_s;
+  const double ratio = run.sample_period_s / Ts;
+  const auto m = static_cast<std::int64_t>(std::llround(ratio));
+  if (m < 1 || std::abs(ratio - static_cast<double>(m)) > 0.01)
+    throw ConfigError(fmt::format(
+        "{}: the trace is sampled every {} s, which is not a whole multiple of the controller period {} s: the "
+        "reference the loop saw cannot be rebuilt",
+        run.trace.source, run.sample_period_s, Ts));
+  const std::size_t n_rows = rows == 0 ? run.trace.num_rows() : std::min(rows, run.trace.num_rows());
+  if (m > 1)
+    res.notes.push_back(fmt::format("trace sampled every {} s = {} controller periods: the reference is interpolated "
+                                    "linearly to Ts = {} s and the twin's outputs are taken at the trace's samples",
+                                    run.sample_period_s, m, Ts));
+  const auto& t = run.trace.at("t_s");
+  const std::int64_t n_ticks = static_cast<std::int64_t>(n_rows - 1) * m + 1;
+  AxisArray<std::vector<double>> ref;
+  AxisArray<double> x0{};
+  for (Axis a : run.axes) {
+    const std::string n(axis_name(a));
+    const auto& r = run.trace.at(n + "_ref_mm");
+    auto& dst = ref[index(a)];
+    dst.resize(static_cast<std::size_t>(n_ticks));
+    for (std::int64_t k = 0; k < n_ticks; ++k) {
+      const std::size_t i = static_cast<std::size_t>(k / m);
+      const double f = static_cast<double>(k % m) / static_cast<double>(m);
+      dst[static_cast<std::size_t>(k)] = f == 0.0 ? r[i] : r[i] + f * (r[i + 1] - r[i]);
+    }
+    const auto* xm = run.trace.find(n + "_mm");
+    x0[index(a)] = xm ? (*xm)[0] : r[0];
+  }
+  auto reference = std::make_shared<sim::SampledReference>(std::move(ref), Ts);
+  sim::CoSimulation cosim(machine, reference, nullptr, x0, options);
+  res.t_s.reserve(n_rows);
+  for (Axis a : run.axes) {
+    res.x_ref_mm[index(a)].reserve(n_rows);
+    res.x_mm[index(a)].reserve(n_rows);
+    res.u_V[index(a)].reserve(n_rows);
+    res.i_A[index(a)].reserve(n_rows);
+  }
+  for (std::int64_t k = 0; k < n_ticks; ++k) {
+    const sim::Snapshot& s = cosim.step();
+    if (k % m != 0) continue;
+    res.t_s.push_back(t[static_cast<std::size_t>(k / m)]);
+    for (Axis a : run.axes) {
+      const auto& x = s.axes[index(a)];
+      res.x_ref_mm[index(a)].push_back(x.x_ref_mm);
+      res.x_mm[index(a)].push_back(x.x_mm);
+      res.u_V[index(a)].push_back(x.u_V);
+      res.i_A[index(a)].push_back(x.i_A);
+    }
+  }
+  return res;
+}
+
+void write_replay_trace(const std::filesystem::path& path, const ReplayResult& r) {
+  std::vector<std::string> names{"t_s"};
+  for (Axis a : r.axes) {
+    const std::string n(axis_name(a));
+    names.insert(names.end(), {n + "_ref_mm", n + "_mm", n + "_u_V", n + "_i_A"});
+  }
+  io::TraceWriter w(path, names);
+  std::vector<double> row;
+  for (std::size_t i = 0; i < r.t_s.size(); ++i) {
+    row.clear();
+    row.push_back(r.t_s[i]);
+    for (Axis a : r.axes)
+      row.insert(row.end(), {r.x_ref_mm[index(a)][i], r.x_mm[index(a)][i], r.u_V[index(a)][i], r.i_A[index(a)][i]});
+    w.write_row(row);
+  }
+  w.commit();
+}
+
+}  // namespace twin::analysis

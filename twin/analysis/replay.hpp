@@ -1,0 +1,63 @@
+#pragma once
+/// Replay of a measured run (spec/measured-data.md): the twin's loops follow
+/// the run's `<a>_ref_mm` columns at the controller period and the twin's
+/// trace is written with the same column names.
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "feeddrive/drive_bank.hpp"
+#include "twin/io/trace_csv.hpp"
+#include "twin/sim/machine.hpp"
+
+namespace twin::analysis {
+
+struct RunMeta {
+  std::optional<std::string> machine;
+  std::vector<Axis> axes;
+  std::optional<double> controller_period_s;
+  std::optional<double> sample_period_s;
+  std::optional<double> encoder_resolution_mm;
+  std::string description;
+};
+
+struct MeasuredRun {
+  std::filesystem::path dir;
+  RunMeta meta;
+  io::TraceTable trace;
+  std::vector<Axis> axes;          ///< axes with a <a>_ref_mm column
+  double sample_period_s{0.0};     ///< from the time column (uniform within 1 %)
+};
+
+/// Reads RUN/meta.json and RUN/trace.csv(.gz); checks the columns and time.
+MeasuredRun load_run(const std::filesystem::path& dir);
+
+/// The machine a run is replayed on: `machine_override` (name or path) or the
+/// run's meta.machine; the run's controller period and encoder resolution
+/// replace the machine's where the meta gives them.
+sim::MachineDefinition machine_for_run(const MeasuredRun& run, const std::string& machine_override,
+                                       std::vector<std::string>* notes);
+
+struct ReplayResult {
+  std::vector<Axis> axes;
+  std::vector<double> t_s;                  ///< at the run's samples
+  AxisArray<std::vector<double>> x_ref_mm;
+  AxisArray<std::vector<double>> x_mm;      ///< measured (quantised) position of the twin
+  AxisArray<std::vector<double>> u_V;
+  AxisArray<std::vector<double>> i_A;
+  std::vector<std::string> notes;           ///< what was handled and how
+};
+
+/// Replays the run on `machine`. Where the samples are a whole multiple m of
+/// the controller period, the reference is interpolated linearly to the
+/// controller period and outputs are taken every m ticks (a note says so);
+/// any other sampling is a ConfigError naming the figures.
+/// `rows` limits the replay to the first rows (0: all).
+ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& machine, std::size_t rows = 0,
+                        feeddrive::IntegratorOptions options = {});
+
+/// Writes the replay as trace.csv: t_s and per axis <a>_ref_mm <a>_mm <a>_u_V <a>_i_A.
+void write_replay_trace(const std::filesystem::path& path, const ReplayResult& r);
+
+}  // namespace twin::analysis

@@ -1,0 +1,319 @@
+#include "twin/analysis/run_report.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "twin/analysis/plots.hpp"
+#include "twin/core/error.hpp"
+#include "twin/core/units.hpp"
+#include "twin/io/atomic_file.hpp"
+#include "twin/io/trace_csv.hpp"
+#include "twin/sim/reference.hpp"
+
+namespace twin::analysis {
+
+std::vector<std::string> run_trace_columns(const std::vector<Axis>& axes) {
+  std::vector<std::string> c{"t_s"};
+  for (Axis a : axes) {
+    const std::string n(axis_name(a));
+    c.insert(c.end(), {n + "_ref_mm", n + "_mm", n + "_u_V", n + "_i_A"});
+  }
+  c.insert(c.end(), {"fx_N", "fy_N", "fz_N", "spindle_rpm"});
+  for (Axis a : axes) {
+    const std::string n(axis_name(a));
+    c.insert(c.end(), {n + "_err_mm", n + "_true_mm", n + "_v_mm_per_s", n + "_Tm_Nm", n + "_Td_Nm"});
+  }
+  c.insert(c.end(), {"feed_programmed_mm_per_min", "feed_ref_mm_per_min", "feed_mm_per_min", "contour_error_mm",
+                     "engagement_deg", "chip_mm", "spindle_torque_Nm", "cutting_power_W", "fx_avg_N", "fy_avg_N",
+                     "fz_avg_N", "block"});
+  return c;
+}
+
+void fill_run_trace_row(const sim::Snapshot& s, const std::vector<Axis>& axes, std::vector<double>& row) {
+  row.clear();
+  row.push_back(s.t_s);
+  for (Axis a : axes) {
+    const auto& x = s.axes[index(a)];
+    row.insert(row.end(), {x.x_ref_mm, x.x_mm, x.u_V, x.i_A});
+  }
+  row.insert(row.end(), {s.F_N[0], s.F_N[1], s.F_N[2], s.spindle_rpm});
+  for (Axis a : axes) {
+    const auto& x = s.axes[index(a)];
+    row.insert(row.end(), {x.e_mm, x.x_true_mm, x.v_mm_per_s, x.Tm_Nm, x.Td_Nm});
+  }
+  row.insert(row.end(), {s.feed_programmed_mm_per_min, s.feed_ref_mm_per_min, s.feed_real_mm_per_min,
+                         s.contour_error_mm, s.engagement_deg, s.chip_mm, s.spindle_torque_Nm, s.cutting_power_W,
+                         s.F_avg_N[0], s.F_avg_N[1], s.F_avg_N[2], static_cast<double>(s.block)});
+}
+
+std::vector<CornerWindow> corner_windows(const controller::Trajectory& traj, const controller::Program& program) {
+  std::vector<CornerWindow> out;
+  const double Ts = traj.Ts_s();
+  const std::int64_t n = traj.num_ticks();
+  const auto nb = static_cast<int>(program.blocks.size());
+  auto cutting = [&](int b) {
+    if (b < 0 || b >= nb) return false;
+    const auto k = program.blocks[static_cast<std::size_t>(b)].kind;
+    return k == controller::MotionKind::kLinear || k == controller::MotionKind::kArcCw ||
+           k == controller::MotionKind::kArcCcw;
+  };
+  for (const auto& c : traj.corners()) {
+    // Corners of the cut: both neighbours are feed moves (rapids stop anyway).
+    if (!cutting(c.block_before) || !cutting(c.block_after)) continue;
+    CornerWindow w;
+    w.corner = c;
+    w.line_after = program.blocks[static_cast<std::size_t>(c.block_after)].line;
+    const double F_before = program.blocks[static_cast<std::size_t>(c.block_before)].feed_mm_per_min / kSPerMin;
+    const double F_after = program.blocks[static_cast<std::size_t>(c.block_after)].feed_mm_per_min / kSPerMin;
+    w.feed_programmed_mm_per_min = std::min(F_before, F_after) * kSPerMin;
+    const auto kc = std::clamp<std::int64_t>(static_cast<std::int64_t>(std::llround(c.t_s / Ts)), 0, n);
+    // The dip: from where the reference last ran at the feed of the block
+    // before, to where it first runs at the feed of the block after.
+    std::int64_t k0 = kc;
+    double lost = 0.0;
+    double vmin = traj.sample(kc).path_speed_mm_per_s;
+    while (k0 > 0) {
+      const auto s = traj.sample(k0 - 1);
+      if (s.path_speed_mm_per_s >= 0.995 * F_before || (s.block != c.block_before && s.block != c.block_after)) break;
+      lost += (1.0 - s.path_speed_mm_per_s / F_before) * Ts;
+      vmin = std::min(vmin, s.path_speed_mm_per_s);
+      --k0;
+    }
+    std::int64_t k1 = kc;
+    while (k1 < n) {
+      const auto s = traj.sample(k1);
+      if (s.path_speed_mm_per_s >= 0.995 * F_after || (s.block != c.block_before && s.block != c.block_after)) break;
+      lost += (1.0 - s.path_speed_mm_per_s / F_after) * Ts;
+      vmin = std::min(vmin, s.path_speed_mm_per_s);
+      ++k1;
+    }
+    // At least +-2 ms around the corner for the force and error statistics.
+    const std::int64_t pad = static_cast<std::int64_t>(std::ceil(0.002 / Ts));
+    w.k_begin = std::max<std::int64_t>(0, std::min(k0, kc - pad));
+    w.k_end = std::min<std::int64_t>(n + 1, std::max(k1, kc + pad));
+    w.t_begin_s = static_cast<double>(w.k_begin) * Ts;
+    w.t_end_s = static_cast<double>(w.k_end) * Ts;
+    w.time_lost_s = lost;
+    w.feed_ref_min_mm_per_min = vmin * kSPerMin;
+    out.push_back(w);
+  }
+  return out;
+}
+
+RunStatistics::RunStatistics(const controller::Program& program, const controller::Trajectory& trajectory,
+                             std::vector<Axis> axes, double encoder_resolution_mm)
+    : program_(program),
+      trajectory_(trajectory),
+      axes_(std::move(axes)),
+      settle_band_mm_(std::max(2.0 * encoder_resolution_mm, 1e-4)),
+      windows_(corner_windows(trajectory, program)),
+      blocks_(program.blocks.size()),
+      corner_stats_(windows_.size()),
+      Ts_s_(trajectory.Ts_s()) {}
+
+void RunStatistics::add(const sim::Snapshot& s) {
+  ++ticks_;
+  t_last_s_ = s.t_s;
+  const double F = std::sqrt(s.F_N[0] * s.F_N[0] + s.F_N[1] * s.F_N[1] + s.F_N[2] * s.F_N[2]);
+  bool moving = !s.reference_done;
+  bool settled = true;
+  for (Axis a : axes_) {
+    const auto& x = s.axes[index(a)];
+    const double e = std::abs(x.e_mm);
+    max_err_mm_[index(a)] = std::max(max_err_mm_[index(a)], e);
+    if (moving) sum_err2_[index(a)] += e * e;
+    if (std::abs(x.x_true_mm - x.x_ref_mm) > settle_band_mm_) settled = false;
+  }
+  if (moving) {
+    ++moving_ticks_;
+    sum_contour2_ += s.contour_error_mm * s.contour_error_mm;
+  }
+  max_contour_mm_ = std::max(max_contour_mm_, s.contour_error_mm);
+  for (std::size_t c = 0; c < 3; ++c) {
+    peak_force_N_[c] = std::max(peak_force_N_[c], std::abs(s.F_N[c]));
+  }
+  peak_resultant_N_ = std::max(peak_resultant_N_, F);
+  if (s.engagement_deg > 0.0) {
+    ++cutting_ticks_;
+    for (std::size_t c = 0; c < 3; ++c) sum_force_N_[c] += s.F_avg_N[c];
+  }
+  energy_cut_J_ += s.cutting_power_W * Ts_s_;
+  if (s.reference_done && t_done_s_ < 0.0) t_done_s_ = s.t_s;
+  if (s.reference_done && settled && t_settled_s_ < 0.0) t_settled_s_ = s.t_s;
+  if (!s.reference_done) t_settled_s_ = -1.0;
+
+  if (s.block >= 0 && static_cast<std::size_t>(s.block) < blocks_.size()) {
+    BlockStats& b = blocks_[static_cast<std::size_t>(s.block)];
+    ++b.ticks;
+    b.feed_real_sum += s.feed_real_mm_per_min;
+    b.feed_real_min = std::min(b.feed_real_min, s.feed_real_mm_per_min);
+    for (Axis a : axes_) b.max_err_mm[index(a)] = std::max(b.max_err_mm[index(a)], std::abs(s.axes[index(a)].e_mm));
+    b.max_contour_mm = std::max(b.max_contour_mm, s.contour_error_mm);
+    b.peak_force_N = std::max(b.peak_force_N, F);
+  }
+  // The steady cut before each corner: the tick-mean force over the 0.2 s
+  // before its window, to compare the corner's peak with.
+  const double F_avg = std::sqrt(s.F_avg_N[0] * s.F_avg_N[0] + s.F_avg_N[1] * s.F_avg_N[1] + s.F_avg_N[2] * s.F_avg_N[2]);
+  const auto approach = static_cast<std::int64_t>(std::llround(0.2 / Ts_s_));
+  for (std::size_t c = next_corner_; c < windows_.size() && windows_[c].k_begin - approach <= s.k; ++c) {
+    if (s.k >= windows_[c].k_begin) continue;
+    corner_stats_[c].approach_force_sum_N += F_avg;
+    corner_stats_[c].approach_ticks += 1;
+  }
+  while (next_corner_ < windows_.size() && windows_[next_corner_].k_end <= s.k) ++next_corner_;
+  for (std::size_t c = next_corner_; c < windows_.size() && windows_[c].k_begin <= s.k; ++c) {
+    if (s.k >= windows_[c].k_end) continue;
+    CornerStats& cs = corner_stats_[c];
+    cs.feed_real_min = std::min(cs.feed_real_min, s.feed_real_mm_per_min);
+    cs.max_contour_mm = std::max(cs.max_contour_mm, s.contour_error_mm);
+    cs.peak_force_N = std::max(cs.peak_force_N, F);
+    cs.max_engagement_deg = std::max(cs.max_engagement_deg, s.engagement_deg);
+  }
+}
+
+double RunStatistics::cycle_time_s() const noexcept {
+  if (t_settled_s_ >= 0.0) return t_settled_s_;
+  return t_last_s_ + Ts_s_;
+}
+
+namespace {
+std::string kind_name(controller::MotionKind k) {
+  switch (k) {
+    case controller::MotionKind::kRapid: return "G0";
+    case controller::MotionKind::kLinear: return "G1";
+    case controller::MotionKind::kArcCw: return "G2";
+    case controller::MotionKind::kArcCcw: return "G3";
+    case controller::MotionKind::kDwell: return "G4";
+  }
+  return "?";
+}
+}  // namespace
+
+nlohmann::json RunStatistics::summary() const {
+  using nlohmann::json;
+  json j;
+  const double mt = std::max<double>(1.0, static_cast<double>(moving_ticks_));
+  json max_err = json::object(), rms_err = json::object();
+  for (Axis a : axes_) {
+    max_err[std::string(axis_name(a))] = max_err_mm_[index(a)];
+    rms_err[std::string(axis_name(a))] = std::sqrt(sum_err2_[index(a)] / mt);
+  }
+  double ideal = 0.0;
+  const auto& bt = trajectory_.block_timings();
+  json blocks = json::array();
+  for (std::size_t i = 0; i < program_.blocks.size(); ++i) {
+    const auto& b = program_.blocks[i];
+    const BlockStats& s = blocks_[i];
+    json jb;
+    jb["index"] = i;
+    jb["line"] = b.line;
+    jb["motion"] = kind_name(b.kind);
+    jb["feed_programmed_mm_per_min"] = b.kind == controller::MotionKind::kDwell ? 0.0 : b.feed_mm_per_min;
+    if (i < bt.size()) {
+      jb["length_mm"] = bt[i].length_mm;
+      jb["time_s"] = bt[i].t_end_s - bt[i].t_start_s;
+      const double at_feed = bt[i].feed_programmed_mm_per_s > 0.0 ? bt[i].length_mm / bt[i].feed_programmed_mm_per_s
+                                                                  : bt[i].t_end_s - bt[i].t_start_s;
+      jb["time_at_programmed_feed_s"] = at_feed;
+      ideal += at_feed;
+    }
+    jb["feed_real_mean_mm_per_min"] = s.ticks > 0 ? s.feed_real_sum / static_cast<double>(s.ticks) : 0.0;
+    jb["feed_real_min_mm_per_min"] = s.ticks > 0 ? s.feed_real_min : 0.0;
+    json e = json::object();
+    for (Axis a : axes_) e[std::string(axis_name(a))] = s.max_err_mm[index(a)];
+    jb["max_tracking_error_mm"] = e;
+    jb["max_contour_error_mm"] = s.max_contour_mm;
+    jb["peak_force_N"] = s.peak_force_N;
+    blocks.push_back(jb);
+  }
+  json corners = json::array();
+  double lost_total = 0.0;
+  for (std::size_t c = 0; c < windows_.size(); ++c) {
+    const auto& w = windows_[c];
+    const auto& cs = corner_stats_[c];
+    json jc;
+    jc["index"] = c;
+    jc["line"] = w.line_after;
+    jc["turn_angle_deg"] = w.corner.turn_angle_deg;
+    jc["p_mm"] = {w.corner.p_mm[0], w.corner.p_mm[1], w.corner.p_mm[2]};
+    jc["t_s"] = w.corner.t_s;
+    jc["exact_stop"] = w.corner.exact_stop;
+    jc["feed_programmed_mm_per_min"] = w.feed_programmed_mm_per_min;
+    jc["feed_ref_min_mm_per_min"] = w.feed_ref_min_mm_per_min;
+    jc["feed_real_min_mm_per_min"] = cs.feed_real_min < 1e299 ? cs.feed_real_min : 0.0;
+    jc["time_lost_s"] = w.time_lost_s;
+    jc["max_contour_error_mm"] = cs.max_contour_mm;
+    jc["peak_force_N"] = cs.peak_force_N;
+    jc["mean_force_before_corner_N"] =
+        cs.approach_ticks > 0 ? cs.approach_force_sum_N / static_cast<double>(cs.approach_ticks) : 0.0;
+    jc["window_s"] = {w.t_begin_s, w.t_end_s};
+    jc["max_engagement_deg"] = cs.max_engagement_deg;
+    lost_total += w.time_lost_s;
+    corners.push_back(jc);
+  }
+  j["ticks"] = ticks_;
+  j["cycle_time_s"] = cycle_time_s();
+  j["reference_time_s"] = trajectory_.duration_s();
+  j["time_at_programmed_feed_s"] = ideal;
+  j["time_lost_at_corners_s"] = lost_total;
+  j["settled"] = t_settled_s_ >= 0.0;
+  j["max_tracking_error_mm"] = max_err;
+  j["rms_tracking_error_mm"] = rms_err;
+  j["max_contour_error_mm"] = max_contour_mm_;
+  j["rms_contour_error_mm"] = std::sqrt(sum_contour2_ / mt);
+  json forces;
+  forces["peak_N"] = {{"fx", peak_force_N_[0]}, {"fy", peak_force_N_[1]}, {"fz", peak_force_N_[2]}};
+  const double ct = std::max<double>(1.0, static_cast<double>(cutting_ticks_));
+  forces["mean_while_cutting_N"] = {
+      {"fx", sum_force_N_[0] / ct}, {"fy", sum_force_N_[1] / ct}, {"fz", sum_force_N_[2] / ct}};
+  forces["peak_resultant_N"] = peak_resultant_N_;
+  forces["cutting_time_s"] = static_cast<double>(cutting_ticks_) * Ts_s_;
+  forces["cutting_energy_J"] = energy_cut_J_;
+  j["forces"] = forces;
+  j["blocks"] = blocks;
+  j["corners"] = corners;
+  return j;
+}
+
+RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options) {
+  io::ensure_directory(options.out_dir);
+  const controller::Program program = io::parse_program(scenario);
+  auto reference = std::make_shared<sim::ProgramReference>(
+      controller::plan_trajectory(program, scenario.machine.motion_limits(), scenario.machine.Ts_s));
+  const controller::Trajectory& traj = reference->trajectory();
+  sim::CoSimulation cosim(scenario.machine, reference, scenario.make_process ? scenario.make_process() : nullptr,
+                          scenario.start_mm);
+  const auto& axes = cosim.axes();
+  const std::int64_t settle_ticks = static_cast<std::int64_t>(std::ceil(scenario.settle_s / scenario.machine.Ts_s));
+  const std::int64_t total = traj.num_ticks() + settle_ticks;
+
+  RunOutputs out;
+  out.trace_path = options.out_dir / "trace.csv";
+  out.summary_path = options.out_dir / "summary.json";
+  io::TraceWriter writer(out.trace_path, run_trace_columns(axes));
+  RunStatistics stats(program, traj, axes, scenario.machine.encoder_resolution_mm);
+  std::vector<double> row;
+  for (std::int64_t k = 0; k < total; ++k) {
+    const sim::Snapshot& s = cosim.step();
+    stats.add(s);
+    fill_run_trace_row(s, axes, row);
+    writer.write_row(row);
+  }
+  nlohmann::json summary;
+  summary["scenario"] = scenario.name;
+  summary["machine"] = scenario.machine.name;
+  summary["program"] = scenario.program_path.string();
+  summary["process"] = scenario.make_process ? scenario.process_summary : std::string("air cut");
+  summary["Ts_s"] = scenario.machine.Ts_s;
+  const nlohmann::json st = stats.summary();
+  summary.update(st);
+  writer.commit();
+  io::write_file_atomic(out.summary_path, summary.dump(2) + "\n");
+  out.summary = summary;
+  if (options.plots) out.plots = plot_run(options.out_dir, out.trace_path, axes, stats.corners(), scenario.make_process != nullptr);
+  return out;
+}
+
+}  // namespace twin::analysis

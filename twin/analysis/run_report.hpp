@@ -1,0 +1,108 @@
+#pragma once
+/// Runs a scenario through the co-simulation loop, streams trace.csv and
+/// builds summary.json: cycle time, per block the programmed and real feed,
+/// tracking and contour errors, and per corner the real feed at its minimum,
+/// the peak force and the time lost.
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "controller/interpolator.hpp"
+#include "twin/io/scenario_file.hpp"
+#include "twin/sim/cosimulation.hpp"
+
+namespace twin::analysis {
+
+/// Column names of a simulated trace for the given axes (spec columns first).
+std::vector<std::string> run_trace_columns(const std::vector<Axis>& axes);
+/// Fills one row in the order of run_trace_columns.
+void fill_run_trace_row(const sim::Snapshot& s, const std::vector<Axis>& axes, std::vector<double>& row);
+
+/// Corner windows on the reference: where the reference speed dips below the
+/// programmed feed around each corner.
+struct CornerWindow {
+  controller::Corner corner;
+  int line_after{0};
+  std::int64_t k_begin{0};
+  std::int64_t k_end{0};        ///< exclusive
+  double t_begin_s{0.0};
+  double t_end_s{0.0};
+  double feed_programmed_mm_per_min{0.0};
+  double time_lost_s{0.0};      ///< integral of (1 - v_ref / F) over the window
+  double feed_ref_min_mm_per_min{0.0};
+};
+std::vector<CornerWindow> corner_windows(const controller::Trajectory& trajectory,
+                                         const controller::Program& program);
+
+/// Accumulates per-tick statistics into the summary.
+class RunStatistics {
+ public:
+  RunStatistics(const controller::Program& program, const controller::Trajectory& trajectory,
+                std::vector<Axis> axes, double encoder_resolution_mm);
+  void add(const sim::Snapshot& s);
+  nlohmann::json summary() const;
+  double cycle_time_s() const noexcept;
+  const std::vector<CornerWindow>& corners() const noexcept { return windows_; }
+
+ private:
+  struct BlockStats {
+    std::int64_t ticks{0};
+    double feed_real_sum{0.0};
+    double feed_real_min{1e300};
+    AxisArray<double> max_err_mm{};
+    double max_contour_mm{0.0};
+    double peak_force_N{0.0};
+  };
+  struct CornerStats {
+    double feed_real_min{1e300};
+    double max_contour_mm{0.0};
+    double peak_force_N{0.0};
+    double approach_force_sum_N{0.0};
+    std::int64_t approach_ticks{0};
+    double max_engagement_deg{0.0};
+  };
+  const controller::Program& program_;
+  const controller::Trajectory& trajectory_;
+  std::vector<Axis> axes_;
+  double settle_band_mm_;
+  std::vector<CornerWindow> windows_;
+  std::vector<BlockStats> blocks_;
+  std::vector<CornerStats> corner_stats_;
+  std::size_t next_corner_{0};
+  std::int64_t ticks_{0};
+  double t_last_s_{0.0};
+  double t_done_s_{-1.0};
+  double t_settled_s_{-1.0};
+  AxisArray<double> max_err_mm_{};
+  AxisArray<double> sum_err2_{};
+  double max_contour_mm_{0.0};
+  double sum_contour2_{0.0};
+  std::int64_t moving_ticks_{0};
+  std::array<double, 3> peak_force_N_{};
+  std::array<double, 3> sum_force_N_{};
+  double peak_resultant_N_{0.0};
+  std::int64_t cutting_ticks_{0};
+  double energy_cut_J_{0.0};
+  double Ts_s_{1e-4};
+};
+
+struct RunOutputs {
+  nlohmann::json summary;
+  std::filesystem::path trace_path;
+  std::filesystem::path summary_path;
+  std::vector<std::filesystem::path> plots;
+};
+
+struct RunOptions {
+  std::filesystem::path out_dir;
+  bool plots{true};
+};
+
+/// The whole `twin run`: plan, simulate, stream the trace, write the summary
+/// and the plots. Files appear at their final names only when complete.
+RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options);
+
+}  // namespace twin::analysis

@@ -1,0 +1,65 @@
+#pragma once
+/// Signal processing for calibration: zero-phase Butterworth low-pass,
+/// derivatives, normalised RMS, linear least squares with standard errors,
+/// an amplitude spectrum and binning statistics.
+#include <cstddef>
+#include <span>
+#include <vector>
+
+namespace twin::analysis {
+
+/// One second-order section, direct form II transposed, a0 = 1.
+struct Biquad {
+  double b0{0.0}, b1{0.0}, b2{0.0}, a1{0.0}, a2{0.0};
+};
+
+/// 4th-order Butterworth low-pass (bilinear transform with prewarping) as
+/// two sections. ConfigError unless 0 < fc_Hz < fs_Hz / 2.
+std::vector<Biquad> butterworth_lowpass4(double fc_Hz, double fs_Hz);
+
+/// Forward-backward (zero-phase) filtering with the sections. The ends are
+/// extended by odd reflection and each pass starts in the steady state of its
+/// first value, so a constant passes unchanged and ramps have no end transient.
+std::vector<double> filtfilt(const std::vector<Biquad>& sos, std::span<const double> x);
+
+/// filtfilt(butterworth_lowpass4(fc_Hz, fs_Hz), x).
+std::vector<double> lowpass(std::span<const double> x, double fc_Hz, double fs_Hz);
+
+/// Central differences (one-sided at the ends) of x sampled every dt_s.
+std::vector<double> derivative(std::span<const double> x, double dt_s);
+
+/// rms(a - b) / rms(a) over rows [from, to); 0 when both are zero, and
+/// rms(a - b) when rms(a) is zero.
+double nrms(std::span<const double> a, std::span<const double> b, std::size_t from, std::size_t to);
+double rms(std::span<const double> a, std::size_t from, std::size_t to);
+
+/// Linear least squares y ~ X theta over the rows listed in `rows`.
+/// X is given column by column. Standard errors assume residuals that are
+/// white over blocks of `correlation_length` samples (the filter makes
+/// neighbouring residuals correlated): sigma^2 (X'X)^-1 scaled by it.
+struct LsqResult {
+  std::vector<double> theta;
+  std::vector<double> stderr_theta;
+  double residual_rms{0.0};
+  std::size_t n{0};
+  bool ok{false};  ///< false when the rows are too few or X is rank deficient
+};
+LsqResult least_squares(const std::vector<const std::vector<double>*>& columns, const std::vector<double>& y,
+                        const std::vector<std::size_t>& rows, double correlation_length = 1.0);
+
+/// Amplitude spectrum of x (mean removed, Hann window) at bins k fs / N for a
+/// power-of-two N = largest power of two <= x.size(): returns |X_k| for
+/// k = 0..N/2 and sets df_Hz.
+std::vector<double> amplitude_spectrum(std::span<const double> x, double fs_Hz, double* df_Hz);
+
+/// Mean of y over bins of x: edges of `num_bins` equal bins over [lo, hi];
+/// rows listed in `rows`. Empty bins have count 0 and mean 0.
+struct Bins {
+  double lo{0.0}, hi{0.0};
+  std::vector<double> mean;
+  std::vector<std::size_t> count;
+};
+Bins bin_means(const std::vector<double>& x, const std::vector<double>& y, const std::vector<std::size_t>& rows,
+               double lo, double hi, std::size_t num_bins);
+
+}  // namespace twin::analysis

@@ -1,0 +1,710 @@
+#include "twin/analysis/tune.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <limits>
+
+#include <fmt/format.h>
+#include <nlopt.hpp>
+
+#include "twin/analysis/plots.hpp"
+#include "twin/core/error.hpp"
+#include "twin/core/units.hpp"
+#include "twin/io/atomic_file.hpp"
+#include "twin/sim/cosimulation.hpp"
+#include "twin/sim/reference.hpp"
+
+namespace twin::analysis {
+
+namespace {
+
+bool is_feed_move(const controller::Program& program, int block) {
+  if (block < 0 || block >= static_cast<int>(program.blocks.size())) return false;
+  const auto kind = program.blocks[static_cast<std::size_t>(block)].kind;
+  return kind == controller::MotionKind::kLinear || kind == controller::MotionKind::kArcCw ||
+         kind == controller::MotionKind::kArcCcw;
+}
+
+std::string gains_text(const controller::PositionLoopParams& g) {
+  return fmt::format("Kp {:.6g}, Ki {:.6g}, Kd {:.6g}, K1 {:.6g}, K2 {:.6g}", g.Kp_V_per_mm, g.Ki_V_per_s_mm,
+                     g.Kd_V_s_per_mm, g.K1_V_s2_per_mm, g.K2_V_s_per_mm);
+}
+
+/// How far the linear constraints are broken (0 when all hold), in normalised units.
+double linear_violation(const ConstraintValues& v, const TuneConstraints& c) {
+  if (!v.stable) return 10.0;
+  double s = 0.0;
+  s += std::max(0.0, (c.phase_margin_min_deg - v.phase_margin_deg) / 10.0);
+  s += std::max(0.0, (c.gain_margin_min_dB - v.gain_margin_dB) / 3.0);
+  s += std::max(0.0, (v.sensitivity_peak - c.sensitivity_peak_max) / 0.2);
+  s += std::max(0.0, (v.step_overshoot - c.step_overshoot_max) / 0.05);
+  return s;
+}
+
+}  // namespace
+
+ConstraintValues linear_constraints(const LinearPlant& plant, const controller::PositionLoopParams& gains,
+                                    const TuneConstraints& c, const std::string& where) {
+  ConstraintValues v;
+  const LoopAnalysis a = analyse_loop(DiscreteLoopModel(plant, gains, where), 0.01, 1500);
+  v.stable = a.stable;
+  v.phase_margin_deg = a.phase_margin_deg;
+  v.gain_margin_dB = a.gain_margin_dB;
+  v.sensitivity_peak = a.sensitivity_peak;
+  v.step_overshoot = a.step_overshoot;
+  v.u_limit_V = c.u_fraction_max * gains.u_max_V;
+  if (!a.stable) {
+    v.violation = fmt::format("{}: closed loop unstable (largest pole |z| = {:.6f})", where, a.max_pole_magnitude);
+  } else if (a.phase_margin_deg < c.phase_margin_min_deg) {
+    v.violation = fmt::format("{}: phase margin {:.2f} deg < {:.2f} deg", where, a.phase_margin_deg,
+                              c.phase_margin_min_deg);
+  } else if (a.gain_margin_dB < c.gain_margin_min_dB) {
+    v.violation = fmt::format("{}: gain margin {:.2f} dB < {:.2f} dB", where, a.gain_margin_dB, c.gain_margin_min_dB);
+  } else if (a.sensitivity_peak > c.sensitivity_peak_max) {
+    v.violation = fmt::format("{}: sensitivity peak {:.3f} > {:.3f}", where, a.sensitivity_peak, c.sensitivity_peak_max);
+  } else if (a.step_overshoot > c.step_overshoot_max) {
+    v.violation = fmt::format("{}: step overshoot {:.1f} % > {:.1f} %", where, 100.0 * a.step_overshoot,
+                              100.0 * c.step_overshoot_max);
+  }
+  v.linear_ok = v.violation.empty();
+  return v;
+}
+
+PlannedScenario plan_scenario(const io::Scenario& scenario) {
+  PlannedScenario p;
+  p.program = io::parse_program(scenario);
+  p.trajectory = controller::plan_trajectory(p.program, scenario.machine.motion_limits(), scenario.machine.Ts_s);
+  p.corners = corner_windows(p.trajectory, p.program);
+  for (const auto& c : p.corners)
+    if (is_feed_move(p.program, c.corner.block_before) && is_feed_move(p.program, c.corner.block_after))
+      p.tuning_corners.push_back(c);
+  if (p.tuning_corners.empty()) p.tuning_corners = p.corners;
+  p.total_ticks =
+      p.trajectory.num_ticks() + static_cast<std::int64_t>(std::ceil(scenario.settle_s / scenario.machine.Ts_s));
+  return p;
+}
+
+SimulationWindow full_window(const PlannedScenario& planned) {
+  return SimulationWindow{0, planned.total_ticks, planned.corners};
+}
+
+SimulationWindow corner_window(const PlannedScenario& planned, double before_s, double after_s) {
+  if (planned.tuning_corners.empty()) return full_window(planned);
+  const double Ts = planned.trajectory.Ts_s();
+  SimulationWindow w;
+  w.corners = planned.tuning_corners;
+  w.k_begin = std::max<std::int64_t>(0, w.corners.front().k_begin - static_cast<std::int64_t>(std::llround(before_s / Ts)));
+  w.k_end = std::min(planned.total_ticks, w.corners.back().k_end + static_cast<std::int64_t>(std::llround(after_s / Ts)));
+  return w;
+}
+
+ScenarioMetrics simulate_window(const io::Scenario& scenario, const PlannedScenario& planned,
+                                const sim::MachineDefinition& machine, const SimulationWindow& window,
+                                CornerTrace* trace, std::int64_t trace_begin, std::int64_t trace_end) {
+  ScenarioMetrics m;
+  auto reference = std::make_shared<sim::ProgramReference>(planned.trajectory);
+  const double Ts = machine.Ts_s;
+  const std::int64_t k0 = window.k_begin;
+  AxisArray<double> x0 = scenario.start_mm;
+  if (k0 > 0) x0 = planned.trajectory.sample(k0).x_mm;
+  sim::CoSimulation cosim(machine, reference, scenario.make_process ? scenario.make_process() : nullptr, x0);
+  const auto& axes = cosim.axes();
+  if (k0 > 0) {
+    // Steady motion at tick k0: the drives at the reference speed, no error, the
+    // integrator holding what the feedforward does not give of B w + Tc.
+    sim::CoSimState st = cosim.get_state();
+    const auto r0 = planned.trajectory.sample(k0);
+    const auto r1 = planned.trajectory.sample(k0 - 1);
+    const auto r2 = planned.trajectory.sample(std::max<std::int64_t>(0, k0 - 2));
+    for (std::size_t i = 0; i < axes.size(); ++i) {
+      const std::size_t a = index(axes[i]);
+      const auto& d = machine.axes[a].drive;
+      const auto& g = machine.axes[a].loop;
+      const double v = (r1.x_mm[a] - r2.x_mm[a]) / Ts;
+      const double w = r0.v_mm_per_s[a] / d.rg_mm_per_rad;
+      auto& ds = st.drives[i];
+      ds.x_mm = r0.x_mm[a];
+      ds.w_rad_per_s = w;
+      ds.stuck = w == 0.0;
+      ds.x_load_mm = ds.x_mm;
+      ds.w_load_rad_per_s = w;
+      ds.x_table_mm = ds.x_mm;
+      ds.load_stuck = ds.stuck;
+      auto& ls = st.loops[i];
+      ls = controller::PositionLoopState{};
+      const double Tc = w > 0.0 ? d.Tc_pos_Nm : (w < 0.0 ? -d.Tc_neg_Nm : 0.0);
+      const double u_needed = (d.B_kg_m2_per_s * w + Tc) / (d.Ka_A_per_V * d.Kt_Nm_per_A);
+      ls.I_mm_s = g.Ki_V_per_s_mm > 0.0 ? (u_needed - g.K2_V_s_per_mm * v) / g.Ki_V_per_s_mm : 0.0;
+      ls.e_prev_mm = 0.0;
+      ls.x_ref_prev_mm = r1.x_mm[a];
+      ls.v_ref_prev_mm_per_s = v;
+      ls.last_k = k0 - 1;
+    }
+    st.k = k0;
+    st.last.k = k0 - 1;
+    cosim.set_state(st);
+  }
+  if (trace) *trace = CornerTrace{};
+  AxisArray<double> sum_e2{};
+  double sum_c2 = 0.0;
+  std::int64_t n_corner = 0;
+  std::size_t next = 0;
+  try {
+    for (std::int64_t k = k0; k < window.k_end; ++k) {
+      const sim::Snapshot& s = cosim.step();
+      ++m.ticks;
+      for (Axis ax : axes) {
+        const auto& x = s.axes[index(ax)];
+        m.u_peak_V[index(ax)] = std::max(m.u_peak_V[index(ax)], std::abs(x.u_V));
+        if (x.saturated) ++m.saturated_ticks[index(ax)];
+        if (s.reference_done)
+          m.max_error_after_stop_mm[index(ax)] = std::max(m.max_error_after_stop_mm[index(ax)], std::abs(x.e_mm));
+      }
+      m.max_contour_error_run_mm = std::max(m.max_contour_error_run_mm, s.contour_error_mm);
+      while (next < window.corners.size() && window.corners[next].k_end <= k) ++next;
+      bool in_corner = false;
+      for (std::size_t c = next; c < window.corners.size() && window.corners[c].k_begin <= k; ++c)
+        if (k < window.corners[c].k_end) in_corner = true;
+      if (in_corner) {
+        ++n_corner;
+        for (Axis ax : axes) {
+          const double e = s.axes[index(ax)].e_mm;
+          m.max_tracking_error_mm[index(ax)] = std::max(m.max_tracking_error_mm[index(ax)], std::abs(e));
+          sum_e2[index(ax)] += e * e;
+        }
+        m.max_contour_error_mm = std::max(m.max_contour_error_mm, s.contour_error_mm);
+        sum_c2 += s.contour_error_mm * s.contour_error_mm;
+      }
+      if (trace && k >= trace_begin && k < trace_end) {
+        trace->t_s.push_back(s.t_s);
+        for (Axis ax : axes) trace->e_mm[index(ax)].push_back(s.axes[index(ax)].e_mm);
+        trace->contour_mm.push_back(s.contour_error_mm);
+      }
+    }
+    m.completed = true;
+  } catch (const ModelError& e) {
+    m.failure = e.what();
+  }
+  const double n = std::max<double>(1.0, static_cast<double>(n_corner));
+  for (Axis ax : axes) m.rms_tracking_error_mm[index(ax)] = std::sqrt(sum_e2[index(ax)] / n);
+  m.rms_contour_error_mm = std::sqrt(sum_c2 / n);
+  return m;
+}
+
+namespace {
+
+/// Per-axis search variables: ln(Kp/Kp_b), ln(Ki/Ki_b), ln(Kd/Kd_b), K1/K1_m, K2/K2_m.
+struct AxisScales {
+  Axis axis{Axis::kX};
+  LinearPlant plant;
+  controller::PositionLoopParams start;
+  double Kp_b{1.0}, Ki_b{0.0}, Kd_b{1.0};
+  FeedforwardGains ff;
+  controller::PositionLoopParams gains(const double* q) const {
+    controller::PositionLoopParams g = start;
+    g.Kp_V_per_mm = Kp_b * std::exp(q[0]);
+    g.Ki_V_per_s_mm = Ki_b > 0.0 ? Ki_b * std::exp(q[1]) : 0.0;
+    g.Kd_V_s_per_mm = Kd_b * std::exp(q[2]);
+    g.K1_V_s2_per_mm = ff.K1_V_s2_per_mm * q[3];
+    g.K2_V_s_per_mm = ff.K2_V_s_per_mm * q[4];
+    return g;
+  }
+};
+
+struct StageA {
+  const AxisScales* scales;
+  const TuneConstraints* constraints;
+  std::string where;
+};
+
+double stage_a_objective(unsigned, const double* q, double*, void*) {
+  return q[0] * q[0] + q[1] * q[1] + q[2] * q[2];
+}
+
+double stage_a_constraint(unsigned, const double* q, double*, void* data) {
+  const auto* d = static_cast<const StageA*>(data);
+  double full[5] = {q[0], q[1], q[2], 0.0, 0.0};
+  // Aim a little inside the constraints so that COBYLA's last point is feasible.
+  TuneConstraints tight = *d->constraints;
+  tight.phase_margin_min_deg += 0.5;
+  tight.gain_margin_min_dB += 0.2;
+  tight.sensitivity_peak_max -= 0.02;
+  tight.step_overshoot_max -= 0.005;
+  try {
+    const ConstraintValues v = linear_constraints(d->scales->plant, d->scales->gains(full), tight, d->where);
+    return linear_violation(v, tight);
+  } catch (const ConfigError&) {
+    return 100.0;
+  }
+}
+
+struct StageB {
+  const io::Scenario* scenario;
+  const PlannedScenario* planned;
+  const SimulationWindow* window;
+  const TuneOptions* options;
+  std::vector<AxisScales> scales;
+  sim::MachineDefinition machine;
+  double norm_contour{1.0}, norm_rms{1.0}, norm_max{1.0};
+  int evaluations{0};
+  double best_objective{std::numeric_limits<double>::infinity()};
+  std::vector<double> best_q;
+  ScenarioMetrics best_metrics;
+};
+
+double objective_of(const ScenarioMetrics& m, const std::vector<AxisScales>& scales, const StageB& d) {
+  double rms = 0.0, mx = 0.0;
+  for (const auto& s : scales) {
+    rms += m.rms_tracking_error_mm[index(s.axis)];
+    mx += m.max_tracking_error_mm[index(s.axis)];
+  }
+  return m.max_contour_error_mm / d.norm_contour + d.options->rms_weight * rms / d.norm_rms +
+         d.options->max_tracking_weight * mx / d.norm_max;
+}
+
+/// Simulation constraint violation: peak |u| beyond the limit, or a runaway.
+double simulation_violation(const ScenarioMetrics& m, const std::vector<AxisScales>& scales,
+                            const sim::MachineDefinition& machine, const TuneConstraints& c) {
+  if (!m.completed) return 10.0;
+  double s = 0.0;
+  for (const auto& sc : scales) {
+    const double limit = c.u_fraction_max * machine.axes[index(sc.axis)].loop.u_max_V;
+    s += std::max(0.0, (m.u_peak_V[index(sc.axis)] - limit) / limit);
+  }
+  return s;
+}
+
+double stage_b_objective(unsigned n, const double* q, double*, void* data) {
+  auto* d = static_cast<StageB*>(data);
+  const TuneConstraints& c = d->options->constraints;
+  double lin = 0.0;
+  sim::MachineDefinition machine = d->machine;
+  for (std::size_t i = 0; i < d->scales.size(); ++i) {
+    const auto& s = d->scales[i];
+    const controller::PositionLoopParams g = s.gains(q + 5 * i);
+    try {
+      lin += linear_violation(linear_constraints(s.plant, g, c, std::string(axis_name(s.axis))), c);
+    } catch (const ConfigError&) {
+      lin += 100.0;
+    }
+    machine.axes[index(s.axis)].loop = g;
+  }
+  if (lin > 0.0) return 1e3 * (1.0 + lin);
+  ++d->evaluations;
+  const ScenarioMetrics m = simulate_window(*d->scenario, *d->planned, machine, *d->window);
+  const double simv = simulation_violation(m, d->scales, machine, c);
+  if (simv > 0.0) return 1e2 * (1.0 + simv);
+  const double f = objective_of(m, d->scales, *d);
+  if (f < d->best_objective) {
+    d->best_objective = f;
+    d->best_q.assign(q, q + n);
+    d->best_metrics = m;
+  }
+  return f;
+}
+
+}  // namespace
+
+TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) {
+  TuneResult result;
+  const sim::MachineDefinition& m0 = scenario.machine;
+  result.machine_before = m0;
+  result.machine_after = m0;
+  if (options.axes.empty()) throw ConfigError("tune: no axis to tune");
+  if (!(options.gain_range > 1.0) || !(options.feedforward_range > 0.0) || options.max_evaluations < 1)
+    throw ConfigError(fmt::format("tune: gain_range {} must be > 1, feedforward_range {} > 0, max_evaluations {} >= 1",
+                                  options.gain_range, options.feedforward_range, options.max_evaluations));
+  const TuneConstraints& c = options.constraints;
+  std::vector<AxisScales> scales;
+  for (Axis a : options.axes) {
+    const auto& def = m0.axes[index(a)];
+    if (!def.present)
+      throw ConfigError(fmt::format("tune: axis {} is not present in machine {}", axis_name(a), m0.name));
+    AxisScales s;
+    s.axis = a;
+    s.plant = linear_plant(def.drive);
+    s.plant.validate(fmt::format("{}: axis {}", m0.source.empty() ? m0.name : m0.source, axis_name(a)));
+    s.start = def.loop;
+    s.Kp_b = def.loop.Kp_V_per_mm > 0.0 ? def.loop.Kp_V_per_mm : 100.0;
+    s.Ki_b = def.loop.Ki_V_per_s_mm;
+    s.Kd_b = def.loop.Kd_V_s_per_mm > 0.0 ? def.loop.Kd_V_s_per_mm : s.Kp_b * 1e-3;
+    s.ff = model_feedforward(s.plant);
+    scales.push_back(s);
+  }
+  const double lr = std::log(options.gain_range);
+
+  // Stage A: nearest feedback gains that meet the linear constraints, per axis.
+  std::vector<double> q0;
+  for (const auto& s : scales) {
+    StageA data{&s, &c, std::string(axis_name(s.axis))};
+    nlopt::opt opt(nlopt::LN_COBYLA, 3);
+    opt.set_lower_bounds(std::vector<double>{-lr, s.Ki_b > 0.0 ? -lr : 0.0, -lr});
+    opt.set_upper_bounds(std::vector<double>{lr, s.Ki_b > 0.0 ? lr : 0.0, lr});
+    opt.set_min_objective(stage_a_objective, &data);
+    opt.add_inequality_constraint(stage_a_constraint, &data, 0.0);
+    opt.set_maxeval(600);
+    opt.set_xtol_abs(1e-4);
+    opt.set_initial_step(0.3);
+    std::vector<double> x{0.0, 0.0, 0.0};
+    double fval = 0.0;
+    try {
+      opt.optimize(x, fval);
+    } catch (const std::exception&) {
+      // COBYLA's stopping by round-off is not a failure: the point is checked below.
+    }
+    double full[5] = {x[0], x[1], x[2], 1.0, 1.0};
+    const ConstraintValues v = linear_constraints(s.plant, s.gains(full), c, std::string(axis_name(s.axis)));
+    if (!v.linear_ok) {
+      result.feasible = false;
+      result.message = fmt::format(
+          "no gains satisfy the constraints on axis {} within the search range (Kp, Ki, Kd in [1/{:g}, {:g}] x "
+          "start): best found {} ({}); start {}",
+          axis_name(s.axis), options.gain_range, options.gain_range, gains_text(s.gains(full)), v.violation,
+          gains_text(s.start));
+      for (const auto& sc : scales) {
+        AxisTuneResult ar;
+        ar.axis = sc.axis;
+        ar.before = ar.after = sc.start;
+        ar.model_feedforward = sc.ff;
+        ar.analysis_before = ar.analysis_after = analyse_loop(DiscreteLoopModel(sc.plant, sc.start));
+        ar.constraints_before = ar.constraints_after =
+            linear_constraints(sc.plant, sc.start, c, std::string(axis_name(sc.axis)));
+        result.axes.push_back(ar);
+      }
+      return result;
+    }
+    q0.insert(q0.end(), {x[0], x[1], x[2], 1.0, 1.0});
+  }
+
+  // Stage B: the coupled simulation through the corners.
+  const PlannedScenario planned = plan_scenario(scenario);
+  const SimulationWindow window = corner_window(planned, options.window_before_s, options.window_after_s);
+  StageB data;
+  data.scenario = &scenario;
+  data.planned = &planned;
+  data.window = &window;
+  data.options = &options;
+  data.scales = scales;
+  data.machine = m0;
+  result.window_before = simulate_window(scenario, planned, m0, window);
+  {
+    sim::MachineDefinition ms = m0;
+    for (std::size_t i = 0; i < scales.size(); ++i) ms.axes[index(scales[i].axis)].loop = scales[i].gains(&q0[5 * i]);
+    const ScenarioMetrics start = simulate_window(scenario, planned, ms, window);
+    const ScenarioMetrics& ref = result.window_before.completed ? result.window_before : start;
+    data.norm_contour = std::max(ref.max_contour_error_mm, 1e-6);
+    double rms = 0.0, mx = 0.0;
+    for (const auto& s : scales) {
+      rms += ref.rms_tracking_error_mm[index(s.axis)];
+      mx += ref.max_tracking_error_mm[index(s.axis)];
+    }
+    data.norm_rms = std::max(rms, 1e-6);
+    data.norm_max = std::max(mx, 1e-6);
+    result.objective_before = result.window_before.completed ? objective_of(result.window_before, scales, data) : 0.0;
+  }
+  const unsigned n = static_cast<unsigned>(q0.size());
+  std::vector<double> lb(n), ub(n);
+  for (std::size_t i = 0; i < scales.size(); ++i) {
+    const bool has_ki = scales[i].Ki_b > 0.0;
+    const double lo[5] = {-lr, has_ki ? -lr : 0.0, -lr, 0.0, 0.0};
+    const double hi[5] = {lr, has_ki ? lr : 0.0, lr, options.feedforward_range, options.feedforward_range};
+    for (std::size_t j = 0; j < 5; ++j) {
+      lb[5 * i + j] = lo[j];
+      ub[5 * i + j] = hi[j];
+    }
+  }
+  {
+    nlopt::opt opt(nlopt::LN_BOBYQA, n);
+    opt.set_lower_bounds(lb);
+    opt.set_upper_bounds(ub);
+    opt.set_min_objective(stage_b_objective, &data);
+    opt.set_maxeval(options.max_evaluations);
+    std::vector<double> step(n);
+    for (std::size_t i = 0; i < n; ++i) step[i] = (i % 5) < 3 ? 0.15 : 0.1;
+    opt.set_initial_step(step);
+    opt.set_xtol_abs(1e-3);
+    std::vector<double> x = q0;
+    double fval = 0.0;
+    try {
+      opt.optimize(x, fval);
+    } catch (const std::exception&) {
+      // A stop by round-off or by the evaluation budget keeps the best feasible point below.
+    }
+  }
+  if (data.best_q.empty()) {
+    result.feasible = false;
+    result.message = "no evaluated gains met every constraint in the simulation (|u| below the limit, no runaway)";
+    data.best_q = q0;
+  } else {
+    result.feasible = true;
+  }
+  result.evaluations = data.evaluations;
+  result.window_after = data.best_metrics;
+  result.objective_after = data.best_objective;
+  for (std::size_t i = 0; i < scales.size(); ++i)
+    result.machine_after.axes[index(scales[i].axis)].loop = scales[i].gains(&data.best_q[5 * i]);
+
+  // Judge on the full scenario.
+  const SimulationWindow full = full_window(planned);
+  result.full_before = simulate_window(scenario, planned, m0, full);
+  result.full_after = simulate_window(scenario, planned, result.machine_after, full);
+  for (const auto& s : scales) {
+    AxisTuneResult ar;
+    ar.axis = s.axis;
+    ar.before = s.start;
+    ar.after = result.machine_after.axes[index(s.axis)].loop;
+    ar.model_feedforward = s.ff;
+    const std::string name(axis_name(s.axis));
+    ar.analysis_before = analyse_loop(DiscreteLoopModel(s.plant, ar.before, name));
+    ar.analysis_after = analyse_loop(DiscreteLoopModel(s.plant, ar.after, name));
+    ar.constraints_before = linear_constraints(s.plant, ar.before, c, name);
+    ar.constraints_after = linear_constraints(s.plant, ar.after, c, name);
+    for (auto* pair : {&ar.constraints_before, &ar.constraints_after}) {
+      const ScenarioMetrics& fm = pair == &ar.constraints_before ? result.full_before : result.full_after;
+      pair->u_peak_V = fm.u_peak_V[index(s.axis)];
+      pair->simulation_ok = fm.completed && pair->u_peak_V <= pair->u_limit_V;
+      if (pair->violation.empty() && !pair->simulation_ok)
+        pair->violation = fm.completed ? fmt::format("{}: peak |u| {:.3f} V > {:.3f} V in the full scenario", name,
+                                                     pair->u_peak_V, pair->u_limit_V)
+                                       : fmt::format("{}: {}", name, fm.failure);
+    }
+    if (result.feasible && !ar.constraints_after.violation.empty()) {
+      result.feasible = false;
+      result.message = fmt::format("tuned gains break a constraint on the full scenario: {}",
+                                   ar.constraints_after.violation);
+    }
+    result.axes.push_back(ar);
+  }
+  if (result.feasible) {
+    result.message = fmt::format(
+        "tuned {} axis(es) in {} simulations: max contour error through the corners {:.3f} um -> {:.3f} um",
+        scales.size(), result.evaluations, 1e3 * result.full_before.max_contour_error_mm,
+        1e3 * result.full_after.max_contour_error_mm);
+  }
+  return result;
+}
+
+namespace {
+
+nlohmann::json gains_json(const controller::PositionLoopParams& g) {
+  return {{"Kp_V_per_mm", g.Kp_V_per_mm},       {"Ki_V_per_s_mm", g.Ki_V_per_s_mm},
+          {"Kd_V_s_per_mm", g.Kd_V_s_per_mm},   {"K1_V_s2_per_mm", g.K1_V_s2_per_mm},
+          {"K2_V_s_per_mm", g.K2_V_s_per_mm}};
+}
+
+double finite_or(double v, double alt) { return std::isfinite(v) ? v : alt; }
+
+nlohmann::json analysis_json(const LoopAnalysis& a) {
+  nlohmann::json poles = nlohmann::json::array();
+  for (const auto& p : a.poles) poles.push_back({p.real(), p.imag()});
+  // JSON has no infinity: a margin that does not exist is written as null.
+  auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  return {{"stable", a.stable},
+          {"poles_z", poles},
+          {"gain_margin_dB", num(a.gain_margin_dB)},
+          {"phase_crossover_Hz", a.phase_crossover_Hz},
+          {"phase_margin_deg", num(a.phase_margin_deg)},
+          {"gain_crossover_Hz", a.gain_crossover_Hz},
+          {"sensitivity_peak", a.sensitivity_peak},
+          {"sensitivity_peak_dB", a.sensitivity_peak_dB},
+          {"bandwidth_Hz", a.bandwidth_Hz},
+          {"bandwidth_with_feedforward_Hz", a.bandwidth_with_feedforward_Hz},
+          {"step_overshoot", num(a.step_overshoot)},
+          {"step_settling_time_s", num(a.step_settling_time_s)},
+          {"tracking_error_gain_1Hz", a.error_gain_1Hz},
+          {"tracking_error_gain_10Hz", a.error_gain_10Hz}};
+}
+
+nlohmann::json constraints_json(const ConstraintValues& v) {
+  return {{"phase_margin_deg", finite_or(v.phase_margin_deg, 1e300)},
+          {"gain_margin_dB", finite_or(v.gain_margin_dB, 1e300)},
+          {"sensitivity_peak", v.sensitivity_peak},
+          {"step_overshoot", finite_or(v.step_overshoot, 1e300)},
+          {"u_peak_V", v.u_peak_V},
+          {"u_limit_V", v.u_limit_V},
+          {"satisfied", v.violation.empty()},
+          {"violation", v.violation}};
+}
+
+nlohmann::json axis_metrics_json(const ScenarioMetrics& m, Axis a) {
+  return {{"max_tracking_error_mm", m.max_tracking_error_mm[index(a)]},
+          {"rms_tracking_error_mm", m.rms_tracking_error_mm[index(a)]},
+          {"u_peak_V", m.u_peak_V[index(a)]},
+          {"saturated_ticks", m.saturated_ticks[index(a)]},
+          {"max_error_after_stop_mm", m.max_error_after_stop_mm[index(a)]}};
+}
+
+nlohmann::json metrics_json(const ScenarioMetrics& m, const std::vector<Axis>& axes) {
+  nlohmann::json j = {{"completed", m.completed},
+                      {"max_contour_error_corners_mm", m.max_contour_error_mm},
+                      {"rms_contour_error_corners_mm", m.rms_contour_error_mm},
+                      {"max_contour_error_run_mm", m.max_contour_error_run_mm},
+                      {"ticks", m.ticks}};
+  if (!m.completed) j["failure"] = m.failure;
+  for (Axis a : axes) j["axes"][std::string(axis_name(a))] = axis_metrics_json(m, a);
+  return j;
+}
+
+}  // namespace
+
+nlohmann::json tune_report(const io::Scenario& scenario, const TuneOptions& options, const TuneResult& r,
+                           const std::optional<io::Scenario>& check_scenario,
+                           const std::optional<std::pair<ScenarioMetrics, ScenarioMetrics>>& check_metrics) {
+  nlohmann::json j;
+  j["scenario"] = scenario.name;
+  j["machine"] = scenario.machine.name;
+  j["feasible"] = r.feasible;
+  j["message"] = r.message;
+  const auto& c = options.constraints;
+  j["constraints"] = {{"phase_margin_min_deg", c.phase_margin_min_deg},
+                      {"gain_margin_min_dB", c.gain_margin_min_dB},
+                      {"sensitivity_peak_max", c.sensitivity_peak_max},
+                      {"step_overshoot_max", c.step_overshoot_max},
+                      {"u_fraction_max", c.u_fraction_max}};
+  j["search"] = {{"method", "NLopt COBYLA (linear constraints) then BOBYQA (coupled simulation)"},
+                 {"simulations", r.evaluations},
+                 {"max_evaluations", options.max_evaluations},
+                 {"window_before_s", options.window_before_s},
+                 {"window_after_s", options.window_after_s},
+                 {"objective_before", r.objective_before},
+                 {"objective_after", r.objective_after}};
+  std::vector<Axis> axes;
+  for (const auto& a : r.axes) axes.push_back(a.axis);
+  for (const auto& a : r.axes) {
+    nlohmann::json ja;
+    ja["gains_before"] = gains_json(a.before);
+    ja["gains_after"] = gains_json(a.after);
+    ja["model_feedforward"] = {{"K1_V_s2_per_mm", a.model_feedforward.K1_V_s2_per_mm},
+                               {"K2_V_s_per_mm", a.model_feedforward.K2_V_s_per_mm}};
+    ja["analysis_before"] = analysis_json(a.analysis_before);
+    ja["analysis_after"] = analysis_json(a.analysis_after);
+    ja["constraints_before"] = constraints_json(a.constraints_before);
+    ja["constraints_after"] = constraints_json(a.constraints_after);
+    ja["corners_before"] = axis_metrics_json(r.full_before, a.axis);
+    ja["corners_after"] = axis_metrics_json(r.full_after, a.axis);
+    j["axes"][std::string(axis_name(a.axis))] = ja;
+  }
+  j["scenario_before"] = metrics_json(r.full_before, axes);
+  j["scenario_after"] = metrics_json(r.full_after, axes);
+  j["tuning_window_before"] = metrics_json(r.window_before, axes);
+  j["tuning_window_after"] = metrics_json(r.window_after, axes);
+  const double b = r.full_before.max_contour_error_mm, a = r.full_after.max_contour_error_mm;
+  j["max_contour_error_corners_ratio"] = b > 0.0 ? a / b : 0.0;
+  if (check_scenario && check_metrics) {
+    j["generalisation"] = {{"scenario", check_scenario->name},
+                           {"before", metrics_json(check_metrics->first, axes)},
+                           {"after", metrics_json(check_metrics->second, axes)}};
+    const double cb = check_metrics->first.max_contour_error_mm, ca = check_metrics->second.max_contour_error_mm;
+    j["generalisation"]["max_contour_error_corners_ratio"] = cb > 0.0 ? ca / cb : 0.0;
+  }
+  return j;
+}
+
+std::vector<std::filesystem::path> plot_tune(const std::filesystem::path& out_dir, const io::Scenario& scenario,
+                                             const TuneResult& r) {
+  std::vector<std::filesystem::path> outputs;
+  // Bode data: one block per axis and gain set.
+  const auto bode_dat = out_dir / "bode.dat";
+  {
+    std::string text = "# f_Hz |L|_dB argL_deg |S|_dB |T|_dB |E/R|_dB\n";
+    for (const auto& a : r.axes) {
+      for (const auto* g : {&a.before, &a.after}) {
+        const DiscreteLoopModel m(linear_plant(r.machine_before.axes[index(a.axis)].drive), *g);
+        double unwrap = 0.0, prev = 0.0;
+        bool first = true;
+        for (const auto& p : frequency_response(m, 0.1, 600)) {
+          double ph = std::arg(p.L) * kDegPerRad;
+          if (!first) {
+            while (ph + unwrap - prev > 180.0) unwrap -= 360.0;
+            while (ph + unwrap - prev < -180.0) unwrap += 360.0;
+          }
+          first = false;
+          prev = ph + unwrap;
+          text += fmt::format("{:.6g} {:.6g} {:.6g} {:.6g} {:.6g} {:.6g}\n", p.f_Hz, 20.0 * std::log10(std::abs(p.L)),
+                              prev, 20.0 * std::log10(std::abs(p.S)), 20.0 * std::log10(std::abs(p.T)),
+                              20.0 * std::log10(std::max(std::abs(p.E_over_R), 1e-300)));
+        }
+        text += "\n\n";
+      }
+    }
+    io::write_file_atomic(bode_dat, text);
+  }
+  std::string script = "set terminal pngcairo size 1200,900\n";
+  const auto bode_png = out_dir / "bode.png";
+  auto tmp_png = [](std::filesystem::path p) {
+    p += ".tmp.png";
+    return gnuplot_quote(p);
+  };
+  script += fmt::format("set output {}\n", tmp_png(bode_png));
+  script += "set multiplot layout 2,1\nset logscale x\nset grid\nset xlabel 'f [Hz]'\nset ylabel 'dB'\n";
+  script += fmt::format("set title 'Open loop L (broken at u), {}: before (Table gains) and after tuning'\n",
+                        scenario.machine.name);
+  std::string mag = "plot ", ph = "plot ";
+  int idx = 0;
+  for (const auto& a : r.axes) {
+    for (const char* when : {"before", "after"}) {
+      const std::string label = fmt::format("{} {}", axis_name(a.axis), when);
+      if (idx > 0) {
+        mag += ", ";
+        ph += ", ";
+      }
+      mag += fmt::format("{} index {} using 1:2 with lines title '|L| {}', '' index {} using 1:4 with lines dt 2 "
+                         "title '|S| {}'",
+                         gnuplot_quote(bode_dat), idx, label, idx, label);
+      ph += fmt::format("{} index {} using 1:3 with lines title 'arg L {}'", gnuplot_quote(bode_dat), idx, label);
+      ++idx;
+    }
+  }
+  script += mag + "\nset ylabel 'deg'\nset title 'Phase of L'\n" + ph + "\nunset multiplot\n";
+  outputs.push_back(bode_png);
+
+  // Tracking error through the first tuning corner, before and after.
+  const PlannedScenario planned = plan_scenario(scenario);
+  if (!planned.tuning_corners.empty()) {
+    const auto& cw = planned.tuning_corners.front();
+    const double Ts = planned.trajectory.Ts_s();
+    const std::int64_t pad = static_cast<std::int64_t>(std::llround(0.02 / Ts));
+    const std::int64_t t0 = std::max<std::int64_t>(0, cw.k_begin - pad), t1 = cw.k_end + pad;
+    SimulationWindow w{std::max<std::int64_t>(0, t0 - static_cast<std::int64_t>(std::llround(0.1 / Ts))), std::min(planned.total_ticks, t1),
+                       {cw}};
+    CornerTrace before, after;
+    simulate_window(scenario, planned, r.machine_before, w, &before, t0, t1);
+    simulate_window(scenario, planned, r.machine_after, w, &after, t0, t1);
+    const auto dat = out_dir / "corner_error.dat";
+    std::string text = "# t_s";
+    for (const auto& a : r.axes) text += fmt::format(" {0}_err_before_um {0}_err_after_um", axis_name(a.axis));
+    text += " contour_before_um contour_after_um\n";
+    const std::size_t n = std::min(before.t_s.size(), after.t_s.size());
+    for (std::size_t k = 0; k < n; ++k) {
+      text += fmt::format("{:.6f}", before.t_s[k]);
+      for (const auto& a : r.axes)
+        text += fmt::format(" {:.6g} {:.6g}", 1e3 * before.e_mm[index(a.axis)][k], 1e3 * after.e_mm[index(a.axis)][k]);
+      text += fmt::format(" {:.6g} {:.6g}\n", 1e3 * before.contour_mm[k], 1e3 * after.contour_mm[k]);
+    }
+    io::write_file_atomic(dat, text);
+    const auto png = out_dir / "corner_error.png";
+    script += fmt::format("set output {}\nset multiplot layout 2,1\nunset logscale x\nset xlabel 't [s]'\n",
+                          tmp_png(png));
+    script += fmt::format("set ylabel 'um'\nset title 'Tracking error through the corner at line {}'\nplot ",
+                          cw.line_after);
+    int col = 2;
+    bool first = true;
+    for (const auto& a : r.axes) {
+      if (!first) script += ", ";
+      first = false;
+      script += fmt::format("{} using 1:{} with lines title '{} before', '' using 1:{} with lines title '{} after'",
+                            gnuplot_quote(dat), col, axis_name(a.axis), col + 1, axis_name(a.axis));
+      col += 2;
+    }
+    script += fmt::format("\nset title 'Contour error'\nplot {} using 1:{} with lines title 'before', '' using 1:{} "
+                          "with lines title 'after'\nunset multiplot\n",
+                          gnuplot_quote(dat), col, col + 1);
+    outputs.push_back(png);
+  }
+  script += "unset output\n";
+  run_gnuplot(out_dir, script, outputs);
+  return outputs;
+}
+
+}  // namespace twin::analysis

@@ -1,0 +1,164 @@
+#pragma once
+/// Gain tuning of the position loops (`twin tune`): Kp, Ki, Kd, K1, K2 per axis
+/// are searched to minimise the tracking and contour error through the corners
+/// of a scenario in the coupled nonlinear simulation (friction, saturation,
+/// encoder, cutting load in), subject to constraints read from the linear
+/// analysis (linear_analysis.hpp) and from the simulation:
+///   phase margin >= PM_min, gain margin >= GM_min, sensitivity peak <= Ms_max,
+///   feedback step overshoot <= overshoot_max (linear model),
+///   |u| <= u_fraction_max * u_max at every tick of the scenario (never at the clamp).
+///
+/// Two stages, both NLopt (derivative-free):
+///  A. per axis, COBYLA on the linear model only: the feedback gains (Kp, Ki, Kd)
+///     nearest (in log ratio) to the starting gains that meet the linear constraints;
+///  B. all tuned axes together, BOBYQA on the simulated corners, starting from the
+///     stage-A gains and the model-based feedforward K1 = J/(Ka Kt rg),
+///     K2 = B/(Ka Kt rg); a broken constraint is a penalty, and the result is the
+///     best point that met every constraint (never an infeasible one).
+/// The search simulates a window around the corners (the run starts on the path
+/// in steady motion, see docs/tuning.md); the result is judged on the full scenario.
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "controller/gcode.hpp"
+#include "controller/interpolator.hpp"
+#include "twin/analysis/linear_analysis.hpp"
+#include "twin/analysis/run_report.hpp"
+#include "twin/io/scenario_file.hpp"
+
+namespace twin::analysis {
+
+struct TuneConstraints {
+  double phase_margin_min_deg{40.0};
+  double gain_margin_min_dB{6.0};
+  double sensitivity_peak_max{2.0};    ///< |S| peak, absolute (2 = 6 dB)
+  double step_overshoot_max{0.35};     ///< feedback-only position step overshoot, fraction of the step
+  double u_fraction_max{0.95};         ///< peak |u| over the scenario / u_max
+};
+
+struct TuneOptions {
+  std::vector<Axis> axes;              ///< axes to tune (present axes of the machine)
+  TuneConstraints constraints;
+  int max_evaluations{160};            ///< simulations in stage B
+  double window_before_s{0.1};         ///< simulated before the first tuning corner
+  double window_after_s{0.1};          ///< simulated after the last tuning corner
+  double gain_range{4.0};              ///< Kp, Ki, Kd stay within [start / range, start * range]
+  double feedforward_range{2.0};       ///< K1, K2 stay within [0, range * model value]
+  double rms_weight{0.5};              ///< weight of the RMS tracking error against the max contour error
+  double max_tracking_weight{0.25};    ///< weight of the max tracking error
+};
+
+/// The values every constraint is judged on, for one axis and one set of gains.
+struct ConstraintValues {
+  double phase_margin_deg{0.0};
+  double gain_margin_dB{0.0};
+  double sensitivity_peak{0.0};
+  double step_overshoot{0.0};
+  double u_peak_V{0.0};                ///< from the simulation (0 before one ran)
+  double u_limit_V{0.0};               ///< u_fraction_max * u_max
+  bool stable{false};
+  bool linear_ok{false};
+  bool simulation_ok{false};
+  std::string violation;               ///< empty when all hold; otherwise the first broken one, with values
+};
+/// Linear constraint values for an axis (u_peak is left at 0).
+ConstraintValues linear_constraints(const LinearPlant& plant, const controller::PositionLoopParams& gains,
+                                    const TuneConstraints& c, const std::string& where);
+
+/// A tick range of the scenario and the corners judged inside it.
+struct SimulationWindow {
+  std::int64_t k_begin{0};
+  std::int64_t k_end{0};               ///< exclusive
+  std::vector<CornerWindow> corners;   ///< only ticks inside these count for the corner figures
+};
+
+/// Figures of one coupled run through the corners of a window.
+struct ScenarioMetrics {
+  bool completed{false};
+  std::string failure;                 ///< why the run stopped (runaway), when !completed
+  AxisArray<double> max_tracking_error_mm{};   ///< through the corners
+  AxisArray<double> rms_tracking_error_mm{};   ///< through the corners
+  AxisArray<double> u_peak_V{};                ///< over the whole window
+  AxisArray<std::int64_t> saturated_ticks{};
+  double max_contour_error_mm{0.0};            ///< through the corners
+  double rms_contour_error_mm{0.0};            ///< through the corners
+  double max_contour_error_run_mm{0.0};        ///< over the whole window
+  AxisArray<double> max_error_after_stop_mm{}; ///< |e| after the reference ends (overshoot / settling)
+  std::int64_t ticks{0};
+};
+
+/// Per-tick tracking and contour error around one corner (plots).
+struct CornerTrace {
+  std::vector<double> t_s;
+  AxisArray<std::vector<double>> e_mm;
+  std::vector<double> contour_mm;
+};
+
+/// A planned scenario: program, trajectory and its corners.
+struct PlannedScenario {
+  controller::Program program;
+  controller::Trajectory trajectory;
+  std::vector<CornerWindow> corners;         ///< all corners
+  std::vector<CornerWindow> tuning_corners;  ///< corners between two feed moves (all corners if none)
+  std::int64_t total_ticks{0};               ///< reference plus settling
+};
+PlannedScenario plan_scenario(const io::Scenario& scenario);
+
+/// The whole scenario, or a window from window_before_s ahead of the first tuning
+/// corner to window_after_s past the last one.
+SimulationWindow full_window(const PlannedScenario& planned);
+SimulationWindow corner_window(const PlannedScenario& planned, double before_s, double after_s);
+
+/// Runs the coupled simulation over the window with the machine `machine`. A window
+/// that starts after tick 0 starts in steady motion on the reference (drives at the
+/// reference speed, integrators holding the force of the viscous and Coulomb friction).
+/// A run that the co-simulation stops (runaway) returns completed = false with the reason.
+/// With `trace`, records ticks [trace_begin, trace_end).
+ScenarioMetrics simulate_window(const io::Scenario& scenario, const PlannedScenario& planned,
+                                const sim::MachineDefinition& machine, const SimulationWindow& window,
+                                CornerTrace* trace = nullptr, std::int64_t trace_begin = 0,
+                                std::int64_t trace_end = 0);
+
+struct AxisTuneResult {
+  Axis axis{Axis::kX};
+  controller::PositionLoopParams before, after;
+  FeedforwardGains model_feedforward;
+  LoopAnalysis analysis_before, analysis_after;
+  ConstraintValues constraints_before, constraints_after;  ///< u_peak from the full scenario
+};
+
+struct TuneResult {
+  bool feasible{false};
+  std::string message;                       ///< one line: what was found, or why no gains qualify
+  sim::MachineDefinition machine_before, machine_after;
+  std::vector<AxisTuneResult> axes;
+  ScenarioMetrics window_before, window_after;   ///< on the tuning window
+  ScenarioMetrics full_before, full_after;       ///< on the full scenario
+  int evaluations{0};                            ///< coupled simulations run in stage B
+  double objective_before{0.0}, objective_after{0.0};
+};
+
+/// Tunes the given axes of the scenario's machine. Does not throw for gains that
+/// cannot meet the constraints: the result says so (feasible = false, message).
+/// Throws ConfigError for an axis that is absent or options out of range.
+TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options);
+
+/// report.json content: per axis gains, margins, bandwidth and constraint values
+/// before and after, errors through the corners before and after, and, when given,
+/// the same figures on a second scenario not used for tuning.
+nlohmann::json tune_report(const io::Scenario& scenario, const TuneOptions& options, const TuneResult& result,
+                           const std::optional<io::Scenario>& check_scenario,
+                           const std::optional<std::pair<ScenarioMetrics, ScenarioMetrics>>& check_metrics);
+
+/// Writes the Bode plot (bode.png: |L|, arg L, |S|, |T| before and after per axis) and
+/// the tracking error through the first tuning corner before and after
+/// (corner_error.png). Returns the files written.
+std::vector<std::filesystem::path> plot_tune(const std::filesystem::path& out_dir, const io::Scenario& scenario,
+                                             const TuneResult& result);
+
+}  // namespace twin::analysis

@@ -1,0 +1,45 @@
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "twin/analysis/replay.hpp"
+#include "twin/cli/commands.hpp"
+#include "twin/cli/common.hpp"
+#include "twin/io/atomic_file.hpp"
+
+namespace twin::cli {
+
+void register_replay(CLI::App& app) {
+  struct Options {
+    std::string run;
+    std::string out;
+    std::string machine;
+    std::vector<std::string> sets;
+  };
+  auto opt = std::make_shared<Options>();
+  CLI::App* cmd = app.add_subcommand(
+      "replay", "Replay a measured run folder (trace.csv + meta.json) from its <a>_ref_mm columns; writes OUT/trace.csv");
+  cmd->add_option("run", opt->run, "measured run folder")->required();
+  cmd->add_option("-o,--out", opt->out, "output folder (created if missing)")->required();
+  cmd->add_option("--machine", opt->machine, "machine definition (name or YAML file) replacing the run's meta.machine");
+  cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.J=0.008")->take_all();
+  cmd->callback([opt]() {
+    const analysis::MeasuredRun run = analysis::load_run(opt->run);
+    std::vector<std::string> notes;
+    sim::MachineDefinition machine = analysis::machine_for_run(run, opt->machine, &notes);
+    apply_sets(machine, opt->sets);
+    analysis::ReplayResult r = analysis::replay_run(run, machine);
+    io::ensure_directory(opt->out);
+    const auto path = std::filesystem::path(opt->out) / "trace.csv";
+    analysis::write_replay_trace(path, r);
+    notes.insert(notes.end(), r.notes.begin(), r.notes.end());
+    for (const auto& n : notes) std::fprintf(stderr, "twin replay: note: %s\n", n.c_str());
+    std::printf("replayed %zu samples of %s on machine %s; wrote %s\n", r.t_s.size(), opt->run.c_str(),
+                machine.name.c_str(), path.c_str());
+  });
+}
+
+}  // namespace twin::cli

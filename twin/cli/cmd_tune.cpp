@@ -1,0 +1,162 @@
+#include <cstdio>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+
+#include "twin/analysis/linear_analysis.hpp"
+#include "twin/analysis/tune.hpp"
+#include "twin/cli/commands.hpp"
+#include "twin/cli/common.hpp"
+#include "twin/core/error.hpp"
+#include "twin/io/atomic_file.hpp"
+#include "twin/io/machine_file.hpp"
+#include "twin/io/scenario_file.hpp"
+
+namespace twin::cli {
+
+namespace {
+
+std::vector<Axis> parse_axes(const std::string& text, const sim::MachineDefinition& machine) {
+  if (text == "all") return machine.present_axes();
+  std::vector<Axis> axes;
+  std::size_t pos = 0;
+  while (pos <= text.size()) {
+    const std::size_t comma = text.find(',', pos);
+    const std::string item = text.substr(pos, comma == std::string::npos ? std::string::npos : comma - pos);
+    const auto a = parse_axis(item);
+    if (!a) throw ConfigError(fmt::format("--axis '{}': '{}' is not x, y, z or all", text, item));
+    if (!machine.axes[index(*a)].present)
+      throw ConfigError(fmt::format("--axis {}: machine {} has no axis {}", text, machine.name, item));
+    axes.push_back(*a);
+    if (comma == std::string::npos) break;
+    pos = comma + 1;
+  }
+  return axes;
+}
+
+void print_line(const std::string& s) { std::printf("%s\n", s.c_str()); }
+
+}  // namespace
+
+void register_tune(CLI::App& app) {
+  struct Options {
+    std::string scenario;
+    std::string out;
+    std::string machine;
+    std::string axes{"x,y"};
+    std::string check{"contour_square"};
+    std::vector<std::string> sets;
+    bool analyse{false};
+    bool no_plots{false};
+    analysis::TuneOptions tune;
+  };
+  auto opt = std::make_shared<Options>();
+  CLI::App* cmd = app.add_subcommand(
+      "tune", "Linear analysis of the position loops and tuning of Kp, Ki, Kd, K1, K2 on a scenario's corners "
+              "(default: the FADAL 2216 pocket corner); writes OUT/machine.yaml, OUT/report.json and plots");
+  cmd->add_option("scenario", opt->scenario, "scenario.yaml, its folder, or a shipped scenario name");
+  cmd->add_option("-o,--out", opt->out, "output folder (created if missing); required unless --analyse");
+  cmd->add_option("--axis", opt->axes, "axes to tune: x, y, z, all, or a list like x,y (default x,y)");
+  cmd->add_flag("--analyse,--analyze", opt->analyse,
+                "print poles, margins, sensitivity peak, bandwidth and step figures for the current gains and stop");
+  cmd->add_option("--machine", opt->machine, "machine definition (name or YAML file) replacing the scenario's");
+  cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.Kp=600")->take_all();
+  cmd->add_option("--check", opt->check,
+                  "second scenario, not used for tuning, on which before/after are reported ('none' to skip)");
+  cmd->add_option("--max-evals", opt->tune.max_evaluations, "coupled simulations in the search (default 160)");
+  cmd->add_option("--pm", opt->tune.constraints.phase_margin_min_deg, "minimum phase margin, deg (default 40)");
+  cmd->add_option("--gm", opt->tune.constraints.gain_margin_min_dB, "minimum gain margin, dB (default 6)");
+  cmd->add_option("--ms", opt->tune.constraints.sensitivity_peak_max, "maximum sensitivity peak |S| (default 2)");
+  cmd->add_option("--overshoot", opt->tune.constraints.step_overshoot_max,
+                  "maximum feedback step overshoot, fraction (default 0.35)");
+  cmd->add_option("--u-fraction", opt->tune.constraints.u_fraction_max,
+                  "peak |u| allowed in the scenario as a fraction of u_max (default 0.95)");
+  cmd->add_flag("--no-plots", opt->no_plots, "do not draw the PNG plots");
+  cmd->callback([opt]() {
+    const auto path = opt->scenario.empty() ? io::default_scenario_path() : io::resolve_scenario_path(opt->scenario);
+    io::Scenario scenario = io::load_scenario(path, opt->machine);
+    apply_sets(scenario.machine, opt->sets);
+    const std::vector<Axis> axes = parse_axes(opt->axes, scenario.machine);
+    if (opt->analyse) {
+      for (Axis a : axes) {
+        const auto& def = scenario.machine.axes[index(a)];
+        const analysis::LinearPlant plant = analysis::linear_plant(def.drive);
+        const analysis::DiscreteLoopModel model(plant, def.loop, fmt::format("axis {}", axis_name(a)));
+        const analysis::FeedforwardGains ff = analysis::model_feedforward(plant);
+        std::printf("%s", analysis::format_analysis(fmt::format("axis {} of {} (Ts {:g} s):", axis_name(a),
+                                                                scenario.machine.name, def.loop.Ts_s),
+                                                    def.loop, analysis::analyse_loop(model))
+                              .c_str());
+        print_line(fmt::format("  model feedforward: K1 = J/(Ka Kt rg) = {:.6g} V s^2/mm, K2 = B/(Ka Kt rg) = {:.6g} "
+                               "V s/mm",
+                               ff.K1_V_s2_per_mm, ff.K2_V_s_per_mm));
+      }
+      return;
+    }
+    if (opt->out.empty()) throw ConfigError("tune: -o OUT is required (or use --analyse)");
+    opt->tune.axes = axes;
+    const std::filesystem::path out(opt->out);
+    io::ensure_directory(out);
+    print_line(fmt::format("tuning axes {} on {} ({} simulations at most) ...", opt->axes, scenario.name,
+                           opt->tune.max_evaluations));
+    const analysis::TuneResult result = analysis::tune_gains(scenario, opt->tune);
+
+    std::optional<io::Scenario> check;
+    std::optional<std::pair<analysis::ScenarioMetrics, analysis::ScenarioMetrics>> check_metrics;
+    if (opt->check != "none" && !opt->check.empty() && !result.axes.empty()) {
+      io::Scenario cs = io::load_scenario(io::resolve_scenario_path(opt->check), opt->machine);
+      apply_sets(cs.machine, opt->sets);
+      const analysis::PlannedScenario planned = analysis::plan_scenario(cs);
+      sim::MachineDefinition before = cs.machine, after = cs.machine;
+      for (const auto& a : result.axes) {
+        before.axes[index(a.axis)].loop = a.before;
+        after.axes[index(a.axis)].loop = a.after;
+      }
+      const auto w = analysis::full_window(planned);
+      check_metrics = std::make_pair(analysis::simulate_window(cs, planned, before, w),
+                                     analysis::simulate_window(cs, planned, after, w));
+      check = std::move(cs);
+    }
+    const nlohmann::json report = analysis::tune_report(scenario, opt->tune, result, check, check_metrics);
+    io::write_file_atomic(out / "report.json", report.dump(2) + "\n");
+    std::vector<std::filesystem::path> written{out / "report.json"};
+    if (result.feasible) {
+      const std::string header = fmt::format(
+          "{} with position-loop gains tuned by `twin tune` on scenario {} (axes {}); see report.json",
+          scenario.machine.name, scenario.name, opt->axes);
+      io::write_file_atomic(out / "machine.yaml", io::machine_to_yaml(result.machine_after, header));
+      written.push_back(out / "machine.yaml");
+    }
+    if (!opt->no_plots && !result.axes.empty()) {
+      for (const auto& p : analysis::plot_tune(out, scenario, result)) written.push_back(p);
+    }
+    for (const auto& a : result.axes) {
+      print_line(fmt::format("axis {}: Kp {:.4g} -> {:.4g}, Ki {:.4g} -> {:.4g}, Kd {:.4g} -> {:.4g}, K1 {:.4g} -> "
+                             "{:.4g}, K2 {:.4g} -> {:.4g}; PM {:.1f} -> {:.1f} deg, GM {:.1f} -> {:.1f} dB, Ms {:.2f} "
+                             "-> {:.2f}, bandwidth {:.1f} -> {:.1f} Hz",
+                             axis_name(a.axis), a.before.Kp_V_per_mm, a.after.Kp_V_per_mm, a.before.Ki_V_per_s_mm,
+                             a.after.Ki_V_per_s_mm, a.before.Kd_V_s_per_mm, a.after.Kd_V_s_per_mm,
+                             a.before.K1_V_s2_per_mm, a.after.K1_V_s2_per_mm, a.before.K2_V_s_per_mm,
+                             a.after.K2_V_s_per_mm, a.analysis_before.phase_margin_deg,
+                             a.analysis_after.phase_margin_deg, a.analysis_before.gain_margin_dB,
+                             a.analysis_after.gain_margin_dB, a.analysis_before.sensitivity_peak,
+                             a.analysis_after.sensitivity_peak, a.analysis_before.bandwidth_Hz,
+                             a.analysis_after.bandwidth_Hz));
+    }
+    if (check_metrics)
+      print_line(fmt::format("check scenario {}: max contour error through the corners {:.3f} um -> {:.3f} um",
+                             check->name, 1e3 * check_metrics->first.max_contour_error_mm,
+                             1e3 * check_metrics->second.max_contour_error_mm));
+    std::string files;
+    for (const auto& p : written) files += (files.empty() ? "" : ", ") + p.string();
+    print_line("wrote " + files);
+    if (!result.feasible) throw ModelError(fmt::format("tune: {}", result.message));
+    print_line(result.message);
+  });
+}
+
+}  // namespace twin::cli

@@ -1,0 +1,151 @@
+#include "twin/io/machine_file.hpp"
+
+#include <cmath>
+#include <cstdlib>
+#include <sstream>
+
+#include <fmt/format.h>
+#include <yaml-cpp/yaml.h>
+
+#include "twin/core/error.hpp"
+#include "twin/io/atomic_file.hpp"
+#include "twin/io/yaml_util.hpp"
+
+#ifndef TWIN_SCENARIOS_DIR
+#error "TWIN_SCENARIOS_DIR must be defined by the build"
+#endif
+
+namespace twin::io {
+
+std::filesystem::path scenarios_dir() {
+  if (const char* env = std::getenv("TWIN_SCENARIOS_DIR"); env != nullptr && *env != '\0') return env;
+  return TWIN_SCENARIOS_DIR;
+}
+
+std::filesystem::path resolve_machine_path(const std::string& name_or_path, const std::filesystem::path& relative_to) {
+  std::filesystem::path p(name_or_path);
+  if (p.has_extension() || name_or_path.find('/') != std::string::npos) {
+    if (p.is_relative() && !relative_to.empty() && !std::filesystem::exists(p)) p = relative_to / p;
+    return p;
+  }
+  return scenarios_dir() / "machines" / (name_or_path + ".yaml");
+}
+
+namespace {
+
+void parse_effects(const YAML::Node& node, sim::AxisDefinition& axis, const std::string& where) {
+  if (!node.IsMap()) throw ConfigError(fmt::format("{}: effects must be a map of effect names", where));
+  for (const auto& kv : node) {
+    const std::string effect = kv.first.as<std::string>();
+    const std::string w = where + ".effects." + effect;
+    if (!kv.second.IsMap()) throw ConfigError(fmt::format("{}: must be a map of parameters", w));
+    bool known_effect = false;
+    for (const auto& spec : sim::axis_param_specs())
+      if (spec.name.starts_with(effect + ".")) known_effect = true;
+    if (!known_effect) throw ConfigError(fmt::format("{}: unknown effect '{}'", where, effect));
+    bool any = false;
+    for (const auto& p : kv.second) {
+      const std::string key = p.first.as<std::string>();
+      if (key == "enabled") {
+        const bool on = yaml_bool(p.second, w + ".enabled");
+        for (const auto& spec : sim::axis_param_specs())
+          if (spec.name.starts_with(effect + ".") && spec.enables) *spec.enables(axis) = on;
+        any = true;
+        continue;
+      }
+      const auto* spec = sim::find_axis_param(effect + "." + key);
+      if (spec == nullptr) throw ConfigError(fmt::format("{}: unknown key '{}'", w, key));
+      sim::set_axis_param(axis, *spec, yaml_number(p.second, w + "." + key));
+      any = true;
+    }
+    if (!any) throw ConfigError(fmt::format("{}: no parameters", w));
+  }
+}
+
+}  // namespace
+
+sim::MachineDefinition load_machine(const std::filesystem::path& path) {
+  const std::string where = path.string();
+  YAML::Node root = load_yaml_file(path);
+  if (!root.IsMap()) throw ConfigError(fmt::format("{}: a machine definition must be a YAML map", where));
+  sim::MachineDefinition m;
+  m.source = where;
+  m.name = path.stem().string();
+  bool have_axes = false;
+  for (const auto& kv : root) {
+    const std::string key = kv.first.as<std::string>();
+    if (key == "name") {
+      m.name = yaml_string(kv.second, where + ": name");
+    } else if (key == "description") {
+      static_cast<void>(yaml_string(kv.second, where + ": description"));
+    } else if (key == "axes") {
+      have_axes = true;
+      if (!kv.second.IsMap()) throw ConfigError(fmt::format("{}: axes must be a map x/y/z", where));
+      for (const auto& ax : kv.second) {
+        const std::string an = ax.first.as<std::string>();
+        const auto axis = parse_axis(an);
+        if (!axis) throw ConfigError(fmt::format("{}: axes: unknown axis '{}'", where, an));
+        sim::AxisDefinition& def = m.axes[index(*axis)];
+        def.present = true;
+        if (!ax.second.IsMap()) throw ConfigError(fmt::format("{}: axes.{} must be a map", where, an));
+        for (const auto& p : ax.second) {
+          const std::string pk = p.first.as<std::string>();
+          const std::string w = fmt::format("{}: axes.{}", where, an);
+          if (pk == "effects") {
+            parse_effects(p.second, def, w);
+            continue;
+          }
+          const auto* spec = sim::find_axis_param(pk);
+          if (spec == nullptr || spec->enables != nullptr)
+            throw ConfigError(fmt::format("{}: unknown key '{}'", w, pk));
+          sim::set_axis_param(def, *spec, yaml_number(p.second, w + "." + pk));
+        }
+      }
+    } else if (const auto* ms = sim::find_machine_param(key)) {
+      ms->ref(m) = yaml_number(kv.second, where + ": " + key);
+    } else {
+      throw ConfigError(fmt::format("{}: unknown key '{}'", where, key));
+    }
+  }
+  if (!have_axes) throw ConfigError(fmt::format("{}: missing key 'axes'", where));
+  for (auto& ax : m.axes) ax.loop.Ts_s = m.Ts_s;
+  m.validate();
+  return m;
+}
+
+std::string machine_to_yaml(const sim::MachineDefinition& m, const std::string& header_comment) {
+  std::ostringstream o;
+  o.precision(12);
+  std::istringstream hc(header_comment);
+  for (std::string line; std::getline(hc, line);) o << "# " << line << "\n";
+  o << "name: " << m.name << "\n";
+  for (const auto& s : sim::machine_param_specs())
+    o << s.name << ": " << s.ref(const_cast<sim::MachineDefinition&>(m)) << "    # " << s.unit << ", " << s.doc << "\n";
+  o << "axes:\n";
+  for (Axis a : m.present_axes()) {
+    const sim::AxisDefinition& ax = m.axes[index(a)];
+    o << "  " << axis_name(a) << ":\n";
+    std::ostringstream eff;
+    eff.precision(12);
+    std::string current_effect;
+    for (const auto& s : sim::axis_param_specs()) {
+      const double v = sim::get_axis_param(ax, s);
+      if (s.enables == nullptr) {
+        o << "    " << s.name << ": " << v << "    # " << s.unit << ", " << s.doc << "\n";
+        continue;
+      }
+      if (!*s.enables(const_cast<sim::AxisDefinition&>(ax))) continue;
+      const auto dot = s.name.find('.');
+      const std::string effect(s.name.substr(0, dot));
+      if (effect != current_effect) {
+        eff << "      " << effect << ":\n";
+        current_effect = effect;
+      }
+      eff << "        " << s.name.substr(dot + 1) << ": " << v << "    # " << s.unit << ", " << s.doc << "\n";
+    }
+    if (!eff.str().empty()) o << "    effects:\n" << eff.str();
+  }
+  return o.str();
+}
+
+}  // namespace twin::io

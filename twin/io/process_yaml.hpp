@@ -1,0 +1,26 @@
+#pragma once
+/// Reads the `process:` section of a scenario and the tool and material
+/// files it names (YAML, see docs/process.md for the schema). Every problem is
+/// a ConfigError "file:line: process.key ...". bind_process (declared in
+/// process_binding.hpp) is implemented here on top of these.
+#include <filesystem>
+#include <string>
+
+#include <yaml-cpp/yaml.h>
+
+#include "process/milling_process.hpp"
+
+namespace twin::io {
+
+/// A tool mapping (keys of process::ToolGeometry, `type` flat|bull_nose|ball).
+process::ToolGeometry parse_tool(const YAML::Node& node, const std::string& where);
+process::ToolGeometry load_tool_file(const std::filesystem::path& path);
+/// A material mapping with `sets:`; picks the set measured at (lead, tilt).
+process::CuttingCoefficients parse_material(const YAML::Node& node, const std::string& where, double lead_deg,
+                                            double tilt_deg);
+process::CuttingCoefficients load_material_file(const std::filesystem::path& path, double lead_deg, double tilt_deg);
+/// The whole `process:` section; relative file names are taken from `dir`.
+process::ProcessSetup parse_process_setup(const YAML::Node& node, const std::string& where,
+                                          const std::filesystem::path& dir);
+
+}  // namespace twin::io

@@ -1,0 +1,205 @@
+#include "twin/sim/cosimulation.hpp"
+
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "twin/core/check.hpp"
+#include "twin/core/error.hpp"
+#include "twin/core/units.hpp"
+
+namespace twin::sim {
+namespace {
+
+std::vector<feeddrive::DriveParams> drive_params_of(const MachineDefinition& m, const std::vector<Axis>& axes) {
+  std::vector<feeddrive::DriveParams> out;
+  for (Axis a : axes) out.push_back(m.axes[index(a)].drive);
+  return out;
+}
+
+}  // namespace
+
+CoSimulation::CoSimulation(MachineDefinition machine, std::shared_ptr<const ReferenceSource> reference,
+                           std::unique_ptr<process::ProcessModel> process, const AxisArray<double>& x0_mm,
+                           feeddrive::IntegratorOptions options)
+    : machine_(std::move(machine)),
+      axes_((machine_.validate(), machine_.present_axes())),
+      reference_(std::move(reference)),
+      process_(std::move(process)),
+      drives_(drive_params_of(machine_, axes_), machine_.Ts_s, options),
+      encoder_{machine_.encoder_resolution_mm} {
+  TWIN_DEMAND(reference_ != nullptr);
+  std::vector<double> x0;
+  for (Axis a : axes_) {
+    x0.push_back(x0_mm[index(a)]);
+    controller::PositionLoopParams lp = machine_.axes[index(a)].loop;
+    lp.Ts_s = machine_.Ts_s;
+    loops_.emplace_back(lp);
+  }
+  drives_.reset(x0);
+  inputs_.assign(axes_.size(), feeddrive::DriveInput{});
+  clamp_watch_.assign(axes_.size(), ClampWatch{});
+}
+
+CoSimulation::~CoSimulation() = default;
+CoSimulation::CoSimulation(CoSimulation&&) noexcept = default;
+CoSimulation& CoSimulation::operator=(CoSimulation&&) noexcept = default;
+
+void CoSimulation::set_reference(std::shared_ptr<const ReferenceSource> reference) {
+  TWIN_DEMAND(reference != nullptr);
+  reference_ = std::move(reference);
+}
+
+const Snapshot& CoSimulation::step() {
+  const double Ts = machine_.Ts_s;
+  const double t = time_s();
+  Snapshot row;
+  row.k = k_;
+  row.t_s = t;
+
+  // 1. Drives at t_k.
+  std::array<double, 3> p_mm{};
+  std::array<double, 3> v_mm_per_s{};
+  for (std::size_t i = 0; i < axes_.size(); ++i) {
+    const std::size_t a = index(axes_[i]);
+    const feeddrive::DriveOutput out = drives_.output(i);
+    p_mm[a] = out.x_mm;
+    v_mm_per_s[a] = out.v_mm_per_s;
+    row.axes[a].x_true_mm = out.x_mm;
+    row.axes[a].x_mm = encoder_.measure_mm(out.x_meas_mm);
+    row.axes[a].v_mm_per_s = out.v_mm_per_s;
+  }
+
+  // 2. Reference.
+  const controller::ReferenceSample ref = reference_->sample(k_);
+  row.block = ref.block;
+  row.reference_done = ref.done;
+  row.feed_programmed_mm_per_min = ref.feed_programmed_mm_per_s * kSPerMin;
+  row.feed_ref_mm_per_min = ref.path_speed_mm_per_s * kSPerMin;
+  row.spindle_rpm = spindle_override_rpm_ ? *spindle_override_rpm_ : ref.spindle_rpm;
+
+  // 3. Process over [t_k, t_k+1).
+  std::array<double, 3> F_avg_N = F_ext_N_;
+  row.F_N = F_ext_N_;
+  if (process_) {
+    process::ProcessInput pin;
+    pin.k = k_;
+    pin.t_s = t;
+    pin.Ts_s = Ts;
+    pin.p_mm = p_mm;
+    pin.v_mm_per_s = v_mm_per_s;
+    pin.spindle_rpm = row.spindle_rpm;
+    const process::ProcessOutput pout = process_->step(pin);
+    for (std::size_t c = 0; c < 3; ++c) {
+      F_avg_N[c] += pout.F_avg_N[c];
+      row.F_N[c] += pout.F_N[c];
+    }
+    row.engagement_deg = pout.engagement_deg;
+    row.chip_mm = pout.chip_mm;
+    row.spindle_torque_Nm = pout.spindle_torque_Nm;
+    row.cutting_power_W = pout.power_W;
+  }
+  row.F_avg_N = F_avg_N;
+
+  // 4. Position loops; 5. drive inputs.
+  for (std::size_t i = 0; i < axes_.size(); ++i) {
+    const std::size_t a = index(axes_[i]);
+    AxisSnapshot& s = row.axes[a];
+    s.x_ref_mm = ref.x_mm[a];
+    const controller::PositionLoopOutput lo = loops_[i].step(k_, s.x_ref_mm, s.x_mm);
+    s.e_mm = lo.e_mm;
+    s.u_V = lo.u_V;
+    s.saturated = lo.saturated;
+    s.Td_Nm = F_avg_N[a] * drives_.params(i).rg_mm_per_rad * kMPerMm;
+    inputs_[i] = feeddrive::DriveInput{lo.u_V, s.Td_Nm};
+  }
+  drives_.advance(t, t0_s_ + static_cast<double>(k_ + 1) * Ts, inputs_);
+
+  // 6. Row k: currents and torques held over the tick; health checks.
+  double v_real2 = 0.0;
+  std::array<double, 3> dev{};
+  for (std::size_t i = 0; i < axes_.size(); ++i) {
+    const std::size_t a = index(axes_[i]);
+    AxisSnapshot& s = row.axes[a];
+    const feeddrive::DriveOutput out = drives_.output(i);
+    s.i_A = out.i_A;
+    s.Tm_Nm = out.Tm_Nm;
+    const double limit = machine_.axes[a].following_error_limit_mm;
+    if (!std::isfinite(out.x_mm) || !std::isfinite(out.w_rad_per_s) || !std::isfinite(s.u_V))
+      throw ModelError(fmt::format("axis {} became non-finite at t = {:.4f} s (tick {}): check the gains and the model",
+                                   axis_name(axes_[i]), t, k_));
+    if (std::abs(s.e_mm) > limit)
+      throw ModelError(fmt::format(
+          "axis {} unstable or overloaded at t = {:.4f} s (tick {}): tracking error {:.4g} mm exceeds the following-error "
+          "limit {:g} mm (u = {:.3g} V{}); check the gains",
+          axis_name(axes_[i]), t, k_, s.e_mm, limit, s.u_V, s.saturated ? ", at the clamp" : ""));
+    // An unstable loop whose growth the clamp bounds rings at +-u_max with
+    // the sign of u flipping: judged over blocks of 20 ms, a block is bad when
+    // u sits at the clamp for half of it and changes sign at least 4 times;
+    // three bad blocks in a row (60 ms) are not a transient.
+    ClampWatch& w = clamp_watch_[i];
+    const double u_prev = last_.k == k_ - 1 ? last_.axes[a].u_V : 0.0;
+    w.saturated_ticks += s.saturated ? 1 : 0;
+    w.flips += (s.saturated && u_prev * s.u_V < 0.0) ? 1 : 0;
+    if (++w.ticks_in_block * Ts >= 0.02 - 1e-12) {
+      const bool bad = 2 * w.saturated_ticks >= w.ticks_in_block && w.flips >= 4;
+      w.bad_blocks = bad ? w.bad_blocks + 1 : 0;
+      w.ticks_in_block = w.saturated_ticks = w.flips = 0;
+      if (w.bad_blocks >= 3)
+        throw ModelError(fmt::format(
+            "axis {} unstable at t = {:.4f} s (tick {}): u oscillates between the +-{:g} V clamps for 60 ms "
+            "(tracking error {:.3g} mm); check the gains",
+            axis_name(axes_[i]), t, k_, machine_.axes[a].loop.u_max_V, s.e_mm));
+    }
+    v_real2 += s.v_mm_per_s * s.v_mm_per_s;
+    dev[a] = s.x_true_mm - s.x_ref_mm;
+  }
+  row.feed_real_mm_per_min = std::sqrt(v_real2) * kSPerMin;
+  // Contour error: the part of the deviation normal to the reference direction.
+  const double vr = ref.path_speed_mm_per_s;
+  double d2 = dev[0] * dev[0] + dev[1] * dev[1] + dev[2] * dev[2];
+  if (vr > 1e-6) {
+    double along = 0.0;
+    for (std::size_t c = 0; c < 3; ++c) along += dev[c] * ref.v_mm_per_s[c] / vr;
+    d2 = std::max(0.0, d2 - along * along);
+  }
+  row.contour_error_mm = std::sqrt(d2);
+
+  last_ = row;
+  ++k_;
+  return last_;
+}
+
+const feeddrive::DriveState& CoSimulation::drive_state(Axis a) const {
+  for (std::size_t i = 0; i < axes_.size(); ++i)
+    if (axes_[i] == a) return drives_.state(i);
+  throw ConfigError(fmt::format("axis {} is not present in machine {}", axis_name(a), machine_.name));
+}
+const feeddrive::DriveParams& CoSimulation::drive_params(Axis a) const {
+  for (std::size_t i = 0; i < axes_.size(); ++i)
+    if (axes_[i] == a) return drives_.params(i);
+  throw ConfigError(fmt::format("axis {} is not present in machine {}", axis_name(a), machine_.name));
+}
+
+CoSimState CoSimulation::get_state() const {
+  CoSimState s;
+  s.k = k_;
+  s.drives = drives_.states();
+  for (const auto& l : loops_) s.loops.push_back(l.state());
+  if (process_) s.process = std::shared_ptr<const process::ProcessModel>(process_->clone());
+  s.last = last_;
+  s.clamp_watch = clamp_watch_;
+  return s;
+}
+
+void CoSimulation::set_state(const CoSimState& s) {
+  TWIN_DEMAND(s.drives.size() == axes_.size() && s.loops.size() == loops_.size());
+  k_ = s.k;
+  drives_.set_states(s.drives);
+  for (std::size_t i = 0; i < loops_.size(); ++i) loops_[i].set_state(s.loops[i]);
+  if (s.process) process_ = s.process->clone();
+  last_ = s.last;
+  clamp_watch_ = s.clamp_watch.size() == axes_.size() ? s.clamp_watch : std::vector<ClampWatch>(axes_.size());
+}
+
+}  // namespace twin::sim

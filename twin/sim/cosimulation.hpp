@@ -1,0 +1,129 @@
+#pragma once
+/// The co-simulation loop: the single owner of time (t = t0 + k Ts). Per tick
+/// k, in this fixed order (docs/architecture.md):
+///   1. read the drives at t_k: true position, sensor position, quantised by the encoder;
+///   2. sample the reference r_k;
+///   3. process: force over [t_k, t_k+1) from the tool's real pose and velocity at t_k;
+///   4. position loops: u_k from r_k and the measured position;
+///   5. drives: integrate [t_k, t_k+1) with u_k and Td_k = F_workpiece * rg / 1000 held;
+///   6. record row k (currents and torques are those held over the tick); k <- k + 1.
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "controller/encoder.hpp"
+#include "controller/position_loop.hpp"
+#include "feeddrive/drive_bank.hpp"
+#include "process/process_model.hpp"
+#include "twin/sim/machine.hpp"
+#include "twin/sim/reference.hpp"
+
+namespace twin::sim {
+
+/// Everything the twin reports at tick k: one row of trace.csv.
+struct AxisSnapshot {
+  double x_ref_mm{0.0};
+  double x_mm{0.0};          ///< measured (encoder) position fed back
+  double x_true_mm{0.0};     ///< true tool position on this axis
+  double e_mm{0.0};          ///< tracking error x_ref - x_mm (as the loop sees it)
+  double u_V{0.0};
+  double i_A{0.0};
+  double Tm_Nm{0.0};
+  double Td_Nm{0.0};         ///< cutting load torque held over the tick
+  double v_mm_per_s{0.0};    ///< true axis speed
+  bool saturated{false};
+};
+struct Snapshot {
+  std::int64_t k{0};
+  double t_s{0.0};
+  AxisArray<AxisSnapshot> axes{};
+  std::array<double, 3> F_N{};       ///< force on the workpiece, instantaneous at t_k
+  std::array<double, 3> F_avg_N{};   ///< tick average (what the drives see)
+  double spindle_rpm{0.0};
+  double engagement_deg{0.0};
+  double chip_mm{0.0};
+  double spindle_torque_Nm{0.0};
+  double cutting_power_W{0.0};
+  double feed_programmed_mm_per_min{0.0};
+  double feed_ref_mm_per_min{0.0};   ///< speed of the reference along the path
+  double feed_real_mm_per_min{0.0};  ///< speed of the real tool
+  double contour_error_mm{0.0};      ///< distance of the real tool from the reference path (normal component)
+  int block{-1};
+  bool reference_done{false};
+};
+
+/// Per axis, the watch for a limit cycle bounded by the command clamp.
+struct ClampWatch {
+  int ticks_in_block{0};
+  int saturated_ticks{0};
+  int flips{0};
+  int bad_blocks{0};
+};
+
+/// The whole mutable state, for FMU get/set state and retries.
+struct CoSimState {
+  std::int64_t k{0};
+  std::vector<feeddrive::DriveState> drives;
+  std::vector<controller::PositionLoopState> loops;
+  std::shared_ptr<const process::ProcessModel> process;
+  Snapshot last;
+  std::vector<ClampWatch> clamp_watch;
+};
+
+class CoSimulation {
+ public:
+  /// `process` may be null (an air cut). `x0_mm` is where every axis starts, at rest.
+  CoSimulation(MachineDefinition machine, std::shared_ptr<const ReferenceSource> reference,
+               std::unique_ptr<process::ProcessModel> process, const AxisArray<double>& x0_mm,
+               feeddrive::IntegratorOptions options = {});
+  ~CoSimulation();
+  CoSimulation(CoSimulation&&) noexcept;
+  CoSimulation& operator=(CoSimulation&&) noexcept;
+
+  std::int64_t tick() const noexcept { return k_; }
+  double time_s() const noexcept { return t0_s_ + static_cast<double>(k_) * machine_.Ts_s; }
+  double Ts_s() const noexcept { return machine_.Ts_s; }
+  const MachineDefinition& machine() const noexcept { return machine_; }
+  const std::vector<Axis>& axes() const noexcept { return axes_; }
+
+  /// Runs tick k (steps 1-6 above) and returns its row; afterwards tick() == k + 1.
+  /// Throws ModelError naming axis, time and error if an axis runs away
+  /// (following error beyond its limit, non-finite state).
+  const Snapshot& step();
+  /// The last row produced by step() (k = tick() - 1).
+  const Snapshot& last() const noexcept { return last_; }
+
+  /// Inputs a system-level master may set (FMU): a force on the workpiece
+  /// added to the cutting force, and a spindle speed replacing the program's.
+  void set_external_force_N(const std::array<double, 3>& F_N) noexcept { F_ext_N_ = F_N; }
+  void set_spindle_override_rpm(std::optional<double> rpm) noexcept { spindle_override_rpm_ = rpm; }
+  void set_reference(std::shared_ptr<const ReferenceSource> reference);
+  const ReferenceSource& reference() const noexcept { return *reference_; }
+
+  /// Work terms of the energy balance of axis a since the start (J).
+  const feeddrive::DriveState& drive_state(Axis a) const;
+  const feeddrive::DriveParams& drive_params(Axis a) const;
+
+  CoSimState get_state() const;
+  void set_state(const CoSimState& state);
+
+ private:
+  MachineDefinition machine_;
+  std::vector<Axis> axes_;
+  std::shared_ptr<const ReferenceSource> reference_;
+  std::unique_ptr<process::ProcessModel> process_;
+  feeddrive::DriveBank drives_;
+  std::vector<controller::PositionLoop> loops_;
+  controller::Encoder encoder_;
+  std::vector<feeddrive::DriveInput> inputs_;
+  std::int64_t k_{0};
+  double t0_s_{0.0};
+  std::array<double, 3> F_ext_N_{};
+  std::optional<double> spindle_override_rpm_;
+  Snapshot last_;
+  std::vector<ClampWatch> clamp_watch_;
+};
+
+}  // namespace twin::sim

@@ -1,0 +1,205 @@
+#include "twin/sim/machine.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <string>
+
+#include <fmt/format.h>
+
+#include "twin/core/error.hpp"
+
+namespace twin::sim {
+namespace {
+
+#define TWIN_AXIS_PARAM(NAME, UNIT, DOC, EXPR) \
+  AxisParamSpec { NAME, UNIT, DOC, [](AxisDefinition& a) -> double& { return EXPR; }, nullptr }
+#define TWIN_EFFECT_PARAM(NAME, UNIT, DOC, EFFECT, FIELD)                                   \
+  AxisParamSpec {                                                                          \
+    NAME, UNIT, DOC, [](AxisDefinition& a) -> double& { return a.drive.effects.EFFECT.FIELD; }, \
+        [](AxisDefinition& a) -> bool* { return &a.drive.effects.EFFECT.enabled; }         \
+  }
+
+std::vector<AxisParamSpec> make_axis_specs() {
+  return {
+      TWIN_AXIS_PARAM("Ka", "A/V", "current amplifier gain", a.drive.Ka_A_per_V),
+      TWIN_AXIS_PARAM("Kt", "N m/A", "motor torque constant", a.drive.Kt_Nm_per_A),
+      TWIN_AXIS_PARAM("J", "kg m^2", "inertia reflected to the motor shaft", a.drive.J_kg_m2),
+      TWIN_AXIS_PARAM("B", "kg m^2/s", "viscous damping", a.drive.B_kg_m2_per_s),
+      TWIN_AXIS_PARAM("rg", "mm/rad", "transmission (ballscrew lead / 2 pi)", a.drive.rg_mm_per_rad),
+      TWIN_AXIS_PARAM("Kp", "V/mm", "proportional gain", a.loop.Kp_V_per_mm),
+      TWIN_AXIS_PARAM("Ki", "V/(s mm)", "integral gain", a.loop.Ki_V_per_s_mm),
+      TWIN_AXIS_PARAM("Kd", "V s/mm", "derivative gain", a.loop.Kd_V_s_per_mm),
+      TWIN_AXIS_PARAM("K1", "V s^2/mm", "acceleration feedforward", a.loop.K1_V_s2_per_mm),
+      TWIN_AXIS_PARAM("K2", "V s/mm", "velocity feedforward", a.loop.K2_V_s_per_mm),
+      TWIN_AXIS_PARAM("Tc_pos", "N m", "Coulomb friction torque moving in +", a.drive.Tc_pos_Nm),
+      TWIN_AXIS_PARAM("Tc_neg", "N m", "Coulomb friction torque moving in - (positive)", a.drive.Tc_neg_Nm),
+      TWIN_AXIS_PARAM("u_max", "V", "amplifier command limit (symmetric)", a.loop.u_max_V),
+      TWIN_AXIS_PARAM("v_max", "mm/s", "interpolator speed limit", a.v_max_mm_per_s),
+      TWIN_AXIS_PARAM("a_max", "mm/s^2", "interpolator acceleration limit", a.a_max_mm_per_s2),
+      TWIN_AXIS_PARAM("j_max", "mm/s^3", "interpolator jerk limit", a.j_max_mm_per_s3),
+      TWIN_AXIS_PARAM("travel_min", "mm", "lower end of travel", a.travel_min_mm),
+      TWIN_AXIS_PARAM("travel_max", "mm", "upper end of travel", a.travel_max_mm),
+      TWIN_AXIS_PARAM("following_error_limit", "mm", "following-error alarm", a.following_error_limit_mm),
+      TWIN_EFFECT_PARAM("stribeck.Ts_static", "N m", "static friction level", stribeck, Ts_static_Nm),
+      TWIN_EFFECT_PARAM("stribeck.ws", "rad/s", "Stribeck speed", stribeck, ws_rad_per_s),
+      TWIN_EFFECT_PARAM("cogging.amplitude", "N m", "cogging torque amplitude", cogging, amplitude_Nm),
+      TWIN_EFFECT_PARAM("cogging.cycles_per_rev", "1", "cogging periods per motor revolution", cogging, cycles_per_rev),
+      TWIN_EFFECT_PARAM("cogging.phase", "rad", "cogging phase", cogging, phase_rad),
+      TWIN_EFFECT_PARAM("screw_pitch_error.amplitude", "mm", "lead error amplitude", screw_pitch_error, amplitude_mm),
+      TWIN_EFFECT_PARAM("screw_pitch_error.period", "mm", "lead error period", screw_pitch_error, period_mm),
+      TWIN_EFFECT_PARAM("screw_pitch_error.phase", "rad", "lead error phase", screw_pitch_error, phase_rad),
+      TWIN_EFFECT_PARAM("backlash.gap", "mm", "lost motion at reversal", backlash, gap_mm),
+      TWIN_EFFECT_PARAM("constant_load.torque", "N m", "constant load torque", constant_load, torque_Nm),
+      TWIN_EFFECT_PARAM("position_dependent_friction.dTc", "N m", "extra Coulomb friction in the band", position_dependent_friction, dTc_Nm),
+      TWIN_EFFECT_PARAM("position_dependent_friction.x_start", "mm", "band start", position_dependent_friction, x_start_mm),
+      TWIN_EFFECT_PARAM("position_dependent_friction.x_end", "mm", "band end", position_dependent_friction, x_end_mm),
+      TWIN_EFFECT_PARAM("delay.delay", "s", "command delay", delay, delay_s),
+      TWIN_EFFECT_PARAM("compliance.K", "N m/rad", "torsional stiffness motor-load", compliance, K_Nm_per_rad),
+      TWIN_EFFECT_PARAM("compliance.C", "N m s/rad", "torsional damping motor-load", compliance, C_Nm_s_per_rad),
+      TWIN_EFFECT_PARAM("compliance.load_fraction", "1", "share of J on the load side", compliance, load_fraction),
+      TWIN_EFFECT_PARAM("current_saturation.i_max", "A", "current limit", current_saturation, i_max_A),
+  };
+}
+#undef TWIN_AXIS_PARAM
+#undef TWIN_EFFECT_PARAM
+
+std::vector<MachineParamSpec> make_machine_specs() {
+  return {
+      {"Ts", "s", "position-loop sample period", [](MachineDefinition& m) -> double& { return m.Ts_s; }},
+      {"encoder_resolution", "mm", "encoder resolution at the table (0: ideal)",
+       [](MachineDefinition& m) -> double& { return m.encoder_resolution_mm; }},
+      {"rapid", "mm/min", "rapid traverse rate", [](MachineDefinition& m) -> double& { return m.rapid_mm_per_min; }},
+      {"blend_tolerance", "mm", "G64 corner tolerance when P is not given",
+       [](MachineDefinition& m) -> double& { return m.blend_tolerance_mm; }},
+  };
+}
+
+}  // namespace
+
+const std::vector<AxisParamSpec>& axis_param_specs() {
+  static const std::vector<AxisParamSpec> specs = make_axis_specs();
+  return specs;
+}
+const std::vector<MachineParamSpec>& machine_param_specs() {
+  static const std::vector<MachineParamSpec> specs = make_machine_specs();
+  return specs;
+}
+const AxisParamSpec* find_axis_param(std::string_view name) {
+  for (const auto& s : axis_param_specs())
+    if (s.name == name) return &s;
+  return nullptr;
+}
+const MachineParamSpec* find_machine_param(std::string_view name) {
+  for (const auto& s : machine_param_specs())
+    if (s.name == name) return &s;
+  return nullptr;
+}
+
+double get_axis_param(const AxisDefinition& axis, const AxisParamSpec& spec) {
+  return spec.ref(const_cast<AxisDefinition&>(axis));
+}
+void set_axis_param(AxisDefinition& axis, const AxisParamSpec& spec, double value) {
+  spec.ref(axis) = value;
+  if (spec.enables != nullptr) *spec.enables(axis) = true;
+}
+
+void MachineDefinition::validate() const {
+  const std::string where = source.empty() ? std::string("machine ") + name : source;
+  auto positive = [&](const char* key, double v) {
+    if (!std::isfinite(v) || !(v > 0.0))
+      throw ConfigError(fmt::format("{}: {} = {} must be a finite number > 0", where, key, v));
+  };
+  positive("Ts", Ts_s);
+  if (Ts_s > 0.1) throw ConfigError(fmt::format("{}: Ts = {} s is beyond 0.1 s", where, Ts_s));
+  if (!std::isfinite(encoder_resolution_mm) || encoder_resolution_mm < 0.0)
+    throw ConfigError(fmt::format("{}: encoder_resolution = {} must be a finite number >= 0", where,
+                                  encoder_resolution_mm));
+  positive("rapid", rapid_mm_per_min);
+  positive("blend_tolerance", blend_tolerance_mm);
+  bool any = false;
+  for (Axis a : kAllAxes) {
+    const AxisDefinition& ax = axes[index(a)];
+    if (!ax.present) continue;
+    any = true;
+    const std::string w = fmt::format("{}: axis {}", where, axis_name(a));
+    ax.drive.validate(w);
+    ax.loop.validate(w);
+    auto pos = [&](const char* key, double v) {
+      if (!std::isfinite(v) || !(v > 0.0))
+        throw ConfigError(fmt::format("{}: {} = {} must be a finite number > 0", w, key, v));
+    };
+    pos("v_max", ax.v_max_mm_per_s);
+    pos("a_max", ax.a_max_mm_per_s2);
+    pos("j_max", ax.j_max_mm_per_s3);
+    pos("following_error_limit", ax.following_error_limit_mm);
+    if (!std::isfinite(ax.travel_min_mm) || !std::isfinite(ax.travel_max_mm) ||
+        !(ax.travel_min_mm < ax.travel_max_mm))
+      throw ConfigError(fmt::format("{}: travel [{}, {}] mm must be finite with min < max", w,
+                                    ax.travel_min_mm, ax.travel_max_mm));
+    if (std::abs(ax.loop.Ts_s - Ts_s) > 1e-15)
+      throw ConfigError(fmt::format("{}: loop period {} s differs from the machine's Ts = {} s", w,
+                                    ax.loop.Ts_s, Ts_s));
+  }
+  if (!any) throw ConfigError(fmt::format("{}: no axis defined", where));
+}
+
+controller::MotionLimits MachineDefinition::motion_limits() const {
+  controller::MotionLimits lim;
+  for (Axis a : kAllAxes) {
+    const AxisDefinition& ax = axes[index(a)];
+    lim.v_max_mm_per_s[index(a)] = std::min(ax.v_max_mm_per_s, rapid_mm_per_min / 60.0);
+    lim.a_max_mm_per_s2[index(a)] = ax.a_max_mm_per_s2;
+    lim.j_max_mm_per_s3[index(a)] = ax.j_max_mm_per_s3;
+  }
+  lim.default_blend_tolerance_mm = blend_tolerance_mm;
+  return lim;
+}
+
+std::vector<Axis> MachineDefinition::present_axes() const {
+  std::vector<Axis> out;
+  for (Axis a : kAllAxes)
+    if (axes[index(a)].present) out.push_back(a);
+  return out;
+}
+
+namespace {
+double parse_number(std::string_view text, std::string_view context) {
+  double v = 0.0;
+  const auto* b = text.data();
+  const auto* e = text.data() + text.size();
+  auto [p, ec] = std::from_chars(b, e, v);
+  if (ec != std::errc() || p != e || text.empty())
+    throw ConfigError(fmt::format("--set {}: '{}' is not a number", context, text));
+  if (!std::isfinite(v)) throw ConfigError(fmt::format("--set {}: value {} is not finite", context, text));
+  return v;
+}
+}  // namespace
+
+void apply_set(MachineDefinition& machine, std::string_view assignment) {
+  const auto eq = assignment.find('=');
+  if (eq == std::string_view::npos)
+    throw ConfigError(fmt::format("--set '{}': expected <axis>.<name>=<value>", assignment));
+  const std::string_view lhs = assignment.substr(0, eq);
+  const double value = parse_number(assignment.substr(eq + 1), assignment);
+  if (const auto* ms = find_machine_param(lhs)) {
+    ms->ref(machine) = value;
+    for (auto& ax : machine.axes) ax.loop.Ts_s = machine.Ts_s;
+    return;
+  }
+  const auto dot = lhs.find('.');
+  if (dot == std::string_view::npos)
+    throw ConfigError(fmt::format("--set '{}': unknown machine parameter '{}' (axis parameters are <axis>.<name>)",
+                                  assignment, lhs));
+  const auto axis = parse_axis(lhs.substr(0, dot));
+  if (!axis) throw ConfigError(fmt::format("--set '{}': unknown axis '{}'", assignment, lhs.substr(0, dot)));
+  const auto* spec = find_axis_param(lhs.substr(dot + 1));
+  if (spec == nullptr)
+    throw ConfigError(fmt::format("--set '{}': unknown parameter '{}'", assignment, lhs.substr(dot + 1)));
+  AxisDefinition& ax = machine.axes[index(*axis)];
+  if (!ax.present)
+    throw ConfigError(fmt::format("--set '{}': axis {} is not defined in {}", assignment, axis_name(*axis),
+                                  machine.source));
+  set_axis_param(ax, *spec, value);
+}
+
+}  // namespace twin::sim

@@ -1,0 +1,78 @@
+#pragma once
+/// A machine definition: per axis the drive (Ozcan 2017 Table 1), the position
+/// loop gains (Table 3), the interpolator limits and the travel; machine-wide
+/// the position-loop period and the encoder resolution. Every parameter has a
+/// name (spec/interfaces.md) through which files, `--set`, the FMU and the
+/// reports reach it.
+#include <functional>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "controller/interpolator.hpp"
+#include "controller/position_loop.hpp"
+#include "feeddrive/drive_params.hpp"
+#include "twin/core/axis.hpp"
+
+namespace twin::sim {
+
+struct AxisDefinition {
+  bool present{false};
+  feeddrive::DriveParams drive;
+  controller::PositionLoopParams loop;  ///< loop.Ts_s mirrors MachineDefinition::Ts_s
+  double v_max_mm_per_s{10160.0 / 60.0};
+  double a_max_mm_per_s2{2000.0};
+  double j_max_mm_per_s3{50000.0};
+  double travel_min_mm{-1e9};
+  double travel_max_mm{1e9};
+  /// A real CNC's following-error alarm: a tracking error beyond this stops
+  /// the run as unstable (or mis-tuned) and says where.
+  double following_error_limit_mm{1.0};
+};
+
+struct MachineDefinition {
+  std::string name;
+  std::string source;                  ///< file it was read from (for messages)
+  double Ts_s{1e-4};
+  double encoder_resolution_mm{0.001};
+  double rapid_mm_per_min{10160.0};
+  double blend_tolerance_mm{0.01};     ///< G64 without P
+  AxisArray<AxisDefinition> axes;
+
+  /// Throws ConfigError naming the source, the axis, the key and the value.
+  void validate() const;
+  controller::MotionLimits motion_limits() const;
+  std::vector<Axis> present_axes() const;
+};
+
+/// One named numeric parameter of an axis, as in spec/interfaces.md.
+struct AxisParamSpec {
+  std::string_view name;   ///< "J", "Kp", "stribeck.Ts_static" ...
+  std::string_view unit;
+  std::string_view doc;
+  double& (*ref)(AxisDefinition&);
+  /// For effect parameters: the flag that setting the parameter switches on.
+  bool* (*enables)(AxisDefinition&){nullptr};
+};
+struct MachineParamSpec {
+  std::string_view name;   ///< "Ts", "encoder_resolution" ...
+  std::string_view unit;
+  std::string_view doc;
+  double& (*ref)(MachineDefinition&);
+};
+
+const std::vector<AxisParamSpec>& axis_param_specs();
+const std::vector<MachineParamSpec>& machine_param_specs();
+const AxisParamSpec* find_axis_param(std::string_view name);
+const MachineParamSpec* find_machine_param(std::string_view name);
+
+double get_axis_param(const AxisDefinition& axis, const AxisParamSpec& spec);
+void set_axis_param(AxisDefinition& axis, const AxisParamSpec& spec, double value);
+
+/// Applies one `--set <axis>.<name>=<value>` (or `<name>=<value>` for a
+/// machine-wide parameter). Throws ConfigError for an unknown axis or name,
+/// a malformed or non-finite value. The caller validates the machine after.
+void apply_set(MachineDefinition& machine, std::string_view assignment);
+
+}  // namespace twin::sim
