@@ -36,10 +36,11 @@ std::filesystem::path run_dir(const std::string& name) {
   return std::filesystem::path(TWIN_BINARY_DIR) / "tests" / "calibrate_runs" / name;
 }
 
-CalibrationResult calibrate_case(const Case& c) {
+// `folder` keeps runs of tests that ctest runs in parallel apart.
+CalibrationResult calibrate_case(const Case& c, const std::string& folder = "") {
   truth::RunSpec spec = perturbed();
   spec.effects = c.effects;
-  const auto dir = run_dir(c.name);
+  const auto dir = run_dir(folder.empty() ? c.name : folder);
   truth::write_truth_run(dir, spec);
   const MeasuredRun run = load_run(dir);
   std::vector<std::string> notes;
@@ -72,7 +73,7 @@ TEST_P(TruthEffect, NamesTheEffectAndImprovesHeldOutError) {
   const auto& a = r.error_after[0];
   EXPECT_LE(a.err_mm, b.err_mm * 1.02);
   EXPECT_LE(a.u, b.u * 1.02);
-  const CalibrationResult none = calibrate_case(Case{"none", {}});
+  const CalibrationResult none = calibrate_case(Case{"none", {}}, std::string(c.name) + "_floor");
   const auto& f = none.error_after[0];
   const double excess_err = (a.err_mm - f.err_mm) / std::max(1e-9, b.err_mm - f.err_mm);
   const double excess_u = (a.u - f.u) / std::max(1e-9, b.u - f.u);
