@@ -66,8 +66,9 @@ struct CalibrationResult {
   std::vector<std::string> notes;
 };
 
-/// Errors of `model` against the run on rows [from, n).
-AxisErrors axis_errors(const MeasuredRun& run, const ReplayResult& model, Axis a, std::size_t from);
+/// Errors of `model` against the run on rows [from, to) (to clipped to the run).
+AxisErrors axis_errors(const MeasuredRun& run, const ReplayResult& model, Axis a, std::size_t from,
+                       std::size_t to = static_cast<std::size_t>(-1));
 
 CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition& start,
                             const CalibrateOptions& options = {});

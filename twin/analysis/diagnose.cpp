@@ -153,21 +153,20 @@ void try_stribeck(const Ctx& c, std::vector<EffectCandidate>& out) {
   for (std::size_t i = 1; i < fits.size(); ++i)
     if (fits[i].fit.with.residual_rms < fits[best].fit.with.residual_rms) best = i;
   const double ws_best = fits[best].ws;
-  for (double factor : {1.0, 0.5, 0.25}) {
-    // The fit whose ws is nearest ws_best * factor.
-    std::size_t j = best;
-    for (std::size_t i = 0; i < fits.size(); ++i)
-      if (std::abs(std::log(fits[i].ws / (ws_best * factor))) < std::abs(std::log(fits[j].ws / (ws_best * factor)))) j = i;
-    if (factor != 1.0 && j == best) continue;
-    const Fit& f = fits[j].fit;
-    const double excess = f.with.theta[4];
-    const double Ts_static = excess + 0.5 * (std::max(0.0, f.with.theta[2]) + std::max(0.0, f.with.theta[3]));
-    add(out, c, "stribeck", f, {{"Ts_static", Ts_static}, {"ws", fits[j].ws}},
-        fmt::format("friction excess {:.3f} N m (t = {:.1f}) below ws = {:.2g} rad/s cuts the held-out low-speed "
-                    "torque residual by {:.0f} % (best-fitting ws {:.2g} rad/s)",
-                    excess, f.t_stat, fits[j].ws, 100.0 * f.gain, ws_best));
-    if (factor != 1.0) out.back().signal_gain = fits[best].fit.gain;  // ranked with the best fit
-  }
+  const Fit& f = fits[best].fit;
+  const double excess = f.with.theta[4];
+  const double Tc_mean = 0.5 * (std::max(0.0, f.with.theta[2]) + std::max(0.0, f.with.theta[3]));
+  add(out, c, "stribeck", f, {{"Ts_static", Tc_mean + excess}, {"ws", ws_best}},
+      fmt::format("friction excess {:.3f} N m (t = {:.1f}) below ws = {:.2g} rad/s cuts the held-out low-speed "
+                  "torque residual by {:.0f} %",
+                  excess, f.t_stat, ws_best, 100.0 * f.gain));
+  // The low-pass smears reversals: a rise at a few rad/s reads as a smaller
+  // one at a higher speed. The replay on the fitting part chooses among
+  // slower and stronger versions of it.
+  auto& grid = out.back().param_grid;
+  for (double ws : {0.125, 0.18, 0.25, 0.37, 0.5})
+    for (double m : {1.25, 1.75, 2.25})
+      grid.push_back({{"Ts_static", Tc_mean + m * excess}, {"ws", ws * ws_best}});
 }
 
 void try_cogging(const Ctx& c, std::vector<EffectCandidate>& out) {

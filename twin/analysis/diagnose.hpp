@@ -23,6 +23,10 @@ struct EffectCandidate {
   /// The replay hardly sees it (a reparametrisation of the moving model that
   /// differs only at standstill): where the replayed errors tie, its signature decides.
   bool replay_blind{false};
+  /// Alternative parameter sets the torque residual cannot tell apart (a
+  /// Stribeck speed below what the low-pass resolves): calibrate replays
+  /// each and keeps the one with the lowest error on the fitting part.
+  std::vector<std::vector<std::pair<std::string, double>>> param_grid;
   DriveIdentification base; ///< J, B, Tc fitted together with the effect
   std::vector<double> T_after_Nm;  ///< torque with the effect's part taken out (for a second effect)
 };
