@@ -5,7 +5,7 @@
 ///
 /// DriveEffects holds the optional drive terms of the effect catalogue of
 /// spec/measured-data.md. Each is off by default; when on, it is a real term
-/// of the drive model (see feeddrive/README.md for the equations).
+/// of the drive model (see docs/feeddrive.md for the equations).
 #include <string_view>
 
 namespace twin::feeddrive {
