@@ -23,8 +23,10 @@ struct Result {
   std::string err;
 };
 
+// One folder per test: ctest runs the tests of this file in parallel.
 std::filesystem::path work() {
-  const auto d = std::filesystem::temp_directory_path() / "twin_cli_test";
+  const auto d = std::filesystem::temp_directory_path() / "twin_cli_test" /
+                 ::testing::UnitTest::GetInstance()->current_test_info()->name();
   std::filesystem::create_directories(d);
   return d;
 }
