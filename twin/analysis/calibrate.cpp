@@ -53,7 +53,8 @@ void choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
       trial.validate();
       const ReplayResult rep = replay_run(one, trial, n_fit);
       ++replays;
-      const double score = base.relative(axis_errors(run, rep, c.axis, 0, n_fit));
+      const AxisErrors e = axis_errors(run, rep, c.axis, 0, n_fit);
+      const double score = c.judged_by_hunting ? (base.hunt > 0.0 ? e.hunt / base.hunt : 1.0) : base.relative(e);
       if (best == sets.size() || score < best_score) {
         best_score = score;
         best = j;
@@ -66,7 +67,8 @@ void choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
   c.params = sets[best];
   c.evidence += fmt::format("; of {} parameter sets replayed on the fitting part, the best:", sets.size());
   for (const auto& [k, v] : c.params) c.evidence += fmt::format(" {} = {:.4g}", k, v);
-  c.evidence += fmt::format(" (fitting-part errors {:.3f} of the current model's)", best_score);
+  c.evidence += fmt::format(" (fitting-part {} {:.3f} of the current model's)",
+                            c.judged_by_hunting ? "hunting statistic" : "errors", best_score);
   c.param_grid.clear();
 }
 
@@ -85,6 +87,9 @@ AxisErrors axis_errors(const MeasuredRun& run, const ReplayResult& model, Axis a
       es[k] = model.x_ref_mm[index(a)][k] - model.x_mm[index(a)][k];
     }
     e.err_mm = nrms(em, es, from, rows);
+    const auto window = std::max<std::size_t>(8, static_cast<std::size_t>(std::lround(0.02 / run.sample_period_s)));
+    e.hunt = nrms(window_spread(em, from, rows, window), window_spread(es, from, rows, window), 0,
+                  static_cast<std::size_t>(-1));
   }
   const double fs = 1.0 / run.sample_period_s;
   const double fc = std::min(200.0, 0.4 * fs);
@@ -116,6 +121,7 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
   AxisArray<AxisSignals> sig;
   AxisArray<std::vector<double>> T_cur;
   AxisArray<std::vector<std::string>> present;
+  AxisArray<bool> hunting_on{};
   for (Axis a : run.axes) {
     std::string note;
     auto& ax = machine.axes[index(a)];
@@ -216,10 +222,22 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
                                   cur_err[i].err_mm, e.err_mm, cur_err[i].u, e.u);
         // Each error relative to its own value before: the tracking error of a
         // quantised run sits on a floor of encoder noise that no model moves.
-        const double ratio = cur_err[i].relative(e);
+        double ratio = cur_err[i].relative(e);
+        // Once a hunt is modelled on the axis, no later effect may give it up.
+        const bool hunt_kept = !hunting_on[i] || e.hunt <= cur_err[i].hunt * (1.0 + opt.min_improvement) + 0.02;
         const bool no_worse = e.err_mm <= cur_err[i].err_mm * (1.0 + opt.tie_tolerance) &&
-                              e.u <= cur_err[i].u * (1.0 + opt.tie_tolerance);
-        const bool better = ratio < 1.0 - opt.min_improvement && no_worse;
+                              e.u <= cur_err[i].u * (1.0 + opt.tie_tolerance) && hunt_kept;
+        bool better = ratio < 1.0 - opt.min_improvement && no_worse;
+        if (c.judged_by_hunting) {
+          const double hr = cur_err[i].hunt > 0.0 ? e.hunt / cur_err[i].hunt : 1.0;
+          const bool bounded = e.err_mm <= cur_err[i].err_mm * std::sqrt(2.0) && e.u <= cur_err[i].u * std::sqrt(2.0);
+          c.evidence += fmt::format("; hunting statistic {:.4f} -> {:.4f} ({:.2f} of before)", cur_err[i].hunt,
+                                    e.hunt, hr);
+          better = hr <= opt.max_hunt_ratio && bounded;
+          if (better && !no_worse)
+            c.evidence += "; the point-by-point errors grow as a hunt of the right size out of phase must";
+          ratio = hr;
+        }
         const bool tie_strong = c.replay_blind && c.signal_gain >= opt.strong_signal_gain && c.t_stat >= opt.strong_t &&
                                 no_worse && ratio <= 1.0 + opt.tie_tolerance;
         if (tie_strong && !better)
@@ -247,6 +265,7 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
         ad.after = best_err[i];
         apply_candidate(machine.axes[i], ad.candidate);
         present[i].push_back(ad.candidate.effect);
+        hunting_on[i] = hunting_on[i] || ad.candidate.judged_by_hunting;
         T_cur[i] = ad.candidate.T_after_Nm;
         copy_axis(current, best_replay[i], a);
         cur_err[i] = best_err[i];
@@ -336,10 +355,13 @@ std::string calibration_report_markdown(const CalibrationResult& r, const std::s
   for (const auto& c : r.considered)
     s += fmt::format("- {} on {}: gain {:.1f} %, t = {:.1f}: {}\n", c.effect, axis_name(c.axis), 100.0 * c.signal_gain,
                      c.t_stat, c.evidence);
-  s += "\n## Held-out errors (normalised RMS)\n\n| axis | tracking before | tracking after | u before | u after |\n|---|---|---|---|---|\n";
+  s += "\n## Held-out errors (normalised RMS; hunting: of the 20 ms spreads of the tracking error)\n\n"
+       "| axis | tracking before | tracking after | u before | u after | hunting before | hunting after |\n"
+       "|---|---|---|---|---|---|---|\n";
   for (Axis a : r.axes)
-    s += fmt::format("| {} | {:.4f} | {:.4f} | {:.4f} | {:.4f} |\n", axis_name(a), r.error_before[index(a)].err_mm,
-                     r.error_after[index(a)].err_mm, r.error_before[index(a)].u, r.error_after[index(a)].u);
+    s += fmt::format("| {} | {:.4f} | {:.4f} | {:.4f} | {:.4f} | {:.4f} | {:.4f} |\n", axis_name(a),
+                     r.error_before[index(a)].err_mm, r.error_after[index(a)].err_mm, r.error_before[index(a)].u,
+                     r.error_after[index(a)].u, r.error_before[index(a)].hunt, r.error_after[index(a)].hunt);
   s += "\n## Notes\n\n";
   if (r.notes.empty()) s += "none\n";
   for (const auto& n : r.notes) s += "- " + n + "\n";

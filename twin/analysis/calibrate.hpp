@@ -23,6 +23,10 @@ struct CalibrateOptions {
   double strong_signal_gain{0.3};
   double strong_t{2.0};
   double tie_tolerance{0.02};
+  /// A candidate judged by the hunting statistic (EffectCandidate::judged_by_hunting)
+  /// must cut AxisErrors::hunt to this fraction; its point-by-point errors may
+  /// grow up to sqrt(2) times (an equal hunt out of phase), never beyond.
+  double max_hunt_ratio{0.5};
   int max_effects_per_axis{2};
   int replays_per_round{4};
 };
@@ -32,6 +36,9 @@ struct CalibrateOptions {
 struct AxisErrors {
   double err_mm{0.0};
   double u{0.0};
+  /// Hunting statistic, blind to phase: NRMS of the spread of the tracking
+  /// error in consecutive 20 ms windows (model against run).
+  double hunt{0.0};
   bool has_u{false};
   bool has_current{false};
   double score() const { return (has_u || has_current) ? 0.5 * (err_mm + u) : err_mm; }

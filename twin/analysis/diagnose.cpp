@@ -233,7 +233,7 @@ void try_screw(const Ctx& c, std::vector<EffectCandidate>& out) {
                   A, best_P, best.t_stat, 100.0 * best.gain));
 }
 
-void try_backlash(const Ctx& c, std::vector<EffectCandidate>& out) {
+void try_backlash_torque(const Ctx& c, std::vector<EffectCandidate>& out) {
   // Direction of the last motion of the reference, held through stops.
   std::vector<double> dir(c.s.n, 0.0);
   std::vector<std::size_t> reversals;
@@ -261,6 +261,80 @@ void try_backlash(const Ctx& c, std::vector<EffectCandidate>& out) {
       fmt::format("lost motion {:.4f} mm at {} reversals (t = {:.1f}) cuts the held-out torque residual near "
                   "reversals by {:.0f} %",
                   gap, reversals.size(), f.t_stat, 100.0 * f.gain));
+}
+
+// Backlash with the loop closed on the table: across the gap the motor moves
+// and the table does not, the integral winds up and the loop hunts from one
+// flank of the gap to the other. At standstill, where the nominal plant only
+// chatters by an encoder count, the tracking error then spreads over several
+// counts. The spread at standstill sizes the gap; the candidates are judged by
+// the hunting statistic, since a replay hunts out of phase with the run.
+bool try_backlash_hunting(const Ctx& c, std::vector<EffectCandidate>& out) {
+  const double q = c.s.encoder_resolution_mm;
+  if (!(q > 0.0)) return false;
+  const auto window = std::max<std::size_t>(8, static_cast<std::size_t>(std::lround(0.02 / c.s.dt_s)));
+  const auto settle = static_cast<std::size_t>(std::lround(0.1 / c.s.dt_s));
+  std::vector<double> e(c.s.n);
+  for (std::size_t k = 0; k < c.s.n; ++k) e[k] = c.s.x_ref_mm[k] - c.s.x_mm[k];
+  // Standstill windows: the reference has not changed for `settle` rows, and
+  // is unchanged to the window's end. The stop before the first motion is left out.
+  std::vector<double> fit_sp, held_sp;
+  std::size_t still_since = 0;
+  bool moved = false;
+  std::size_t k = 1;
+  while (k + window <= c.s.n) {
+    if (c.s.x_ref_mm[k] != c.s.x_ref_mm[k - 1]) {
+      still_since = k;
+      moved = true;
+      ++k;
+      continue;
+    }
+    if (!moved || k - still_since < settle) {
+      ++k;
+      continue;
+    }
+    bool still = true;
+    for (std::size_t j = k; j < k + window && still; ++j) still = c.s.x_ref_mm[j] == c.s.x_ref_mm[k - 1];
+    if (!still) {
+      ++k;
+      continue;
+    }
+    const double sp = window_spread(e, k, k + window, window).front();
+    (k + window <= c.s.n_fit ? fit_sp : held_sp).push_back(sp);
+    k += window;
+  }
+  if (fit_sp.size() < 5 || held_sp.size() < 5) return false;
+  auto median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  const double s_fit = median(fit_sp), s_held = median(held_sp);
+  // Quantisation alone spreads by q / sqrt(12); chatter by one count about q / 2.
+  // A hunt is a spread of two counts and more, in both parts of the run.
+  if (s_fit < 2.0 * q || s_held < 2.0 * q) return false;
+  const double q_spread = q / std::sqrt(12.0);
+  EffectCandidate e_c;
+  e_c.effect = "backlash";
+  e_c.axis = c.s.axis;
+  e_c.params = {{"gap", s_fit}};
+  for (double m : {0.6, 0.8, 1.25, 1.6}) e_c.param_grid.push_back({{"gap", m * s_fit}});
+  e_c.signal_gain = 1.0 - q_spread / s_held;
+  e_c.t_stat = s_held / q_spread;
+  e_c.judged_by_hunting = true;
+  e_c.evidence = fmt::format(
+      "at standstill the tracking error hunts with a spread of {:.4f} mm (fitting part, {} windows of {:.0f} ms) and "
+      "{:.4f} mm (held out, {} windows), {:.1f} encoder counts where quantisation leaves {:.2f}: a limit cycle across "
+      "a gap in the loop",
+      s_fit, fit_sp.size(), 1e3 * static_cast<double>(window) * c.s.dt_s, s_held, held_sp.size(), s_held / q,
+      q_spread / q);
+  e_c.base = c.base;
+  e_c.T_after_Nm = c.T;
+  out.push_back(std::move(e_c));
+  return true;
+}
+
+void try_backlash(const Ctx& c, std::vector<EffectCandidate>& out) {
+  if (!try_backlash_hunting(c, out)) try_backlash_torque(c, out);
 }
 
 void try_position_friction(const Ctx& c, std::vector<EffectCandidate>& out) {
@@ -628,6 +702,21 @@ std::vector<EffectCandidate> diagnose_axis(const AxisSignals& s, const std::vect
   std::sort(out.begin(), out.end(),
             [](const EffectCandidate& a, const EffectCandidate& b) { return a.signal_gain > b.signal_gain; });
   return out;
+}
+
+std::vector<double> window_spread(const std::vector<double>& e, std::size_t from, std::size_t to, std::size_t window) {
+  std::vector<double> r;
+  to = std::min(to, e.size());
+  if (window == 0) return r;
+  for (std::size_t a = from; a + window <= to; a += window) {
+    double m = 0.0;
+    for (std::size_t k = a; k < a + window; ++k) m += e[k];
+    m /= static_cast<double>(window);
+    double v = 0.0;
+    for (std::size_t k = a; k < a + window; ++k) v += (e[k] - m) * (e[k] - m);
+    r.push_back(std::sqrt(v / static_cast<double>(window)));
+  }
+  return r;
 }
 
 void apply_candidate(sim::AxisDefinition& axis, const EffectCandidate& c) {

@@ -23,6 +23,10 @@ struct EffectCandidate {
   /// The replay hardly sees it (a reparametrisation of the moving model that
   /// differs only at standstill): where the replayed errors tie, its signature decides.
   bool replay_blind{false};
+  /// A limit cycle (hunting) the replay reproduces only out of phase: the
+  /// candidate is judged by the hunting statistic (AxisErrors::hunt), which
+  /// compares the spread of the tracking error window by window.
+  bool judged_by_hunting{false};
   /// Alternative parameter sets the torque residual cannot tell apart (a
   /// Stribeck speed below what the low-pass resolves): calibrate replays
   /// each and keeps the one with the lowest error on the fitting part.
@@ -39,6 +43,10 @@ std::vector<EffectCandidate> diagnose_axis(const AxisSignals& s, const std::vect
                                            const feeddrive::DriveParams& drive,
                                            const std::vector<std::string>& present,
                                            const std::vector<double>& e_residual_mm);
+
+/// Spread (standard deviation about the window mean) of `e` in consecutive
+/// windows of `window` rows over [from, to); a last partial window is dropped.
+std::vector<double> window_spread(const std::vector<double>& e, std::size_t from, std::size_t to, std::size_t window);
 
 /// Switches the candidate's effect on in `axis` with its parameters and sets
 /// J, B, Tc to the ones fitted with it.

@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include "twin/analysis/diagnose.hpp"
 #include "twin/analysis/signal.hpp"
 #include "twin/core/error.hpp"
 
@@ -136,6 +137,27 @@ TEST(Signal, BinMeans) {
     EXPECT_EQ(b.count[i], 100u);
     EXPECT_NEAR(b.mean[i], 0.125 + 0.25 * static_cast<double>(i), 1e-12);
   }
+}
+
+// window_spread against closed forms: a square wave of amplitude A about any
+// offset has spread A in windows holding whole periods; a ramp of slope m over
+// w samples has the spread of w equally spaced points, m sqrt((w^2 - 1) / 12);
+// a constant has none; the last partial window is dropped. Exact up to rounding.
+TEST(WindowSpread, ClosedForms) {
+  std::vector<double> e;
+  for (int k = 0; k < 45; ++k) e.push_back(3.0 + ((k / 5) % 2 == 0 ? 0.7 : -0.7));
+  const auto sq = window_spread(e, 0, e.size(), 20);
+  ASSERT_EQ(sq.size(), 2u);
+  for (double v : sq) EXPECT_NEAR(v, 0.7, 1e-12);
+  std::vector<double> ramp(30);
+  for (std::size_t k = 0; k < ramp.size(); ++k) ramp[k] = 0.25 * static_cast<double>(k);
+  const auto rs = window_spread(ramp, 5, 30, 10);
+  ASSERT_EQ(rs.size(), 2u);
+  EXPECT_NEAR(rs[0], 0.25 * std::sqrt((100.0 - 1.0) / 12.0), 1e-12);
+  const auto cs = window_spread(std::vector<double>(16, 2.5), 0, 16, 8);
+  ASSERT_EQ(cs.size(), 2u);
+  EXPECT_NEAR(cs[1], 0.0, 1e-15);
+  EXPECT_TRUE(window_spread(ramp, 0, 30, 0).empty());
 }
 
 }  // namespace
