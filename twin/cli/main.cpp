@@ -14,18 +14,10 @@ int main(int argc, char** argv) {
   twin::cli::register_run(app);
   twin::cli::register_replay(app);
   twin::cli::register_bench(app);
-#ifdef TWIN_HAVE_CUT
   twin::cli::register_cut(app);
-#endif
-#ifdef TWIN_HAVE_TUNE
   twin::cli::register_tune(app);
-#endif
-#ifdef TWIN_HAVE_CALIBRATE
   twin::cli::register_calibrate(app);
-#endif
-#ifdef TWIN_HAVE_EXPORT_FMU
   twin::cli::register_export_fmu(app);
-#endif
   if (argc > 1 && argv[1][0] != '-') {
     bool known = false;
     std::string names;

@@ -71,7 +71,7 @@ std::filesystem::path file(const std::string& name, const std::string& text) {
 }
 
 TEST(Cli, HelpForEverySubcommand) {
-  for (const char* sub : {"", "run", "replay"}) {
+  for (const char* sub : {"", "run", "replay", "bench", "cut", "tune", "calibrate", "export-fmu"}) {
     const Result r = twin_cmd(std::string(sub) + " --help");
     EXPECT_EQ(r.exit_code, 0) << sub;
     EXPECT_THAT(r.out, HasSubstr("Usage")) << sub;
