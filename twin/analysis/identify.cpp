@@ -134,7 +134,7 @@ DriveIdentification identify_drive(const AxisSignals& s, const std::vector<doubl
   id.Tc_neg_stderr = r.stderr_theta[3];
   auto clamp_min = [&](double& v, double lo, const char* name) {
     if (v < lo) {
-      notes.push_back(fmt::format("{} = {:.4g} came out below {:.3g} and was set to it", name, v, lo));
+      notes.push_back(fmt::format("{} = {:.4g} came out below {:.3g} and was clamped to {:.3g}", name, v, lo, lo));
       v = lo;
     }
   };
