@@ -41,9 +41,9 @@ TEST(Coupling, EnergyBalanceAndCuttingWorkThroughTheCorner) {
   ASSERT_GT(t_corner_s, 0.0);
   const auto n = static_cast<std::int64_t>((t_corner_s + 0.3) / sc.machine.Ts_s);
   for (std::int64_t k = 0; k < n; ++k) {
-    const sim::Snapshot& s = cs.step();
-    // Displacement over the tick just integrated: from the next row's start.
-    const sim::Snapshot row = s;
+    // Row k; after step() the drives stand at t_k+1, so the displacement over
+    // the tick is drive_state().x_mm - row.x_true_mm.
+    const sim::Snapshot& row = cs.step();
     std::array<double, 3> x_next{};
     for (Axis a : cs.axes()) {
       const auto& st = cs.drive_state(a);
