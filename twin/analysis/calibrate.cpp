@@ -225,23 +225,20 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
         double ratio = cur_err[i].relative(e);
         // Once a hunt is modelled on the axis, no later effect may give it up.
         const bool hunt_kept = !hunting_on[i] || e.hunt <= cur_err[i].hunt * (1.0 + opt.min_improvement) + 0.02;
-        const bool no_worse = e.err_mm <= cur_err[i].err_mm * (1.0 + opt.tie_tolerance) &&
-                              e.u <= cur_err[i].u * (1.0 + opt.tie_tolerance) && hunt_kept;
+        // Never above before, in any of the contract's errors.
+        const bool no_worse = e.err_mm <= cur_err[i].err_mm && e.u <= cur_err[i].u && hunt_kept;
         bool better = ratio < 1.0 - opt.min_improvement && no_worse;
         if (c.judged_by_hunting) {
           const double hr = cur_err[i].hunt > 0.0 ? e.hunt / cur_err[i].hunt : 1.0;
-          const bool bounded = e.err_mm <= cur_err[i].err_mm * std::sqrt(2.0) && e.u <= cur_err[i].u * std::sqrt(2.0);
           c.evidence += fmt::format("; hunting statistic {:.4f} -> {:.4f} ({:.2f} of before)", cur_err[i].hunt,
                                     e.hunt, hr);
-          better = hr <= opt.max_hunt_ratio && bounded;
-          if (better && !no_worse)
-            c.evidence += "; the point-by-point errors grow as a hunt of the right size out of phase must";
+          better = hr <= opt.max_hunt_ratio && no_worse;
           ratio = hr;
         }
-        const bool tie_strong = c.replay_blind && c.signal_gain >= opt.strong_signal_gain && c.t_stat >= opt.strong_t &&
-                                no_worse && ratio <= 1.0 + opt.tie_tolerance;
+        const bool tie_strong =
+            c.replay_blind && c.signal_gain >= opt.strong_signal_gain && c.t_stat >= opt.strong_t && no_worse;
         if (tie_strong && !better)
-          c.evidence += "; the replayed errors tie within noise and the signature decides";
+          c.evidence += "; the replayed errors are not above before and the signature decides";
         const bool first_choice = best_k[i] < 0;
         if ((better || tie_strong) && (first_choice || ratio < best_ratio[i])) {
           best_k[i] = k;

@@ -17,15 +17,15 @@ struct CalibrateOptions {
   double fit_fraction{0.6};       ///< first part fitted, the rest judges
   double min_signal_gain{0.03};   ///< a candidate must cut its held-out torque residual by this much to be replayed
   double min_improvement{0.05};   ///< and the replayed held-out errors by this much (mean of their ratios) to be added
-  /// For a candidate the replay is blind to (EffectCandidate::replay_blind),
-  /// where the replayed errors tie within tie_tolerance (relative), a
-  /// signature this strong decides: signal gain and t above these.
+  /// Every added effect must leave each held-out error (tracking, u) at or
+  /// below its value before. For a candidate the replay is blind to
+  /// (EffectCandidate::replay_blind), whose replayed errors do not improve by
+  /// min_improvement, a signature this strong decides: signal gain and t above these.
   double strong_signal_gain{0.3};
   double strong_t{2.0};
-  double tie_tolerance{0.02};
   /// A candidate judged by the hunting statistic (EffectCandidate::judged_by_hunting)
-  /// must cut AxisErrors::hunt to this fraction; its point-by-point errors may
-  /// grow up to sqrt(2) times (an equal hunt out of phase), never beyond.
+  /// must cut AxisErrors::hunt to this fraction (and, as every candidate,
+  /// leave the point-by-point errors not above before).
   double max_hunt_ratio{0.5};
   int max_effects_per_axis{2};
   int replays_per_round{4};

@@ -194,7 +194,7 @@ void try_cogging(const Ctx& c, std::vector<EffectCandidate>& out) {
   if (!best.ok) return;
   const double A = std::hypot(best.with.theta[4], best.with.theta[5]);
   const double phase = std::atan2(best.with.theta[5], best.with.theta[4]);
-  add(out, c, "cogging", best, {{"amplitude", A}, {"cycles_per_rev", best_n}, {"phase", phase}},
+  add(out, c, "cogging", best, {{"amplitude_Nm", A}, {"cycles_per_rev", best_n}, {"phase_rad", phase}},
       fmt::format("torque ripple {:.3f} N m at {} cycles per motor revolution (period {:.3g} mm, t = {:.1f}) cuts the "
                   "held-out torque residual by {:.0f} %",
                   A, best_n, 2.0 * kPi * c.s.rg_mm_per_rad / best_n, best.t_stat, 100.0 * best.gain));
@@ -227,7 +227,7 @@ void try_screw(const Ctx& c, std::vector<EffectCandidate>& out) {
   if (!best.ok) return;
   const double A = std::hypot(best.with.theta[4], best.with.theta[5]);
   const double phase = std::atan2(best.with.theta[5], best.with.theta[4]);
-  add(out, c, "screw_pitch_error", best, {{"amplitude", A}, {"period", best_P}, {"phase", phase}},
+  add(out, c, "screw_pitch_error", best, {{"amplitude_mm", A}, {"period_mm", best_P}, {"phase_rad", phase}},
       fmt::format("lead error {:.4f} mm with period {:.3g} mm (t = {:.1f}): the torque to follow it cuts the held-out "
                   "torque residual by {:.0f} %",
                   A, best_P, best.t_stat, 100.0 * best.gain));
@@ -257,7 +257,7 @@ void try_backlash_torque(const Ctx& c, std::vector<EffectCandidate>& out) {
   Fit f = fit_additive(c.s, c.T, c.reg, {&psi}, c.fit_slow, held);
   if (!f.ok || f.with.theta[4] <= 0.0) return;
   const double gap = 2.0 * f.with.theta[4];
-  add(out, c, "backlash", f, {{"gap", gap}},
+  add(out, c, "backlash", f, {{"gap_mm", gap}},
       fmt::format("lost motion {:.4f} mm at {} reversals (t = {:.1f}) cuts the held-out torque residual near "
                   "reversals by {:.0f} %",
                   gap, reversals.size(), f.t_stat, 100.0 * f.gain));
@@ -316,8 +316,8 @@ bool try_backlash_hunting(const Ctx& c, std::vector<EffectCandidate>& out) {
   EffectCandidate e_c;
   e_c.effect = "backlash";
   e_c.axis = c.s.axis;
-  e_c.params = {{"gap", s_fit}};
-  for (double m : {0.6, 0.8, 1.25, 1.6}) e_c.param_grid.push_back({{"gap", m * s_fit}});
+  e_c.params = {{"gap_mm", s_fit}};
+  for (double m : {0.6, 0.8, 1.25, 1.6}) e_c.param_grid.push_back({{"gap_mm", m * s_fit}});
   e_c.signal_gain = 1.0 - q_spread / s_held;
   e_c.t_stat = s_held / q_spread;
   e_c.judged_by_hunting = true;
@@ -381,7 +381,7 @@ void try_position_friction(const Ctx& c, std::vector<EffectCandidate>& out) {
   const auto held = filter_rows(c.held_moving, [&](std::size_t k) { return psi[k] != 0.0; });
   Fit f = fit_additive(c.s, c.T, c.reg, {&psi}, c.fit_moving, held);
   if (!f.ok || f.with.theta[4] <= 0.0) return;
-  add(out, c, "position_dependent_friction", f, {{"dTc", f.with.theta[4]}, {"x_start", x0}, {"x_end", x1}},
+  add(out, c, "position_dependent_friction", f, {{"dTc_Nm", f.with.theta[4]}, {"x_start_mm", x0}, {"x_end_mm", x1}},
       fmt::format("friction {:+.3f} N m (t = {:.1f}) between x = {:.1f} and {:.1f} mm cuts the held-out torque "
                   "residual there by {:.0f} % ({} held-out samples in the band)",
                   f.with.theta[4], f.t_stat, x0, x1, 100.0 * f.gain, held.size()));
@@ -438,7 +438,7 @@ void try_delay(const Ctx& c, std::vector<EffectCandidate>& out) {
   EffectCandidate e;
   e.effect = "delay";
   e.axis = c.s.axis;
-  e.params = {{"delay", delay_s}};
+  e.params = {{"delay_s", delay_s}};
   e.signal_gain = g.gain;
   e.t_stat = g.t_stat;
   e.evidence = fmt::format("torque lags the command by {:.2f} ms beyond the hold: shifting it cuts the held-out torque "
@@ -487,7 +487,7 @@ void try_saturation(const Ctx& c, std::vector<EffectCandidate>& out) {
     EffectCandidate e;
     e.effect = "current_saturation";
     e.axis = c.s.axis;
-    e.params = {{"i_max", i_max}};
+    e.params = {{"i_max_A", i_max}};
     e.signal_gain = std::max(0.1, g.gain);
     e.t_stat = g.t_stat;
     e.evidence = fmt::format("the current is flat at {:.2f} A in {} samples where Ka u asks for more (noise {:.3f} A)",
@@ -533,7 +533,7 @@ void try_saturation(const Ctx& c, std::vector<EffectCandidate>& out) {
   EffectCandidate e;
   e.effect = "current_saturation";
   e.axis = c.s.axis;
-  e.params = {{"i_max", best_i}};
+  e.params = {{"i_max_A", best_i}};
   e.signal_gain = g.gain;
   e.t_stat = g.t_stat;
   e.evidence = fmt::format("clipping Ka u at {:.2f} A cuts the held-out torque residual by {:.0f} %", best_i,
@@ -599,7 +599,7 @@ void try_constant_load(const Ctx& c, std::vector<EffectCandidate>& out) {
   g.gain = gain;
   g.t_stat = se > 0.0 ? std::abs(mean) / se : 0.0;
   g.extra_Nm.assign(c.s.n, 0.0);
-  add(out, c, "constant_load", g, {{"torque", load}},
+  add(out, c, "constant_load", g, {{"torque_Nm", load}},
       fmt::format("moving, friction reads {:.3f} N m in + and {:.3f} N m in -: a load of {:+.3f} N m with symmetric "
                   "friction {:.3f} N m; the {} stops hold {:+.3f} N m on average (t = {:.1f}) and the load explains "
                   "{:.0f} % of the holding torque in the {} held-out stops",
@@ -610,6 +610,33 @@ void try_constant_load(const Ctx& c, std::vector<EffectCandidate>& out) {
   // quarter of the other direction's lets the stops decide without the replay.
   const double lo = std::min(b.theta[2], b.theta[3]), hi = std::max(b.theta[2], b.theta[3]);
   out.back().replay_blind = lo < 0.25 * hi;
+  // The same hypothesis on the current model's own Coulomb levels: symmetric
+  // friction of their mean and a load of half their difference move the drive
+  // exactly as the asymmetric levels do, and hold it at the stops as a load
+  // does (stuck while Tm - load is within the friction band in either case).
+  // Its replay is the current one; only the stops' holding torque decides.
+  const double L_eq = 0.5 * (c.d.Tc_pos_Nm - c.d.Tc_neg_Nm);
+  if (L_eq * load <= 0.0) return;
+  EffectCandidate eq = out.back();
+  eq.params = {{"torque_Nm", L_eq}};
+  eq.base.J_kg_m2 = c.d.J_kg_m2;
+  eq.base.B_kg_m2_per_s = c.d.B_kg_m2_per_s;
+  eq.base.Tc_pos_Nm = eq.base.Tc_neg_Nm = 0.5 * (c.d.Tc_pos_Nm + c.d.Tc_neg_Nm);
+  eq.replay_blind = true;
+  eq.param_grid.clear();
+  double e0 = 0.0, e1 = 0.0;
+  for (double m : held_m) {
+    e0 += m * m;
+    e1 += (m - L_eq) * (m - L_eq);
+  }
+  eq.signal_gain = e0 > 0.0 ? 1.0 - std::sqrt(e1 / e0) : 0.0;
+  eq.evidence = fmt::format(
+      "the identified Coulomb levels {:.3f} N m in + and {:.3f} N m in - are symmetric friction {:.3f} N m and a load "
+      "of {:+.3f} N m, the same motion; the {} stops hold {:+.3f} N m on average (t = {:.1f}) and the load explains "
+      "{:.0f} % of the holding torque in the {} held-out stops",
+      c.d.Tc_pos_Nm, c.d.Tc_neg_Nm, eq.base.Tc_pos_Nm, L_eq, all_m.size(), mean, eq.t_stat, 100.0 * eq.signal_gain,
+      held_m.size());
+  out.push_back(std::move(eq));
 }
 
 void try_compliance(const Ctx& c, const std::vector<double>& e_res, std::vector<EffectCandidate>& out) {
@@ -658,7 +685,7 @@ void try_compliance(const Ctx& c, const std::vector<double>& e_res, std::vector<
     const double wr = 2.0 * kPi * f_Hz * ratio;
     const double K = wr * wr * mu;
     const double C = 2.0 * zeta * std::sqrt(K * mu);
-    add(out, c, "compliance", g, {{"K", K}, {"C", C}, {"load_fraction", frac}},
+    add(out, c, "compliance", g, {{"K_Nm_per_rad", K}, {"C_Nm_s_per_rad", C}, {"load_fraction", frac}},
         fmt::format("the held-out tracking-error residual has a resonance at {:.0f} Hz, {:.0f} times the median level "
                     "of its spectrum; two-mass resonance tried at {:.0f} Hz",
                     f_Hz, prominence, f_Hz * ratio));

@@ -50,9 +50,9 @@ TEST(CalibrateExamples, CleanRunAddsNothing) {
 
 // Truth: constant_load on y, +0.25 N m. The torque must be found within
 // 0.05 N m (moving, it is read from the Coulomb asymmetry, which carries the
-// truth's own asymmetry of 0.025 N m) and the held-out errors may not grow
-// beyond the 2 % within which calibrate calls two replays a tie (a constant
-// load changes the moving model not at all, only the stops).
+// truth's own asymmetry of 0.025 N m) and no held-out error may be above its
+// value before (a constant load with symmetric friction moves the drive as
+// the asymmetric levels do; only the stops tell them apart).
 TEST(CalibrateExamples, ConstantLoadOnY) {
   if (!std::filesystem::exists(example("constant_load_y"))) GTEST_SKIP() << "shared/data/examples not present";
   const CalibrationResult r = run_example("constant_load_y");
@@ -61,8 +61,8 @@ TEST(CalibrateExamples, ConstantLoadOnY) {
   EXPECT_EQ(r.added[0].candidate.axis, Axis::kY);
   EXPECT_NEAR(r.added[0].candidate.params.at(0).second, 0.25, 0.05);
   for (Axis a : r.axes) {
-    EXPECT_LE(r.error_after[index(a)].err_mm, r.error_before[index(a)].err_mm * 1.02);
-    EXPECT_LE(r.error_after[index(a)].u, r.error_before[index(a)].u * 1.02);
+    EXPECT_LE(r.error_after[index(a)].err_mm, r.error_before[index(a)].err_mm);
+    EXPECT_LE(r.error_after[index(a)].u, r.error_before[index(a)].u);
   }
 }
 

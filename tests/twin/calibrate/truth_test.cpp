@@ -57,8 +57,8 @@ CalibrationResult calibrate_case(const Case& c, const std::string& folder = "") 
 
 class TruthEffect : public ::testing::TestWithParam<Case> {};
 
-// The named effect must be the first one added on x, and the held-out errors
-// may not grow beyond the 2 % within which calibrate calls replays a tie.
+// The named effect must be the first one added on x, and neither held-out
+// error (tracking, low-passed u) may be above its value before.
 // "At most half where the effect is strong": the part of the held-out error
 // the effect causes, above the floor that the same plant without it leaves
 // (encoder quantisation and stick/slip put the tracking error of any model at
@@ -71,8 +71,8 @@ TEST_P(TruthEffect, NamesTheEffectAndImprovesHeldOutError) {
   EXPECT_EQ(r.added[0].candidate.axis, Axis::kX);
   const auto& b = r.error_before[0];
   const auto& a = r.error_after[0];
-  EXPECT_LE(a.err_mm, b.err_mm * 1.02);
-  EXPECT_LE(a.u, b.u * 1.02);
+  EXPECT_LE(a.err_mm, b.err_mm);
+  EXPECT_LE(a.u, b.u);
   const CalibrationResult none = calibrate_case(Case{"none", {}}, std::string(c.name) + "_floor");
   const auto& f = none.error_after[0];
   const double excess_err = (a.err_mm - f.err_mm) / std::max(1e-9, b.err_mm - f.err_mm);
@@ -109,7 +109,7 @@ INSTANTIATE_TEST_SUITE_P(
 // phase). Checked: right effect and axis, without being told; gap within 25 %
 // of the truth's 0.01 mm (the spread of a hunt sizes the gap only to the
 // grid of gaps calibrate replays, steps of 1.25 to 1.6); held-out tracking and
-// u errors not above before (the 2 % tie band, as for every effect); and the
+// u errors not above before (as for every effect); and the
 // hunting statistic, the error the effect moves most, at most half of before.
 TEST(TruthBacklash, HuntingAcrossTheGapNamesBacklash) {
   const CalibrationResult r = calibrate_case(Case{"backlash", with([](truth::Effects& e) { e.backlash_mm = 0.01; })});
@@ -118,13 +118,13 @@ TEST(TruthBacklash, HuntingAcrossTheGapNamesBacklash) {
   EXPECT_EQ(r.added[0].candidate.axis, Axis::kX);
   double gap_mm = 0.0;
   for (const auto& [k, v] : r.added[0].candidate.params)
-    if (k == "gap") gap_mm = v;
+    if (k == "gap_mm") gap_mm = v;
   EXPECT_NEAR(gap_mm, 0.01, 0.25 * 0.01);
   const auto& b = r.error_before[0];
   const auto& a = r.error_after[0];
   std::printf("  hunting statistic %.4f -> %.4f, gap %.5f mm\n", b.hunt, a.hunt, gap_mm);
-  EXPECT_LE(a.err_mm, b.err_mm * 1.02);
-  EXPECT_LE(a.u, b.u * 1.02);
+  EXPECT_LE(a.err_mm, b.err_mm);
+  EXPECT_LE(a.u, b.u);
   EXPECT_LE(a.hunt, 0.5 * b.hunt);
 }
 
