@@ -31,7 +31,7 @@ std::vector<double> tracking_residual(const MeasuredRun& run, const ReplayResult
 // whose replay has the lowest error on the fitting rows; the held-out rows
 // play no part. Other axes keep `machine`'s model.
 void choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& machine, const ReplayResult& current,
-                        EffectCandidate& c, std::size_t n_fit, int& replays) {
+                        EffectCandidate& c, std::size_t n_fit, double max_hunt_ratio, int& replays) {
   if (c.param_grid.empty() || n_fit < 2) return;
   std::vector<std::vector<std::pair<std::string, double>>> sets{c.params};
   sets.insert(sets.end(), c.param_grid.begin(), c.param_grid.end());
@@ -54,7 +54,12 @@ void choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
       const ReplayResult rep = replay_run(one, trial, n_fit);
       ++replays;
       const AxisErrors e = axis_errors(run, rep, c.axis, 0, n_fit);
-      const double score = c.judged_by_hunting ? (base.hunt > 0.0 ? e.hunt / base.hunt : 1.0) : base.relative(e);
+      // A hunt: among the sets that reproduce its size (hunting statistic at
+      // most max_hunt_ratio of the current model's), the one closest point
+      // by point, i.e. most nearly in phase with the run.
+      const double hunt_ratio = base.hunt > 0.0 ? e.hunt / base.hunt : 1.0;
+      const double score =
+          c.judged_by_hunting ? (hunt_ratio <= max_hunt_ratio ? base.relative(e) : 10.0 + hunt_ratio) : base.relative(e);
       if (best == sets.size() || score < best_score) {
         best_score = score;
         best = j;
@@ -67,8 +72,8 @@ void choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
   c.params = sets[best];
   c.evidence += fmt::format("; of {} parameter sets replayed on the fitting part, the best:", sets.size());
   for (const auto& [k, v] : c.params) c.evidence += fmt::format(" {} = {:.4g}", k, v);
-  c.evidence += fmt::format(" (fitting-part {} {:.3f} of the current model's)",
-                            c.judged_by_hunting ? "hunting statistic" : "errors", best_score);
+  c.evidence += fmt::format(" (fitting-part errors {:.3f} of the current model's)",
+                            best_score >= 10.0 ? best_score - 10.0 : best_score);
   c.param_grid.clear();
 }
 
@@ -186,7 +191,7 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
     }
     if (!any) break;
     for (Axis a : run.axes)
-      for (auto& c : cands[index(a)]) choose_on_fit_part(run, machine, current, c, r.n_fit, r.replays);
+      for (auto& c : cands[index(a)]) choose_on_fit_part(run, machine, current, c, r.n_fit, opt.max_hunt_ratio, r.replays);
     AxisArray<int> best_k{-1, -1, -1};
     AxisArray<AxisErrors> best_err = cur_err;
     AxisArray<double> best_ratio{1.0, 1.0, 1.0};
@@ -235,8 +240,10 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
           better = hr <= opt.max_hunt_ratio && no_worse;
           ratio = hr;
         }
-        const bool tie_strong =
-            c.replay_blind && c.signal_gain >= opt.strong_signal_gain && c.t_stat >= opt.strong_t && no_worse;
+        // Only as the first effect on an axis: after one, the levels are fitted
+        // jointly with it and a second effect must earn its place in the replay.
+        const bool tie_strong = present[i].empty() && c.replay_blind && c.signal_gain >= opt.strong_signal_gain &&
+                                c.t_stat >= opt.strong_t && no_worse;
         if (tie_strong && !better)
           c.evidence += "; the replayed errors are not above before and the signature decides";
         const bool first_choice = best_k[i] < 0;

@@ -63,7 +63,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   const Plant& p = sp.plant;
   const Effects& e = sp.effects;
   const double Ts = sp.Ts_s;
-  const auto ref = make_reference(Ts, sp.cycles);
+  const std::vector<double> ref = sp.reference_mm.empty() ? make_reference(Ts, sp.cycles) : sp.reference_mm;
   const bool two_mass = e.compliance_K > 0.0;
   const double Jm = two_mass ? p.J * (1.0 - e.compliance_frac) : p.J;
   const double Jl = two_mass ? p.J * e.compliance_frac : 0.0;

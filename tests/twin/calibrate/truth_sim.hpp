@@ -6,6 +6,7 @@
 // (trace.csv + meta.json) that `calibrate` reads without being told what is in it.
 #include <filesystem>
 #include <string>
+#include <vector>
 
 namespace twin::truth {
 
@@ -36,6 +37,9 @@ struct RunSpec {
   double current_noise_A{0.01};
   int cycles{2};
   unsigned seed{1};
+  /// Reference positions, one per controller period; empty: the built-in
+  /// program of trapezoidal moves and dwells.
+  std::vector<double> reference_mm;
 };
 
 /// Simulates and writes dir/trace.csv and dir/meta.json for axis x of the

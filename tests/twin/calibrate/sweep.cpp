@@ -1,0 +1,116 @@
+// calibrate_sweep: runs of the truth simulator (truth_sim.cpp) over every
+// catalogue effect at several magnitudes and on two motion programs, each
+// passed to calibrate() without being told what is in it. Prints one line per
+// run: the effect put in, what calibrate added, and the held-out errors before
+// and after. Not a test: a table for docs/calibration.md.
+//
+//   calibrate_sweep [--example RUN_DIR] [--filter NAME] [--verbose]
+//
+// With --example, the second motion program is the x and y reference of that
+// measured run (each replayed on the truth's X plant).
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "truth_sim.hpp"
+#include "twin/analysis/calibrate.hpp"
+#include "twin/core/error.hpp"
+
+namespace {
+
+using twin::truth::Effects;
+
+struct Case {
+  std::string name;
+  std::string effect;
+  std::function<void(Effects&)> set;
+};
+
+std::vector<Case> cases() {
+  std::vector<Case> c;
+  c.push_back({"none", "none", [](Effects&) {}});
+  for (double m : {0.5, 1.0, 2.0}) {
+    const std::string s = "x" + std::to_string(m).substr(0, 3);
+    c.push_back({"stribeck " + s, "stribeck", [m](Effects& e) { e.stribeck_Ts = 0.2 + 0.35 * m; e.stribeck_ws = 2.0; }});
+    c.push_back({"cogging " + s, "cogging", [m](Effects& e) { e.cogging_A = 0.15 * m; e.cogging_n = 6; e.cogging_phase = 1.0; }});
+    c.push_back({"screw_pitch_error " + s, "screw_pitch_error", [m](Effects& e) { e.screw_A_mm = 0.01 * m; e.screw_P_mm = 9.0; }});
+    c.push_back({"backlash " + s, "backlash", [m](Effects& e) { e.backlash_mm = 0.01 * m; }});
+    c.push_back({"constant_load " + s, "constant_load", [m](Effects& e) { e.load_Nm = -0.3 * m; }});
+    c.push_back({"position_dependent_friction " + s, "position_dependent_friction",
+                 [m](Effects& e) { e.pdf_dTc = 0.3 * m; e.pdf_x0 = 4.0; e.pdf_x1 = 10.0; }});
+    c.push_back({"delay " + s, "delay", [m](Effects& e) { e.delay_ticks = static_cast<int>(4 * m); }});
+    c.push_back({"compliance " + s, "compliance", [m](Effects& e) { e.compliance_K = 2500.0 / m; e.compliance_C = 0.15; }});
+    c.push_back({"current_saturation " + s, "current_saturation", [m](Effects& e) { e.i_max_A = 16.0 / m; }});
+  }
+  return c;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string example, filter;
+  bool verbose = false;
+  for (int i = 1; i < argc; ++i)
+    if (!std::strcmp(argv[i], "--verbose")) verbose = true;
+  for (int i = 1; i + 1 < argc; i += 2) {
+    if (!std::strcmp(argv[i], "--example")) example = argv[i + 1];
+    if (!std::strcmp(argv[i], "--filter")) filter = argv[i + 1];
+  }
+  std::vector<std::pair<std::string, std::vector<double>>> programs{{"trapezoids", {}}};
+  if (!example.empty()) {
+    const auto run = twin::analysis::load_run(example);
+    for (const char* a : {"x", "y"})
+      if (const auto* r = run.trace.find(std::string(a) + "_ref_mm")) programs.push_back({std::string("example ") + a, *r});
+  }
+  const auto dir = std::filesystem::temp_directory_path() / "calibrate_sweep";
+  int wrong = 0, rose = 0, total = 0;
+  for (const auto& [prog, ref] : programs)
+    for (const Case& c : cases()) {
+      if (!filter.empty() && c.name.find(filter) == std::string::npos) continue;
+      twin::truth::RunSpec spec;
+      spec.plant.J = 0.0084;
+      spec.plant.B = 0.016;
+      spec.plant.Tc_pos = 0.23;
+      spec.plant.Tc_neg = 0.17;
+      spec.reference_mm = ref;
+      c.set(spec.effects);
+      try {
+        twin::truth::write_truth_run(dir, spec);
+        const auto run = twin::analysis::load_run(dir);
+        std::vector<std::string> notes;
+        const auto machine = twin::analysis::machine_for_run(run, "", &notes);
+        const auto r = twin::analysis::calibrate(run, machine);
+        std::string added;
+        for (const auto& a : r.added) added += (added.empty() ? "" : "+") + a.candidate.effect;
+        if (added.empty()) added = "none";
+        const auto& b = r.error_before[0];
+        const auto& a = r.error_after[0];
+        const bool ok = (r.added.empty() ? std::string("none") : r.added[0].candidate.effect) == c.effect;
+        const bool up = a.err_mm > b.err_mm || a.u > b.u;
+        wrong += !ok;
+        rose += up;
+        ++total;
+        std::printf("%-12s %-34s %-40s err %.4f -> %.4f  u %.4f -> %.4f  hunt %.3f -> %.3f %s%s\n", prog.c_str(),
+                    c.name.c_str(), added.c_str(), b.err_mm, a.err_mm, b.u, a.u, b.hunt, a.hunt, ok ? "" : " WRONG",
+                    up ? " ROSE" : "");
+        if (verbose) {
+          for (const auto& k : r.considered)
+            std::printf("    considered %s: gain %.3f t %.1f: %s\n", k.effect.c_str(), k.signal_gain, k.t_stat,
+                        k.evidence.c_str());
+          for (const auto& k : r.rejected) std::printf("    rejected %s: %s\n", k.effect.c_str(), k.evidence.c_str());
+          for (const auto& k : r.added)
+            std::printf("    added %s: %s\n", k.candidate.effect.c_str(), k.candidate.evidence.c_str());
+        }
+        std::fflush(stdout);
+      } catch (const twin::Error& e) {
+        std::printf("%-12s %-34s error: %s\n", prog.c_str(), c.name.c_str(), e.what());
+        ++wrong;
+        ++total;
+      }
+    }
+  std::printf("%d runs: %d named wrong, %d with a held-out error above before\n", total, wrong, rose);
+  return 0;
+}
