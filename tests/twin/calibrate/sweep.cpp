@@ -8,6 +8,7 @@
 //
 // With --example, the second motion program is the x and y reference of that
 // measured run (each replayed on the truth's X plant).
+#include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -82,7 +83,9 @@ int main(int argc, char** argv) {
         const auto run = twin::analysis::load_run(dir);
         std::vector<std::string> notes;
         const auto machine = twin::analysis::machine_for_run(run, "", &notes);
+        const auto t0 = std::chrono::steady_clock::now();
         const auto r = twin::analysis::calibrate(run, machine);
+        const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         std::string added;
         for (const auto& a : r.added) added += (added.empty() ? "" : "+") + a.candidate.effect;
         if (added.empty()) added = "none";
@@ -93,8 +96,8 @@ int main(int argc, char** argv) {
         wrong += !ok;
         rose += up;
         ++total;
-        std::printf("%-12s %-34s %-40s err %.4f -> %.4f  u %.4f -> %.4f  hunt %.3f -> %.3f %s%s\n", prog.c_str(),
-                    c.name.c_str(), added.c_str(), b.err_mm, a.err_mm, b.u, a.u, b.hunt, a.hunt, ok ? "" : " WRONG",
+        std::printf("%-12s %-34s %-40s err %.4f -> %.4f  u %.4f -> %.4f  hunt %.3f -> %.3f  %.1f s%s%s\n", prog.c_str(),
+                    c.name.c_str(), added.c_str(), b.err_mm, a.err_mm, b.u, a.u, b.hunt, a.hunt, wall_s, ok ? "" : " WRONG",
                     up ? " ROSE" : "");
         if (verbose) {
           for (const auto& k : r.considered)
