@@ -79,7 +79,27 @@ void choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
 
 }  // namespace
 
+// The errors are kept to 6 significant digits: below that two replays differ
+// only by the rounding of their arithmetic, and the held-out rule compares
+// the reported numbers themselves.
+namespace {
+double six_digits(double v) {
+  if (!(v > 0.0) || !std::isfinite(v)) return v;
+  const double scale = std::pow(10.0, 5 - static_cast<int>(std::floor(std::log10(v))));
+  return std::round(v * scale) / scale;
+}
+}  // namespace
+
 AxisErrors axis_errors(const MeasuredRun& run, const ReplayResult& model, Axis a, std::size_t from, std::size_t to) {
+  AxisErrors e = axis_errors_exact(run, model, a, from, to);
+  e.err_mm = six_digits(e.err_mm);
+  e.u = six_digits(e.u);
+  e.hunt = six_digits(e.hunt);
+  return e;
+}
+
+AxisErrors axis_errors_exact(const MeasuredRun& run, const ReplayResult& model, Axis a, std::size_t from,
+                             std::size_t to) {
   AxisErrors e;
   const std::string n(axis_name(a));
   const auto& ref = run.trace.at(n + "_ref_mm");
@@ -223,7 +243,7 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
         if (cands[i].size() <= static_cast<std::size_t>(k)) continue;
         const AxisErrors e = axis_errors(run, rep, a, r.n_fit);
         auto& c = cands[i][static_cast<std::size_t>(k)];
-        c.evidence += fmt::format("; replayed held-out error: tracking {:.4f} -> {:.4f}, u {:.4f} -> {:.4f}",
+        c.evidence += fmt::format("; replayed held-out error: tracking {:.6f} -> {:.6f}, u {:.6f} -> {:.6f}",
                                   cur_err[i].err_mm, e.err_mm, cur_err[i].u, e.u);
         // Each error relative to its own value before: the tracking error of a
         // quantised run sits on a floor of encoder noise that no model moves.

@@ -73,9 +73,14 @@ struct CalibrationResult {
   std::vector<std::string> notes;
 };
 
-/// Errors of `model` against the run on rows [from, to) (to clipped to the run).
+/// Errors of `model` against the run on rows [from, to) (to clipped to the
+/// run), to 6 significant digits: the numbers the held-out rule compares and
+/// report.json carries.
 AxisErrors axis_errors(const MeasuredRun& run, const ReplayResult& model, Axis a, std::size_t from,
                        std::size_t to = static_cast<std::size_t>(-1));
+/// The same, unrounded.
+AxisErrors axis_errors_exact(const MeasuredRun& run, const ReplayResult& model, Axis a, std::size_t from,
+                             std::size_t to = static_cast<std::size_t>(-1));
 
 CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition& start,
                             const CalibrateOptions& options = {});
