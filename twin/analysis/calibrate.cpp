@@ -35,7 +35,9 @@ void choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
   if (c.param_grid.empty() || n_fit < 2) return;
   std::vector<std::vector<std::pair<std::string, double>>> sets{c.params};
   sets.insert(sets.end(), c.param_grid.begin(), c.param_grid.end());
-  double best_score = 0.0;
+  // (rank, score): rank 1 for a hunting candidate's set that does not
+  // reproduce the hunt's size, ranked after every set that does.
+  std::pair<int, double> best_score{0, 0.0};
   std::size_t best = sets.size();
   // Each error relative to the current model's on the same rows (the
   // tracking error sits on an encoder-noise floor that no model moves).
@@ -58,8 +60,8 @@ void choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
       // most max_hunt_ratio of the current model's), the one closest point
       // by point, i.e. most nearly in phase with the run.
       const double hunt_ratio = base.hunt > 0.0 ? e.hunt / base.hunt : 1.0;
-      const double score =
-          c.judged_by_hunting ? (hunt_ratio <= max_hunt_ratio ? base.relative(e) : 10.0 + hunt_ratio) : base.relative(e);
+      const bool off_hunt = c.judged_by_hunting && hunt_ratio > max_hunt_ratio;
+      const std::pair<int, double> score{off_hunt ? 1 : 0, off_hunt ? hunt_ratio : base.relative(e)};
       if (best == sets.size() || score < best_score) {
         best_score = score;
         best = j;
@@ -72,34 +74,23 @@ void choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
   c.params = sets[best];
   c.evidence += fmt::format("; of {} parameter sets replayed on the fitting part, the best:", sets.size());
   for (const auto& [k, v] : c.params) c.evidence += fmt::format(" {} = {:.4g}", k, v);
-  c.evidence += fmt::format(" (fitting-part errors {:.3f} of the current model's)",
-                            best_score >= 10.0 ? best_score - 10.0 : best_score);
+  c.evidence += fmt::format(" (fitting-part {} {:.3f} of the current model's)",
+                            best_score.first == 0 ? "errors" : "hunting statistic", best_score.second);
   c.param_grid.clear();
 }
-
-}  // namespace
 
 // The errors are kept to 6 significant digits: below that two replays differ
 // only by the rounding of their arithmetic, and the held-out rule compares
 // the reported numbers themselves.
-namespace {
 double six_digits(double v) {
   if (!(v > 0.0) || !std::isfinite(v)) return v;
   const double scale = std::pow(10.0, 5 - static_cast<int>(std::floor(std::log10(v))));
   return std::round(v * scale) / scale;
 }
+
 }  // namespace
 
 AxisErrors axis_errors(const MeasuredRun& run, const ReplayResult& model, Axis a, std::size_t from, std::size_t to) {
-  AxisErrors e = axis_errors_exact(run, model, a, from, to);
-  e.err_mm = six_digits(e.err_mm);
-  e.u = six_digits(e.u);
-  e.hunt = six_digits(e.hunt);
-  return e;
-}
-
-AxisErrors axis_errors_exact(const MeasuredRun& run, const ReplayResult& model, Axis a, std::size_t from,
-                             std::size_t to) {
   AxisErrors e;
   const std::string n(axis_name(a));
   const auto& ref = run.trace.at(n + "_ref_mm");
@@ -129,6 +120,9 @@ AxisErrors axis_errors_exact(const MeasuredRun& run, const ReplayResult& model, 
     const auto ls = lowpass(std::span<const double>(mod.data(), rows), fc, fs);
     e.u = nrms(lm, ls, from, rows);
   }
+  e.err_mm = six_digits(e.err_mm);
+  e.u = six_digits(e.u);
+  e.hunt = six_digits(e.hunt);
   return e;
 }
 

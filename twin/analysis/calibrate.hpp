@@ -78,9 +78,6 @@ struct CalibrationResult {
 /// report.json carries.
 AxisErrors axis_errors(const MeasuredRun& run, const ReplayResult& model, Axis a, std::size_t from,
                        std::size_t to = static_cast<std::size_t>(-1));
-/// The same, unrounded.
-AxisErrors axis_errors_exact(const MeasuredRun& run, const ReplayResult& model, Axis a, std::size_t from,
-                             std::size_t to = static_cast<std::size_t>(-1));
 
 CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition& start,
                             const CalibrateOptions& options = {});

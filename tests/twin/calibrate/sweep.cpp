@@ -54,11 +54,18 @@ std::vector<Case> cases() {
 int main(int argc, char** argv) {
   std::string example, filter;
   bool verbose = false;
-  for (int i = 1; i < argc; ++i)
-    if (!std::strcmp(argv[i], "--verbose")) verbose = true;
-  for (int i = 1; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--example")) example = argv[i + 1];
-    if (!std::strcmp(argv[i], "--filter")) filter = argv[i + 1];
+  for (int i = 1; i < argc; ++i) {
+    const bool has_value = i + 1 < argc;
+    if (!std::strcmp(argv[i], "--verbose")) {
+      verbose = true;
+    } else if (!std::strcmp(argv[i], "--example") && has_value) {
+      example = argv[++i];
+    } else if (!std::strcmp(argv[i], "--filter") && has_value) {
+      filter = argv[++i];
+    } else {
+      std::fprintf(stderr, "calibrate_sweep: unknown or incomplete argument '%s'\n", argv[i]);
+      return 2;
+    }
   }
   std::vector<std::pair<std::string, std::vector<double>>> programs{{"trapezoids", {}}};
   if (!example.empty()) {
