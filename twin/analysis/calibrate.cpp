@@ -147,7 +147,7 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
     sig[index(a)] = prepare_axis_signals(run, a, ax.drive, machine.encoder_resolution_mm, opt.fit_fraction, &note);
     if (!note.empty()) r.notes.push_back(note);
     if (sig[index(a)].n == 0) continue;
-    if (!sig[index(a)].torque_from_u)
+    if (!sig[index(a)].has_u)
       r.notes.push_back(fmt::format("axis {}: no {}_u_V: torque from the current (Tm = Kt i); the u error is measured "
                                     "on the current",
                                     axis_name(a), axis_name(a)));
@@ -246,7 +246,8 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
         const bool hunt_kept = !hunting_on[i] || e.hunt <= cur_err[i].hunt * (1.0 + opt.min_improvement) + 0.02;
         // Never above before, in any of the contract's errors.
         const bool no_worse = e.err_mm <= cur_err[i].err_mm && e.u <= cur_err[i].u && hunt_kept;
-        bool better = ratio < 1.0 - opt.min_improvement && no_worse;
+        const double needed = present[i].empty() ? opt.min_improvement : opt.min_improvement_second;
+        bool better = ratio < 1.0 - needed && no_worse;
         if (c.judged_by_hunting) {
           const double hr = cur_err[i].hunt > 0.0 ? e.hunt / cur_err[i].hunt : 1.0;
           c.evidence += fmt::format("; hunting statistic {:.4f} -> {:.4f} ({:.2f} of before)", cur_err[i].hunt,

@@ -16,7 +16,14 @@ namespace twin::analysis {
 struct CalibrateOptions {
   double fit_fraction{0.6};       ///< first part fitted, the rest judges
   double min_signal_gain{0.03};   ///< a candidate must cut its held-out torque residual by this much to be replayed
-  double min_improvement{0.05};   ///< and the replayed held-out errors by this much (mean of their ratios) to be added
+  /// The replayed held-out errors must improve by this much (mean of their
+  /// ratios) for a first effect on an axis to be added: two replays of
+  /// equivalent models differ by under 1 % in these errors.
+  double min_improvement{0.03};
+  /// A second effect on an axis, whose signature may be what is left of the
+  /// first one's misfit (a cogging ripple's harmonics read as a lead error),
+  /// must improve them by this much.
+  double min_improvement_second{0.08};
   /// Every added effect must leave each held-out error (tracking, u) at or
   /// below its value before. For a candidate the replay is blind to
   /// (EffectCandidate::replay_blind), whose replayed errors do not improve by

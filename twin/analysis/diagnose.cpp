@@ -206,7 +206,7 @@ void try_screw(const Ctx& c, std::vector<EffectCandidate>& out) {
   std::vector<double> sn(c.s.n), cs(c.s.n);
   // A periodic error is told from a slow drift only if the travel holds two periods.
   const double P_max = 0.5 * c.travel_mm;
-  for (double P = 1.0; P <= P_max; P *= 1.06) {
+  auto try_period = [&](double P) {
     for (std::size_t k = 0; k < c.s.n; ++k) {
       const double th = 2.0 * kPi * c.s.x_mm[k] / P;
       sn[k] = std::sin(th);
@@ -223,6 +223,15 @@ void try_screw(const Ctx& c, std::vector<EffectCandidate>& out) {
       best = std::move(f);
       best_P = P;
     }
+  };
+  for (double P = 1.0; P <= P_max; P *= 1.06) try_period(P);
+  // The coarse scan places the period to 6 %; over a travel of many periods
+  // that is a phase error the replay sees (0.3 % over 100 mm of a 7 mm
+  // period is 0.9 rad at the ends). Refine to 0.4 %, then to 0.05 %.
+  for (const auto& [span, step] : {std::pair{1.06, 1.004}, std::pair{1.005, 1.0005}}) {
+    if (!best.ok) break;
+    const double P0 = best_P;
+    for (double P = P0 / span; P <= std::min(P_max, P0 * span); P *= step) try_period(P);
   }
   if (!best.ok) return;
   const double A = std::hypot(best.with.theta[4], best.with.theta[5]);
@@ -233,34 +242,53 @@ void try_screw(const Ctx& c, std::vector<EffectCandidate>& out) {
                   A, best_P, best.t_stat, 100.0 * best.gain));
 }
 
-void try_backlash_torque(const Ctx& c, std::vector<EffectCandidate>& out) {
-  // Direction of the last motion of the reference, held through stops.
-  std::vector<double> dir(c.s.n, 0.0);
-  std::vector<std::size_t> reversals;
+// Backlash seen at reversals: with the encoder on the table, the motor turns
+// back through the gap while the table stands, so the measured position lags
+// the model's by up to about half the gap just after every reversal of the
+// reference, in the new direction. The median over reversals of the peak of
+// that signed residual (measured minus model tracking error) in the 50 ms
+// after each reversal sizes the gap; a grid around it goes to the replay.
+void try_backlash_reversals(const Ctx& c, const std::vector<double>& e_res, std::vector<EffectCandidate>& out) {
+  if (e_res.size() != c.s.n) return;
+  const double q = c.s.encoder_resolution_mm > 0.0 ? c.s.encoder_resolution_mm : 0.001;
+  const auto span = static_cast<std::size_t>(std::lround(0.05 / c.s.dt_s));
+  std::vector<double> fit_peaks, held_peaks;
   double last = 0.0;
   for (std::size_t k = 0; k < c.s.n; ++k) {
     const double v = c.s.v_ref_mm_per_s[k];
-    if (std::abs(v) > 0.05) {
-      const double sg = v > 0.0 ? 1.0 : -1.0;
-      if (last != 0.0 && sg != last) reversals.push_back(k);
-      last = sg;
+    if (std::abs(v) <= 0.05) continue;
+    const double sg = v > 0.0 ? 1.0 : -1.0;
+    if (last != 0.0 && sg != last && k + span <= c.s.n) {
+      // e_res is model minus measured position: positive where the table lags.
+      double peak = -1e300;
+      for (std::size_t j = k; j < k + span; ++j) peak = std::max(peak, sg * e_res[j]);
+      (k + span <= c.s.n_fit ? fit_peaks : held_peaks).push_back(peak);
     }
-    dir[k] = last;
+    last = sg;
   }
-  if (reversals.size() < 4) return;
-  auto psi = kinematic_torque(c.s, dir, c.base.J_kg_m2, c.base.B_kg_m2_per_s);
-  const auto window = static_cast<std::size_t>(0.15 / c.s.dt_s);
-  std::vector<char> near(c.s.n, 0);
-  for (std::size_t r : reversals)
-    for (std::size_t k = r > window ? r - window : 0; k < std::min(c.s.n, r + window); ++k) near[k] = 1;
-  const auto held = filter_rows(c.held_slow, [&](std::size_t k) { return near[k] != 0; });
-  Fit f = fit_additive(c.s, c.T, c.reg, {&psi}, c.fit_slow, held);
-  if (!f.ok || f.with.theta[4] <= 0.0) return;
-  const double gap = 2.0 * f.with.theta[4];
-  add(out, c, "backlash", f, {{"gap_mm", gap}},
-      fmt::format("lost motion {:.4f} mm at {} reversals (t = {:.1f}) cuts the held-out torque residual near "
-                  "reversals by {:.0f} %",
-                  gap, reversals.size(), f.t_stat, 100.0 * f.gain));
+  if (fit_peaks.size() < 4 || held_peaks.size() < 2) return;
+  auto median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  const double p_fit = median(fit_peaks), p_held = median(held_peaks);
+  // A model without the gap leaves about one encoder count of such peaks.
+  if (p_fit < 2.5 * q || p_held < 2.0 * q) return;
+  const double gap = 2.0 * p_fit;
+  EffectCandidate e;
+  e.effect = "backlash";
+  e.axis = c.s.axis;
+  e.params = {{"gap_mm", gap}};
+  for (double m : {0.6, 0.8, 1.2, 1.5, 2.0}) e.param_grid.push_back({{"gap_mm", m * gap}});
+  e.signal_gain = 1.0 - q / p_held;
+  e.t_stat = p_held / (0.5 * q);
+  e.evidence = fmt::format(
+      "after a reversal the table lags the model by a median peak of {:.4f} mm ({} reversals fitted) and {:.4f} mm "
+      "({} held out), {:.1f} encoder counts: lost motion of a gap of about {:.4f} mm",
+      p_fit, fit_peaks.size(), p_held, held_peaks.size(), p_held / q, gap);
+  e.base = c.base;
+  e.T_after_Nm = c.T;
+  out.push_back(std::move(e));
 }
 
 // Backlash with the loop closed on the table: across the gap the motor moves
@@ -336,8 +364,9 @@ bool try_backlash_hunting(const Ctx& c, std::vector<EffectCandidate>& out) {
   return true;
 }
 
-void try_backlash(const Ctx& c, std::vector<EffectCandidate>& out) {
-  if (!try_backlash_hunting(c, out)) try_backlash_torque(c, out);
+void try_backlash(const Ctx& c, const std::vector<double>& e_res, std::vector<EffectCandidate>& out) {
+  try_backlash_hunting(c, out);
+  try_backlash_reversals(c, e_res, out);
 }
 
 void try_position_friction(const Ctx& c, std::vector<EffectCandidate>& out) {
@@ -404,7 +433,66 @@ std::vector<double> shift_by(const std::vector<double>& T, double d_samples) {
   return r;
 }
 
+// Mean square of i - Ka u(t - lag) over rows [from, to) for lags 0..max_lag
+// samples: where the current is logged, a delay in the command path shows
+// as the lag that lines the current up with the command (the derivative
+// term's encoder-count chatter makes the match sharp).
+std::vector<double> current_lag_mse(const Ctx& c, std::size_t from, std::size_t to, std::size_t max_lag) {
+  std::vector<double> mse(max_lag + 1, 0.0);
+  const double Ka = c.d.Ka_A_per_V;
+  to = std::min(to, c.s.n);
+  if (to <= from + max_lag + 10) return {};
+  for (std::size_t L = 0; L <= max_lag; ++L) {
+    double sum = 0.0;
+    for (std::size_t k = from + max_lag; k < to; ++k) {
+      const double d = c.s.i_raw_A[k] - Ka * c.s.u_raw_V[k - L];
+      sum += d * d;
+    }
+    mse[L] = sum / static_cast<double>(to - from - max_lag);
+  }
+  return mse;
+}
+
+std::size_t max_delay_samples(const Ctx& c) {
+  return static_cast<std::size_t>(std::floor(0.01 / c.s.dt_s));  // 10 ms
+}
+
+// Lag (samples) of the current behind the command on the fitting rows; 0 when
+// no lag fits the current better than half the mismatch at lag 0.
+std::size_t current_lag(const Ctx& c) {
+  if (!c.s.has_u || !c.s.has_current) return 0;
+  const auto mse = current_lag_mse(c, 0, c.s.n_fit, max_delay_samples(c));
+  if (mse.empty()) return 0;
+  const auto best = static_cast<std::size_t>(std::min_element(mse.begin(), mse.end()) - mse.begin());
+  return mse[best] < 0.5 * mse[0] ? best : 0;
+}
+
+void try_delay_from_current(const Ctx& c, std::vector<EffectCandidate>& out) {
+  const std::size_t lag = current_lag(c);
+  if (lag == 0) return;
+  const auto held = current_lag_mse(c, c.s.n_fit, c.s.n, max_delay_samples(c));
+  if (held.empty() || !(held[0] > 0.0)) return;
+  const double gain = 1.0 - std::sqrt(held[lag] / held[0]);
+  const double delay_s = static_cast<double>(lag) * c.s.dt_s;
+  EffectCandidate e;
+  e.effect = "delay";
+  e.axis = c.s.axis;
+  e.params = {{"delay_s", delay_s}};
+  e.signal_gain = gain;
+  e.t_stat = 100.0 * gain;
+  e.evidence = fmt::format("the current follows Ka u {:.2f} ms late ({} samples): lined up, the held-out mismatch of "
+                           "current and command falls from {:.3f} A to {:.3f} A rms",
+                           1e3 * delay_s, lag, std::sqrt(held[0]), std::sqrt(held[lag]));
+  e.base = c.base;
+  e.T_after_Nm = c.T;
+  out.push_back(std::move(e));
+}
+
 void try_delay(const Ctx& c, std::vector<EffectCandidate>& out) {
+  if (c.s.has_u && c.s.has_current) {
+    try_delay_from_current(c, out);
+    return;
+  }
   if (!c.s.torque_from_u) return;
   // u is held over a controller period: the torque follows it by half a period
   // on average. That is the model's own lag; a delay is what comes on top.
@@ -457,8 +545,11 @@ void try_saturation(const Ctx& c, std::vector<EffectCandidate>& out) {
   const double Ka = c.d.Ka_A_per_V;
   const double Kt = c.d.Kt_Nm_per_A;
   const double fs = 1.0 / c.s.dt_s;
+  // Ka u as it reaches the amplifier: behind the logged command by the lag
+  // the current shows (a delay is a separate effect, not a limit).
+  const std::size_t lag = current_lag(c);
   std::vector<double> iu(c.s.n);
-  for (std::size_t k = 0; k < c.s.n; ++k) iu[k] = Ka * c.s.u_raw_V[k];
+  for (std::size_t k = 0; k < c.s.n; ++k) iu[k] = Ka * c.s.u_raw_V[k >= lag ? k - lag : 0];
   if (c.s.has_current) {
     // Direct: the current stops short of Ka u (flat tops).
     std::vector<double> small;
@@ -474,29 +565,19 @@ void try_saturation(const Ctx& c, std::vector<EffectCandidate>& out) {
     if (tops.size() < 20) return;
     std::sort(tops.begin(), tops.end());
     const double i_max = tops[tops.size() / 2];
-    std::vector<double> Ti(c.s.n);
-    for (std::size_t k = 0; k < c.s.n; ++k) Ti[k] = Kt * std::clamp(iu[k], -i_max, i_max);
-    Ti = lowpass(Ti, c.s.fc_Hz, fs);
-    const auto base_cols = std::vector<const std::vector<double>*>{&c.reg.acc, &c.reg.vel, &c.reg.pos, &c.reg.neg};
-    const auto r0 = least_squares(base_cols, c.T, c.fit_moving, corr_len(c.s));
-    const auto r1 = least_squares(base_cols, Ti, c.fit_moving, corr_len(c.s));
-    if (!r0.ok || !r1.ok) return;
-    Fit g;
-    g.ok = true;
-    g.with = r1;
-    g.without = r0;
-    g.gain = std::min(1.0, static_cast<double>(tops.size()) / std::max<double>(1.0, 0.01 * static_cast<double>(c.s.n)));
-    g.t_stat = static_cast<double>(tops.size());
+    // The torque is the measured current: the base model fitted on it already
+    // holds the limit's consequences; the limit itself goes to the replay.
     EffectCandidate e;
     e.effect = "current_saturation";
     e.axis = c.s.axis;
     e.params = {{"i_max_A", i_max}};
-    e.signal_gain = std::max(0.1, g.gain);
-    e.t_stat = g.t_stat;
-    e.evidence = fmt::format("the current is flat at {:.2f} A in {} samples where Ka u asks for more (noise {:.3f} A)",
-                             i_max, tops.size(), noise);
-    e.base = base_of(g, c.d);
-    e.T_after_Nm = Ti;
+    e.signal_gain =
+        std::max(0.1, std::min(1.0, static_cast<double>(tops.size()) / std::max(1.0, 0.01 * static_cast<double>(c.s.n))));
+    e.t_stat = static_cast<double>(tops.size());
+    e.evidence = fmt::format("the current is flat at {:.2f} A in {} samples where Ka u{} asks for more (noise {:.3f} A)",
+                             i_max, tops.size(), lag > 0 ? fmt::format(" ({} samples earlier)", lag) : "", noise);
+    e.base = c.base;
+    e.T_after_Nm = c.T;
     out.push_back(std::move(e));
     return;
   }
@@ -706,7 +787,7 @@ std::vector<EffectCandidate> diagnose_axis(const AxisSignals& s, const std::vect
   if (wanted("stribeck")) try_stribeck(c, out);
   if (wanted("cogging")) try_cogging(c, out);
   if (wanted("screw_pitch_error")) try_screw(c, out);
-  if (wanted("backlash")) try_backlash(c, out);
+  if (wanted("backlash")) try_backlash(c, e_residual_mm, out);
   if (wanted("constant_load")) try_constant_load(c, out);
   if (wanted("position_dependent_friction")) try_position_friction(c, out);
   if (wanted("delay")) try_delay(c, out);

@@ -42,7 +42,10 @@ AxisSignals prepare_axis_signals(const MeasuredRun& run, Axis axis, const feeddr
   s.rg_mm_per_rad = nominal.rg_mm_per_rad;
   s.has_u = u != nullptr;
   s.has_current = i != nullptr;
-  s.torque_from_u = u != nullptr;
+  // The measured current is the torque itself (Tm = Kt i): it carries what
+  // happens between the command and the motor (a delay, a current limit),
+  // which the command does not. u makes the torque only where no current is logged.
+  s.torque_from_u = u != nullptr && i == nullptr;
   s.torque_per_unit = s.torque_from_u ? nominal.Kt_Nm_per_A * nominal.Ka_A_per_V : nominal.Kt_Nm_per_A;
   s.encoder_resolution_mm = encoder_resolution_mm;
   s.x_ref_mm = *ref;

@@ -3,7 +3,8 @@
 /// Tc_neg) from a measured run by least squares on the inverse dynamics
 /// (Erkorkmaz and Altintas): Tm = J dw/dt + B w + Tc_pos [w > 0] - Tc_neg [w < 0],
 /// with w and dw/dt from the zero-phase low-passed measured position and Tm
-/// from the equally low-passed command (Tm = Kt Ka u) or current (Tm = Kt i).
+/// from the equally low-passed current (Tm = Kt i) or, where no current is
+/// logged, command (Tm = Kt Ka u).
 #include <cstddef>
 #include <string>
 #include <vector>
@@ -23,7 +24,7 @@ struct AxisSignals {
   double fc_Hz{0.0};           ///< low-pass cut-off used for the derivatives
   double rg_mm_per_rad{0.0};
   double torque_per_unit{0.0}; ///< N m per V of u (Kt Ka) or per A of current (Kt)
-  bool torque_from_u{true};    ///< false: from the current column
+  bool torque_from_u{true};    ///< true only without a current column: Tm = Kt Ka u; else Tm = Kt i
   bool has_current{false};
   bool has_u{false};
   double encoder_resolution_mm{0.0};

@@ -4,10 +4,15 @@
 // run: the effect put in, what calibrate added, and the held-out errors before
 // and after. Not a test: a table for docs/calibration.md.
 //
-//   calibrate_sweep [--example RUN_DIR] [--filter NAME] [--verbose]
+//   calibrate_sweep [--example RUN_DIR] [--filter NAME] [--program NAME] [--keep DIR] [--verbose]
 //
 // With --example, the second motion program is the x and y reference of that
-// measured run (each replayed on the truth's X plant).
+// measured run (each replayed on the truth's X plant). --filter and --program
+// keep the cases and programs whose names contain the text; --keep writes the
+// runs under DIR (one folder each) instead of one temporary folder.
+#include <unistd.h>
+
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -52,7 +57,7 @@ std::vector<Case> cases() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string example, filter;
+  std::string example, filter, program, keep;
   bool verbose = false;
   for (int i = 1; i < argc; ++i) {
     const bool has_value = i + 1 < argc;
@@ -62,6 +67,10 @@ int main(int argc, char** argv) {
       example = argv[++i];
     } else if (!std::strcmp(argv[i], "--filter") && has_value) {
       filter = argv[++i];
+    } else if (!std::strcmp(argv[i], "--program") && has_value) {
+      program = argv[++i];
+    } else if (!std::strcmp(argv[i], "--keep") && has_value) {
+      keep = argv[++i];
     } else {
       std::fprintf(stderr, "calibrate_sweep: unknown or incomplete argument '%s'\n", argv[i]);
       return 2;
@@ -73,11 +82,15 @@ int main(int argc, char** argv) {
     for (const char* a : {"x", "y"})
       if (const auto* r = run.trace.find(std::string(a) + "_ref_mm")) programs.push_back({std::string("example ") + a, *r});
   }
-  const auto dir = std::filesystem::temp_directory_path() / "calibrate_sweep";
+  const auto tmp = std::filesystem::temp_directory_path() / ("calibrate_sweep_" + std::to_string(::getpid()));
   int wrong = 0, rose = 0, total = 0;
   for (const auto& [prog, ref] : programs)
     for (const Case& c : cases()) {
       if (!filter.empty() && c.name.find(filter) == std::string::npos) continue;
+      if (!program.empty() && prog.find(program) == std::string::npos) continue;
+      std::string folder = prog + " " + c.name;
+      std::replace(folder.begin(), folder.end(), ' ', '_');
+      const auto dir = keep.empty() ? tmp : std::filesystem::path(keep) / folder;
       twin::truth::RunSpec spec;
       spec.plant.J = 0.0084;
       spec.plant.B = 0.016;
@@ -121,6 +134,7 @@ int main(int argc, char** argv) {
         ++total;
       }
     }
+  if (keep.empty()) std::filesystem::remove_all(tmp);
   std::printf("%d runs: %d named wrong, %d with a held-out error above before\n", total, wrong, rose);
   return 0;
 }
