@@ -149,6 +149,19 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
     }
     const auto* xm = run.trace.find(n + "_mm");
     x0[index(a)] = xm ? (*xm)[0] : r[0];
+    // The machine that made the run did not alarm: the following-error limit
+    // of the replay must allow at least twice the run's own largest error.
+    if (xm) {
+      double e_max = 0.0;
+      for (std::size_t k = 0; k < std::min(r.size(), xm->size()); ++k) e_max = std::max(e_max, std::abs(r[k] - (*xm)[k]));
+      auto& lim = machine.axes[index(a)].following_error_limit_mm;
+      if (2.0 * e_max > lim) {
+        res.notes.push_back(fmt::format("axis {}: the run's tracking error reaches {:.3f} mm; the replay's following-error "
+                                        "limit is raised from {} mm to {:.3f} mm",
+                                        n, e_max, lim, 2.0 * e_max));
+        lim = 2.0 * e_max;
+      }
+    }
   }
   auto reference = std::make_shared<sim::SampledReference>(std::move(ref), Ts);
   sim::CoSimulation cosim(machine, reference, nullptr, x0, options);

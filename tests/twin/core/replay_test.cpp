@@ -117,7 +117,10 @@ const char* kMeta =
 
 TEST(Replay, CoarseSamplingIsInterpolatedAndSaid) {
   std::string csv = "t_s,x_ref_mm,x_mm\n";
-  for (int i = 0; i < 200; ++i) csv += std::to_string(i * 1e-3) + "," + std::to_string(0.01 * i) + ",0\n";
+  // The measured position follows the reference (a run whose own error is
+  // within the following-error limit, so the only note is the sampling's).
+  for (int i = 0; i < 200; ++i)
+    csv += std::to_string(i * 1e-3) + "," + std::to_string(0.01 * i) + "," + std::to_string(0.01 * i) + "\n";
   const auto d = make_run(
       "coarse",
       R"({"machine": "fadal2216", "axes": ["x"], "controller_period_s": 0.0001, "sample_period_s": 0.001, "encoder_resolution_mm": 0.001})",
@@ -130,6 +133,32 @@ TEST(Replay, CoarseSamplingIsInterpolatedAndSaid) {
   EXPECT_THAT(r.notes[0], HasSubstr("10 controller periods"));
   // 10 mm/s ramp: the loop follows it within a few microns.
   EXPECT_NEAR(r.x_mm[0].back(), 1.99, 0.01);
+}
+
+// A run whose own tracking error passes the machine's following-error limit
+// (1 mm) was made without an alarm: its replay must not stop there. A 2 mm
+// step of the reference, which the loop closes with u at its clamp, checked
+// against the limit the replay says it used (twice the run's largest error).
+TEST(Replay, FollowingErrorLimitAllowsTheRunsOwnError) {
+  std::string csv = "t_s,x_ref_mm,x_mm\n";
+  for (int i = 0; i < 2000; ++i) {
+    const double ref = i < 100 ? 0.0 : 2.0;
+    const double x = i < 100 ? 0.0 : std::min(2.0, 2.0 * (i - 100) / 1000.0);
+    csv += std::to_string(i * 1e-4) + "," + std::to_string(ref) + "," + std::to_string(x) + "\n";
+  }
+  const auto d = make_run("big_error", kMeta, csv);
+  const auto run = analysis::load_run(d);
+  const auto m = analysis::machine_for_run(run, "", nullptr);
+  ASSERT_DOUBLE_EQ(m.axes[0].following_error_limit_mm, 1.0);
+  analysis::ReplayResult r;
+  ASSERT_NO_THROW(r = analysis::replay_run(run, m));
+  ASSERT_EQ(r.notes.size(), 1u);
+  EXPECT_THAT(r.notes[0], HasSubstr("raised from 1 mm to 4.000 mm"));
+  // The whole run is replayed, past the ticks where the error exceeded 1 mm,
+  // and the drive closes the step (it overshoots with the integral wound up).
+  ASSERT_EQ(r.x_mm[0].size(), 2000u);
+  EXPECT_GT(r.x_mm[0].back(), 1.5);
+  EXPECT_LT(r.x_mm[0].back(), 2.5);
 }
 
 TEST(Replay, BadRunsAreNamedPrecisely) {
