@@ -50,6 +50,7 @@ void choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
     sim::MachineDefinition trial = machine;
     EffectCandidate v = c;
     v.params = sets[j];
+    if (j > 0 && c.grid_base.size() == c.param_grid.size()) v.base = c.grid_base[j - 1];
     try {
       apply_candidate(trial.axes[index(c.axis)], v);
       trial.validate();
@@ -72,11 +73,13 @@ void choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
   }
   if (best == sets.size()) return;
   c.params = sets[best];
+  if (best > 0 && c.grid_base.size() == c.param_grid.size()) c.base = c.grid_base[best - 1];
   c.evidence += fmt::format("; of {} parameter sets replayed on the fitting part, the best:", sets.size());
   for (const auto& [k, v] : c.params) c.evidence += fmt::format(" {} = {:.4g}", k, v);
   c.evidence += fmt::format(" (fitting-part {} {:.3f} of the current model's)",
                             best_score.first == 0 ? "errors" : "hunting statistic", best_score.second);
   c.param_grid.clear();
+  c.grid_base.clear();
 }
 
 // The errors are kept to 6 significant digits: below that two replays differ
@@ -205,7 +208,10 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
     }
     if (!any) break;
     for (Axis a : run.axes)
-      for (auto& c : cands[index(a)]) choose_on_fit_part(run, machine, current, c, r.n_fit, opt.max_hunt_ratio, r.replays);
+      for (auto& c : cands[index(a)]) {
+        choose_on_fit_part(run, machine, current, c, r.n_fit, opt.max_hunt_ratio, r.replays);
+        update_torque_after(sig[index(a)], T_cur[index(a)], c);
+      }
     AxisArray<int> best_k{-1, -1, -1};
     AxisArray<AxisErrors> best_err = cur_err;
     AxisArray<double> best_ratio{1.0, 1.0, 1.0};

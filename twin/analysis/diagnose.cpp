@@ -163,10 +163,30 @@ void try_stribeck(const Ctx& c, std::vector<EffectCandidate>& out) {
   // The low-pass smears reversals: a rise at a few rad/s reads as a smaller
   // one at a higher speed. The replay on the fitting part chooses among
   // slower and stronger versions of it.
-  auto& grid = out.back().param_grid;
+  // Each set's J, B and Coulomb levels are refitted with its own Stribeck
+  // curve (friction Tc (1 - g) + Ts g, g = exp(-(w/ws)^2), as the drive
+  // has it): levels fitted beside a fast curve are too low for a slow one.
+  auto refit = [&](double Ts, double ws) {
+    std::vector<double> pos(c.s.n), neg(c.s.n), y(c.s.n);
+    for (std::size_t k = 0; k < c.s.n; ++k) {
+      const double w = c.s.w_rad_per_s[k];
+      const double g = std::exp(-(w / ws) * (w / ws));
+      pos[k] = c.reg.pos[k] * (1.0 - g);
+      neg[k] = c.reg.neg[k] * (1.0 - g);
+      y[k] = c.T[k] - Ts * (w > 0.0 ? 1.0 : w < 0.0 ? -1.0 : 0.0) * g;
+    }
+    Fit g;
+    g.with = least_squares({&c.reg.acc, &c.reg.vel, &pos, &neg}, y, c.fit_slow, corr_len(c.s));
+    if (!g.with.ok) return out.back().base;
+    return base_of(g, c.d);
+  };
+  auto& cand = out.back();
   for (double ws : {0.125, 0.18, 0.25, 0.37, 0.5})
-    for (double m : {1.25, 1.75, 2.25})
-      grid.push_back({{"Ts_static", Tc_mean + m * excess}, {"ws", ws * ws_best}});
+    for (double m : {1.25, 1.75, 2.25}) {
+      const double Ts = Tc_mean + m * excess;
+      cand.param_grid.push_back({{"Ts_static", Ts}, {"ws", ws * ws_best}});
+      cand.grid_base.push_back(refit(Ts, ws * ws_best));
+    }
 }
 
 void try_cogging(const Ctx& c, std::vector<EffectCandidate>& out) {
@@ -236,6 +256,9 @@ void try_screw(const Ctx& c, std::vector<EffectCandidate>& out) {
   if (!best.ok) return;
   const double A = std::hypot(best.with.theta[4], best.with.theta[5]);
   const double phase = std::atan2(best.with.theta[5], best.with.theta[4]);
+  // A lead error under half an encoder count is not resolved by the data;
+  // replayed, it only moves the quantisation boundaries.
+  if (c.s.encoder_resolution_mm > 0.0 && A < 0.5 * c.s.encoder_resolution_mm) return;
   add(out, c, "screw_pitch_error", best, {{"amplitude_mm", A}, {"period_mm", best_P}, {"phase_rad", phase}},
       fmt::format("lead error {:.4f} mm with period {:.3g} mm (t = {:.1f}): the torque to follow it cuts the held-out "
                   "torque residual by {:.0f} %",
@@ -811,6 +834,23 @@ std::vector<double> window_spread(const std::vector<double>& e, std::size_t from
     r.push_back(std::sqrt(v / static_cast<double>(window)));
   }
   return r;
+}
+
+void update_torque_after(const AxisSignals& s, const std::vector<double>& T_Nm, EffectCandidate& c) {
+  if (c.effect != "stribeck" || T_Nm.size() != s.n) return;
+  double Ts = 0.0, ws = 0.0;
+  for (const auto& [k, v] : c.params) {
+    if (k == "Ts_static") Ts = v;
+    if (k == "ws") ws = v;
+  }
+  if (!(ws > 0.0)) return;
+  c.T_after_Nm.resize(s.n);
+  for (std::size_t k = 0; k < s.n; ++k) {
+    const double w = s.w_rad_per_s[k];
+    const double sg = w > 0.0 ? 1.0 : w < 0.0 ? -1.0 : 0.0;
+    const double Tc = w > 0.0 ? c.base.Tc_pos_Nm : c.base.Tc_neg_Nm;
+    c.T_after_Nm[k] = T_Nm[k] - sg * (Ts - Tc) * std::exp(-(w / ws) * (w / ws));
+  }
 }
 
 void apply_candidate(sim::AxisDefinition& axis, const EffectCandidate& c) {

@@ -31,6 +31,8 @@ struct EffectCandidate {
   /// Stribeck speed below what the low-pass resolves): calibrate replays
   /// each and keeps the one with the lowest error on the fitting part.
   std::vector<std::vector<std::pair<std::string, double>>> param_grid;
+  /// J, B, Tc refitted with each grid set (empty: `base` serves every set).
+  std::vector<DriveIdentification> grid_base;
   DriveIdentification base; ///< J, B, Tc fitted together with the effect
   std::vector<double> T_after_Nm;  ///< torque with the effect's part taken out (for a second effect)
 };
@@ -47,6 +49,11 @@ std::vector<EffectCandidate> diagnose_axis(const AxisSignals& s, const std::vect
 /// Spread (standard deviation about the window mean) of `e` in consecutive
 /// windows of `window` rows over [from, to); a last partial window is dropped.
 std::vector<double> window_spread(const std::vector<double>& e, std::size_t from, std::size_t to, std::size_t window);
+
+/// After a parameter set was chosen from the grid: the torque with the
+/// effect's part taken out (EffectCandidate::T_after_Nm), recomputed for the
+/// chosen set where the effect's torque is known in closed form (stribeck).
+void update_torque_after(const AxisSignals& s, const std::vector<double>& T_Nm, EffectCandidate& c);
 
 /// Switches the candidate's effect on in `axis` with its parameters and sets
 /// J, B, Tc to the ones fitted with it.
