@@ -194,7 +194,7 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
       for (auto& c : all) {
         r.considered.push_back(c);
         r.considered.back().T_after_Nm.clear();
-        if (c.signal_gain < opt.min_signal_gain || c.t_stat < 3.0) continue;
+        if (c.signal_gain < opt.min_signal_gain || c.t_stat < c.min_t) continue;
         const bool seen = std::any_of(cands[i].begin(), cands[i].end(),
                                       [&](const EffectCandidate& o) { return o.effect == c.effect; });
         if (seen)

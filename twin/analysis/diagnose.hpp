@@ -18,7 +18,8 @@ struct EffectCandidate {
   Axis axis{Axis::kX};
   std::vector<std::pair<std::string, double>> params;  ///< parameter names of the table, without "<effect>."
   double signal_gain{0.0};  ///< 1 - rms(residual with effect) / rms(residual without), held out, where it acts
-  double t_stat{0.0};       ///< fitted size over its standard error
+  double t_stat{0.0};       ///< fitted size over its standard error (for a spectral peak: its prominence)
+  double min_t{3.0};        ///< what t_stat must reach for the candidate to be replayed
   std::string evidence;     ///< one line with the figure that decides
   /// The replay hardly sees it (a reparametrisation of the moving model that
   /// differs only at standstill): where the replayed errors tie, its signature decides.
