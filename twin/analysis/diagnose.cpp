@@ -512,11 +512,14 @@ void try_delay_from_current(const Ctx& c, std::vector<EffectCandidate>& out) {
 }
 
 void try_delay(const Ctx& c, std::vector<EffectCandidate>& out) {
-  if (c.s.has_u && c.s.has_current) {
+  if (!c.s.has_u) return;  // a command delay needs the command
+  // Where the current is logged and lags the command, that lag is the delay.
+  // Otherwise (no current, or a delay after the current's sensor) the motion
+  // lags the torque: shift the torque.
+  if (c.s.has_current && current_lag(c) > 0) {
     try_delay_from_current(c, out);
     return;
   }
-  if (!c.s.torque_from_u) return;
   // u is held over a controller period: the torque follows it by half a period
   // on average. That is the model's own lag; a delay is what comes on top.
   const double tick = c.s.controller_period_s / c.s.dt_s;  // controller periods in samples

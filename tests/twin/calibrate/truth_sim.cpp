@@ -124,7 +124,8 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     double i = p.Ka * u_app;
     if (e.i_max_A > 0.0) i = std::clamp(i, -e.i_max_A, e.i_max_A);
     const double Tm = p.Kt * i;
-    std::fprintf(f, "%.4f,%.4f,%.3f,%.5f,%.4f\n", static_cast<double>(k) * Ts, ref[k], x_meas, u, i + noise(rng));
+    const double i_logged = e.delay_after_current ? p.Ka * u : i;
+    std::fprintf(f, "%.4f,%.4f,%.3f,%.5f,%.4f\n", static_cast<double>(k) * Ts, ref[k], x_meas, u, i_logged + noise(rng));
 
     for (int j = 0; j < sub; ++j) {
       // Friction side: the load (two-mass) or the motor.

@@ -25,6 +25,7 @@ struct Effects {
   double load_Nm{0.0};
   double pdf_dTc{0.0}, pdf_x0{0.0}, pdf_x1{0.0};
   int delay_ticks{0};
+  bool delay_after_current{false};  // true: the logged current is Ka u undelayed, the torque is delayed
   double compliance_K{0.0}, compliance_C{0.0}, compliance_frac{0.5};
   double i_max_A{0.0};
 };
