@@ -30,9 +30,11 @@ std::vector<double> tracking_residual(const MeasuredRun& run, const ReplayResult
 // Chooses among the candidate's parameter sets (its own and its grid) the one
 // whose replay has the lowest error on the fitting rows; the held-out rows
 // play no part. Other axes keep `machine`'s model.
-void choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& machine, const ReplayResult& current,
+// Returns false when no set improves the fitting part (a candidate judged by
+// the hunting statistic excepted): it is not tried on the held-out part.
+bool choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& machine, const ReplayResult& current,
                         EffectCandidate& c, std::size_t n_fit, double max_hunt_ratio, int& replays) {
-  if (c.param_grid.empty() || n_fit < 2) return;
+  if (c.param_grid.empty() || n_fit < 2) return true;
   std::vector<std::vector<std::pair<std::string, double>>> sets{c.params};
   sets.insert(sets.end(), c.param_grid.begin(), c.param_grid.end());
   // (rank, score): rank 1 for a hunting candidate's set that does not
@@ -71,7 +73,7 @@ void choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
       continue;
     }
   }
-  if (best == sets.size()) return;
+  if (best == sets.size()) return true;
   c.params = sets[best];
   if (best > 0 && c.grid_base.size() == c.param_grid.size()) c.base = c.grid_base[best - 1];
   c.evidence += fmt::format("; of {} parameter sets replayed on the fitting part, the best:", sets.size());
@@ -80,6 +82,7 @@ void choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
                             best_score.first == 0 ? "errors" : "hunting statistic", best_score.second);
   c.param_grid.clear();
   c.grid_base.clear();
+  return c.judged_by_hunting || best_score.second < 1.0;
 }
 
 // The errors are kept to 6 significant digits: below that two replays differ
@@ -208,10 +211,20 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
     }
     if (!any) break;
     for (Axis a : run.axes)
-      for (auto& c : cands[index(a)]) {
-        choose_on_fit_part(run, machine, current, c, r.n_fit, opt.max_hunt_ratio, r.replays);
+      for (auto& list = cands[index(a)]; auto& c : list) {
+        if (!choose_on_fit_part(run, machine, current, c, r.n_fit, opt.max_hunt_ratio, r.replays)) {
+          c.evidence += "; no parameter set improves the fitting part: not tried on the held-out part";
+          r.rejected.push_back(c);
+          c.effect.clear();  // dropped below
+          continue;
+        }
         update_torque_after(sig[index(a)], T_cur[index(a)], c);
       }
+    for (Axis a : run.axes) {
+      auto& list = cands[index(a)];
+      list.erase(std::remove_if(list.begin(), list.end(), [](const EffectCandidate& c) { return c.effect.empty(); }),
+                 list.end());
+    }
     AxisArray<int> best_k{-1, -1, -1};
     AxisArray<AxisErrors> best_err = cur_err;
     AxisArray<double> best_ratio{1.0, 1.0, 1.0};

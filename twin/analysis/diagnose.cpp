@@ -740,7 +740,9 @@ void try_compliance(const Ctx& c, const std::vector<double>& e_res, std::vector<
   const auto spec = amplitude_spectrum(std::span<const double>(e_res).subspan(0, c.s.n_fit), fs, &df);
   if (spec.size() < 64 || !(df > 0.0)) return;
   const auto k_lo = static_cast<std::size_t>(std::ceil(20.0 / df));
-  const auto k_hi = std::min(spec.size() - 1, static_cast<std::size_t>(0.4 * fs / df));
+  // Up to 1 kHz: the ballscrew and coupling resonances of such drives lie in
+  // the tens to hundreds of Hz; above, the residual holds the encoder-count chatter.
+  const auto k_hi = std::min(spec.size() - 1, static_cast<std::size_t>(std::min(0.4 * fs, 1000.0) / df));
   if (k_hi <= k_lo + 8) return;
   std::vector<double> band(spec.begin() + static_cast<std::ptrdiff_t>(k_lo), spec.begin() + static_cast<std::ptrdiff_t>(k_hi));
   std::vector<double> sorted = band;
