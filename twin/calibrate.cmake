@@ -6,4 +6,3 @@ add_library(twin::calibrate ALIAS twin_calibrate)
 
 target_sources(twin PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/cli/cmd_calibrate.cpp)
 target_link_libraries(twin PRIVATE twin_calibrate)
-

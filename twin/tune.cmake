@@ -6,4 +6,3 @@ add_library(twin::tune ALIAS twin_tune)
 
 target_sources(twin PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/cli/cmd_tune.cpp)
 target_link_libraries(twin PRIVATE twin_tune)
-

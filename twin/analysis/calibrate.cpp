@@ -210,20 +210,18 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
       any = any || !cands[i].empty();
     }
     if (!any) break;
-    for (Axis a : run.axes)
-      for (auto& list = cands[index(a)]; auto& c : list) {
+    for (Axis a : run.axes) {
+      std::vector<EffectCandidate> kept;
+      for (auto& c : cands[index(a)]) {
         if (!choose_on_fit_part(run, machine, current, c, r.n_fit, opt.max_hunt_ratio, r.replays)) {
           c.evidence += "; no parameter set improves the fitting part: not tried on the held-out part";
-          r.rejected.push_back(c);
-          c.effect.clear();  // dropped below
+          r.rejected.push_back(std::move(c));
           continue;
         }
         update_torque_after(sig[index(a)], T_cur[index(a)], c);
+        kept.push_back(std::move(c));
       }
-    for (Axis a : run.axes) {
-      auto& list = cands[index(a)];
-      list.erase(std::remove_if(list.begin(), list.end(), [](const EffectCandidate& c) { return c.effect.empty(); }),
-                 list.end());
+      cands[index(a)] = std::move(kept);
     }
     AxisArray<int> best_k{-1, -1, -1};
     AxisArray<AxisErrors> best_err = cur_err;

@@ -24,6 +24,13 @@ struct Fit {
 
 double corr_len(const AxisSignals& s) { return 1.0 / (2.0 * s.fc_Hz * s.dt_s); }
 
+// The element at half the size in sorted order (the upper median); v non-empty.
+double median_of(std::vector<double> v) {
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
 double residual_rms(const std::vector<const std::vector<double>*>& cols, const std::vector<double>& theta,
                     const std::vector<double>& y, const std::vector<std::size_t>& rows) {
   if (rows.empty()) return 0.0;
@@ -112,6 +119,7 @@ struct Ctx {
   std::vector<std::size_t> fit_moving, held_moving, fit_slow, held_slow;
   DriveIdentification base;
   double travel_mm{0.0};  ///< range of x over the fitting rows
+  std::size_t current_lag{0};  ///< samples the logged current lags Ka u (measure_current_lag)
 };
 
 void add(std::vector<EffectCandidate>& out, const Ctx& c, const std::string& effect, const Fit& f,
@@ -166,8 +174,8 @@ void try_stribeck(const Ctx& c, std::vector<EffectCandidate>& out) {
   // Each set's J, B and Coulomb levels are refitted with its own Stribeck
   // curve (friction Tc (1 - g) + Ts g, g = exp(-(w/ws)^2), as the drive
   // has it): levels fitted beside a fast curve are too low for a slow one.
+  std::vector<double> pos(c.s.n), neg(c.s.n), y(c.s.n);
   auto refit = [&](double Ts, double ws) {
-    std::vector<double> pos(c.s.n), neg(c.s.n), y(c.s.n);
     for (std::size_t k = 0; k < c.s.n; ++k) {
       const double w = c.s.w_rad_per_s[k];
       const double g = std::exp(-(w / ws) * (w / ws));
@@ -290,11 +298,7 @@ void try_backlash_reversals(const Ctx& c, const std::vector<double>& e_res, std:
     last = sg;
   }
   if (fit_peaks.size() < 4 || held_peaks.size() < 2) return;
-  auto median = [](std::vector<double> v) {
-    std::sort(v.begin(), v.end());
-    return v[v.size() / 2];
-  };
-  const double p_fit = median(fit_peaks), p_held = median(held_peaks);
+  const double p_fit = median_of(fit_peaks), p_held = median_of(held_peaks);
   // A model without the gap leaves about one encoder count of such peaks.
   if (p_fit < 2.5 * q || p_held < 2.0 * q) return;
   const double gap = 2.0 * p_fit;
@@ -355,11 +359,7 @@ bool try_backlash_hunting(const Ctx& c, std::vector<EffectCandidate>& out) {
     k += window;
   }
   if (fit_sp.size() < 5 || held_sp.size() < 5) return false;
-  auto median = [](std::vector<double> v) {
-    std::sort(v.begin(), v.end());
-    return v[v.size() / 2];
-  };
-  const double s_fit = median(fit_sp), s_held = median(held_sp);
+  const double s_fit = median_of(fit_sp), s_held = median_of(held_sp);
   // Quantisation alone spreads by q / sqrt(12); chatter by one count about q / 2.
   // A hunt is a spread of two counts and more, in both parts of the run.
   if (s_fit < 2.0 * q || s_held < 2.0 * q) return false;
@@ -482,7 +482,7 @@ std::size_t max_delay_samples(const Ctx& c) {
 
 // Lag (samples) of the current behind the command on the fitting rows; 0 when
 // no lag fits the current better than half the mismatch at lag 0.
-std::size_t current_lag(const Ctx& c) {
+std::size_t measure_current_lag(const Ctx& c) {
   if (!c.s.has_u || !c.s.has_current) return 0;
   const auto mse = current_lag_mse(c, 0, c.s.n_fit, max_delay_samples(c));
   if (mse.empty()) return 0;
@@ -491,8 +491,7 @@ std::size_t current_lag(const Ctx& c) {
 }
 
 void try_delay_from_current(const Ctx& c, std::vector<EffectCandidate>& out) {
-  const std::size_t lag = current_lag(c);
-  if (lag == 0) return;
+  const std::size_t lag = c.current_lag;
   const auto held = current_lag_mse(c, c.s.n_fit, c.s.n, max_delay_samples(c));
   if (held.empty() || !(held[0] > 0.0)) return;
   const double gain = 1.0 - std::sqrt(held[lag] / held[0]);
@@ -516,7 +515,7 @@ void try_delay(const Ctx& c, std::vector<EffectCandidate>& out) {
   // Where the current is logged and lags the command, that lag is the delay.
   // Otherwise (no current, or a delay after the current's sensor) the motion
   // lags the torque: shift the torque.
-  if (c.s.has_current && current_lag(c) > 0) {
+  if (c.current_lag > 0) {
     try_delay_from_current(c, out);
     return;
   }
@@ -573,7 +572,7 @@ void try_saturation(const Ctx& c, std::vector<EffectCandidate>& out) {
   const double fs = 1.0 / c.s.dt_s;
   // Ka u as it reaches the amplifier: behind the logged command by the lag
   // the current shows (a delay is a separate effect, not a limit).
-  const std::size_t lag = current_lag(c);
+  const std::size_t lag = c.current_lag;
   std::vector<double> iu(c.s.n);
   for (std::size_t k = 0; k < c.s.n; ++k) iu[k] = Ka * c.s.u_raw_V[k >= lag ? k - lag : 0];
   if (c.s.has_current) {
@@ -581,16 +580,14 @@ void try_saturation(const Ctx& c, std::vector<EffectCandidate>& out) {
     std::vector<double> small;
     for (std::size_t k = 0; k < c.s.n; ++k)
       if (std::abs(iu[k]) < 2.0) small.push_back(std::abs(c.s.i_raw_A[k] - iu[k]));
-    std::sort(small.begin(), small.end());
-    const double noise = small.empty() ? 0.01 : 1.4826 * small[small.size() / 2];
+    const double noise = small.empty() ? 0.01 : 1.4826 * median_of(small);
     std::vector<double> tops;
     for (std::size_t k = 0; k < c.s.n; ++k) {
       const double i = c.s.i_raw_A[k];
       if (std::abs(iu[k]) - std::abs(i) > std::max(0.5, 8.0 * noise) && i * iu[k] > 0.0) tops.push_back(std::abs(i));
     }
     if (tops.size() < 20) return;
-    std::sort(tops.begin(), tops.end());
-    const double i_max = tops[tops.size() / 2];
+    const double i_max = median_of(tops);
     // The torque is the measured current: the base model fitted on it already
     // holds the limit's consequences; the limit itself goes to the replay.
     EffectCandidate e;
@@ -744,10 +741,8 @@ void try_compliance(const Ctx& c, const std::vector<double>& e_res, std::vector<
   // the tens to hundreds of Hz; above, the residual holds the encoder-count chatter.
   const auto k_hi = std::min(spec.size() - 1, static_cast<std::size_t>(std::min(0.4 * fs, 1000.0) / df));
   if (k_hi <= k_lo + 8) return;
-  std::vector<double> band(spec.begin() + static_cast<std::ptrdiff_t>(k_lo), spec.begin() + static_cast<std::ptrdiff_t>(k_hi));
-  std::vector<double> sorted = band;
-  std::sort(sorted.begin(), sorted.end());
-  const double median = sorted[sorted.size() / 2];
+  const double median = median_of(
+      std::vector<double>(spec.begin() + static_cast<std::ptrdiff_t>(k_lo), spec.begin() + static_cast<std::ptrdiff_t>(k_hi)));
   // Smooth over a few bins so a peak is a band, not one bin of noise.
   const std::size_t hw = std::max<std::size_t>(2, static_cast<std::size_t>(2.0 / df));
   double best = 0.0;
@@ -823,6 +818,7 @@ std::vector<EffectCandidate> diagnose_axis(const AxisSignals& s, const std::vect
     c.travel_mm = hi - lo;
   }
   if (!c.base.ok) return out;
+  c.current_lag = measure_current_lag(c);
   auto wanted = [&](const char* e) { return std::find(present.begin(), present.end(), e) == present.end(); };
   if (wanted("stribeck")) try_stribeck(c, out);
   if (wanted("cogging")) try_cogging(c, out);

@@ -35,49 +35,47 @@ struct Case {
   std::function<void(Effects&)> set;
 };
 
+// Each catalogue effect at m times its middle magnitude.
+struct EffectAt {
+  std::string name;
+  void (*set)(Effects&, double m);
+};
+
+std::vector<EffectAt> catalogue() {
+  return {
+      {"stribeck", [](Effects& e, double m) { e.stribeck_Ts = 0.2 + 0.35 * m; e.stribeck_ws = 2.0; }},
+      {"cogging", [](Effects& e, double m) { e.cogging_A = 0.15 * m; e.cogging_n = 6; e.cogging_phase = 1.0; }},
+      {"screw_pitch_error", [](Effects& e, double m) { e.screw_A_mm = 0.01 * m; e.screw_P_mm = 9.0; }},
+      {"backlash", [](Effects& e, double m) { e.backlash_mm = 0.01 * m; }},
+      {"constant_load", [](Effects& e, double m) { e.load_Nm = -0.3 * m; }},
+      {"position_dependent_friction", [](Effects& e, double m) { e.pdf_dTc = 0.3 * m; e.pdf_x0 = 4.0; e.pdf_x1 = 10.0; }},
+      {"delay", [](Effects& e, double m) { e.delay_ticks = static_cast<int>(4 * m); }},
+      {"compliance", [](Effects& e, double m) { e.compliance_K = 2500.0 / m; e.compliance_C = 0.15; }},
+      {"current_saturation", [](Effects& e, double m) { e.i_max_A = 16.0 / m; }},
+  };
+}
+
 std::vector<Case> cases() {
+  const std::vector<EffectAt> effects = catalogue();
   std::vector<Case> c;
   c.push_back({"none", "none", [](Effects&) {}});
   for (double m : {0.5, 1.0, 2.0}) {
     const std::string s = "x" + std::to_string(m).substr(0, 3);
-    c.push_back({"stribeck " + s, "stribeck", [m](Effects& e) { e.stribeck_Ts = 0.2 + 0.35 * m; e.stribeck_ws = 2.0; }});
-    c.push_back({"cogging " + s, "cogging", [m](Effects& e) { e.cogging_A = 0.15 * m; e.cogging_n = 6; e.cogging_phase = 1.0; }});
-    c.push_back({"screw_pitch_error " + s, "screw_pitch_error", [m](Effects& e) { e.screw_A_mm = 0.01 * m; e.screw_P_mm = 9.0; }});
-    c.push_back({"backlash " + s, "backlash", [m](Effects& e) { e.backlash_mm = 0.01 * m; }});
-    c.push_back({"constant_load " + s, "constant_load", [m](Effects& e) { e.load_Nm = -0.3 * m; }});
-    c.push_back({"position_dependent_friction " + s, "position_dependent_friction",
-                 [m](Effects& e) { e.pdf_dTc = 0.3 * m; e.pdf_x0 = 4.0; e.pdf_x1 = 10.0; }});
-    c.push_back({"delay " + s, "delay", [m](Effects& e) { e.delay_ticks = static_cast<int>(4 * m); }});
-    c.push_back({"compliance " + s, "compliance", [m](Effects& e) { e.compliance_K = 2500.0 / m; e.compliance_C = 0.15; }});
-    c.push_back({"current_saturation " + s, "current_saturation", [m](Effects& e) { e.i_max_A = 16.0 / m; }});
+    for (const EffectAt& f : effects) c.push_back({f.name + " " + s, f.name, [f, m](Effects& e) { f.set(e, m); }});
   }
   // Two effects at once, at the middle magnitudes.
-  c.push_back({"pair stribeck+cogging", "stribeck+cogging", [](Effects& e) {
-                 e.stribeck_Ts = 0.55;
-                 e.stribeck_ws = 2.0;
-                 e.cogging_A = 0.15;
-                 e.cogging_n = 6;
-                 e.cogging_phase = 1.0;
-               }});
-  c.push_back({"pair constant_load+cogging", "constant_load+cogging", [](Effects& e) {
-                 e.load_Nm = -0.3;
-                 e.cogging_A = 0.15;
-                 e.cogging_n = 6;
-                 e.cogging_phase = 1.0;
-               }});
-  c.push_back({"pair position_dependent_friction+screw_pitch_error", "position_dependent_friction+screw_pitch_error",
-               [](Effects& e) {
-                 e.pdf_dTc = 0.3;
-                 e.pdf_x0 = 4.0;
-                 e.pdf_x1 = 10.0;
-                 e.screw_A_mm = 0.01;
-                 e.screw_P_mm = 9.0;
-               }});
-  c.push_back({"pair stribeck+current_saturation", "stribeck+current_saturation", [](Effects& e) {
-                 e.stribeck_Ts = 0.55;
-                 e.stribeck_ws = 2.0;
-                 e.i_max_A = 16.0;
-               }});
+  auto find = [&](const std::string& name) {
+    return *std::find_if(effects.begin(), effects.end(), [&](const EffectAt& f) { return f.name == name; });
+  };
+  for (const auto& [a, b] : {std::pair{"stribeck", "cogging"}, std::pair{"constant_load", "cogging"},
+                             std::pair{"position_dependent_friction", "screw_pitch_error"},
+                             std::pair{"stribeck", "current_saturation"}}) {
+    const std::string both = std::string(a) + "+" + b;
+    c.push_back({"pair " + both, both, [fa = find(a), fb = find(b)](Effects& e) {
+                   fa.set(e, 1.0);
+                   fb.set(e, 1.0);
+                 }});
+  }
   return c;
 }
 

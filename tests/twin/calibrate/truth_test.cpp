@@ -67,6 +67,27 @@ CalibrationResult calibrate_case(const Case& c, const std::string& folder = "") 
   return r;
 }
 
+// The added effect's parameter `name` (0 when it has none of that name).
+double param(const EffectCandidate& c, const std::string& name) {
+  for (const auto& [k, v] : c.params)
+    if (k == name) return v;
+  return 0.0;
+}
+
+// "At most half where the effect is strong": the part of the held-out error
+// the effect causes, above the floor that the same plant and motion without
+// it leave, must at least halve in the error it moves most.
+void expect_excess_halved(const CalibrationResult& r, bool example_motion, const std::string& floor_folder) {
+  const CalibrationResult none = calibrate_case(Case{"none", {}, example_motion}, floor_folder);
+  const auto& b = r.error_before[0];
+  const auto& a = r.error_after[0];
+  const auto& f = none.error_after[0];
+  const double excess_err = (a.err_mm - f.err_mm) / std::max(1e-9, b.err_mm - f.err_mm);
+  const double excess_u = (a.u - f.u) / std::max(1e-9, b.u - f.u);
+  std::printf("  floor %.4f %.4f: excess ratios %.3f %.3f\n", f.err_mm, f.u, excess_err, excess_u);
+  EXPECT_LE(std::min(excess_err, excess_u), 0.5);
+}
+
 class TruthEffect : public ::testing::TestWithParam<Case> {};
 
 // The named effect must be the first one added on x, and neither held-out
@@ -85,12 +106,7 @@ TEST_P(TruthEffect, NamesTheEffectAndImprovesHeldOutError) {
   const auto& a = r.error_after[0];
   EXPECT_LE(a.err_mm, b.err_mm);
   EXPECT_LE(a.u, b.u);
-  const CalibrationResult none = calibrate_case(Case{"none", {}, c.example_motion}, std::string(c.name) + "_floor");
-  const auto& f = none.error_after[0];
-  const double excess_err = (a.err_mm - f.err_mm) / std::max(1e-9, b.err_mm - f.err_mm);
-  const double excess_u = (a.u - f.u) / std::max(1e-9, b.u - f.u);
-  std::printf("  floor %.4f %.4f: excess ratios %.3f %.3f\n", f.err_mm, f.u, excess_err, excess_u);
-  EXPECT_LE(std::min(excess_err, excess_u), 0.5);
+  expect_excess_halved(r, c.example_motion, std::string(c.name) + "_floor");
 }
 
 truth::Effects with(void (*f)(truth::Effects&)) {
@@ -132,9 +148,7 @@ TEST(TruthBacklash, LostMotionAtReversalsNamesBacklash) {
   ASSERT_FALSE(r.added.empty()) << "backlash: nothing added";
   EXPECT_EQ(r.added[0].candidate.effect, "backlash");
   EXPECT_EQ(r.added[0].candidate.axis, Axis::kX);
-  double gap_mm = 0.0;
-  for (const auto& [k, v] : r.added[0].candidate.params)
-    if (k == "gap_mm") gap_mm = v;
+  const double gap_mm = param(r.added[0].candidate, "gap_mm");
   EXPECT_NEAR(gap_mm, 0.01, 0.25 * 0.01);
   const auto& b = r.error_before[0];
   const auto& a = r.error_after[0];
@@ -142,12 +156,7 @@ TEST(TruthBacklash, LostMotionAtReversalsNamesBacklash) {
   EXPECT_LE(a.err_mm, b.err_mm);
   EXPECT_LE(a.u, b.u);
   EXPECT_LE(a.hunt, 0.5 * b.hunt);
-  const CalibrationResult none = calibrate_case(Case{"none", {}, true}, "backlash_floor");
-  const auto& f = none.error_after[0];
-  const double excess_err = (a.err_mm - f.err_mm) / std::max(1e-9, b.err_mm - f.err_mm);
-  const double excess_u = (a.u - f.u) / std::max(1e-9, b.u - f.u);
-  std::printf("  floor %.4f %.4f: excess ratios %.3f %.3f\n", f.err_mm, f.u, excess_err, excess_u);
-  EXPECT_LE(std::min(excess_err, excess_u), 0.5);
+  expect_excess_halved(r, true, "backlash_floor");
 }
 
 // A delay the logged current does not show (the current is sensed before
@@ -163,10 +172,7 @@ TEST(TruthDelay, AfterTheCurrentSensor) {
   ASSERT_FALSE(r.added.empty()) << "delay after the current: nothing added";
   EXPECT_EQ(r.added[0].candidate.effect, "delay");
   EXPECT_EQ(r.added[0].candidate.axis, Axis::kX);
-  double delay_s = 0.0;
-  for (const auto& [k, v] : r.added[0].candidate.params)
-    if (k == "delay_s") delay_s = v;
-  EXPECT_NEAR(delay_s, 5e-4, 1e-4);
+  EXPECT_NEAR(param(r.added[0].candidate, "delay_s"), 5e-4, 1e-4);
   EXPECT_LE(r.error_after[0].err_mm, r.error_before[0].err_mm);
   EXPECT_LE(r.error_after[0].u, r.error_before[0].u);
 }
