@@ -6,8 +6,9 @@
 //
 //   calibrate_sweep [--example RUN_DIR] [--filter NAME] [--program NAME] [--keep DIR] [--verbose]
 //
-// With --example, the second motion program is the x and y reference of that
-// measured run (each replayed on the truth's X plant). --filter and --program
+// With --example, further motion programs are the x and y reference of that
+// measured run, each on the truth's X plant, and its y reference on the Y
+// plant written as axis y ("Y example y"). --filter and --program
 // keep the cases and programs whose names contain the text; --keep writes the
 // runs under DIR (one folder each) instead of one temporary folder.
 #include <unistd.h>
@@ -101,15 +102,23 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  std::vector<std::pair<std::string, std::vector<double>>> programs{{"trapezoids", {}}};
+  // A program: a reference and the drive that follows it (the X plant, or
+  // the Y plant written as axis y).
+  struct Program {
+    std::string name;
+    std::vector<double> ref_mm;
+    bool y_plant{false};
+  };
+  std::vector<Program> programs{{"trapezoids", {}, false}};
   if (!example.empty()) {
     const auto run = twin::analysis::load_run(example);
     for (const char* a : {"x", "y"})
-      if (const auto* r = run.trace.find(std::string(a) + "_ref_mm")) programs.push_back({std::string("example ") + a, *r});
+      if (const auto* r = run.trace.find(std::string(a) + "_ref_mm")) programs.push_back({std::string("example ") + a, *r, false});
+    if (const auto* r = run.trace.find("y_ref_mm")) programs.push_back({"Y example y", *r, true});
   }
   const auto tmp = std::filesystem::temp_directory_path() / ("calibrate_sweep_" + std::to_string(::getpid()));
   int wrong = 0, rose = 0, total = 0;
-  for (const auto& [prog, ref] : programs)
+  for (const auto& [prog, ref, y_plant] : programs)
     for (const Case& c : cases()) {
       if (!filter.empty() && c.name.find(filter) == std::string::npos) continue;
       if (!program.empty() && prog.find(program) == std::string::npos) continue;
@@ -117,10 +126,20 @@ int main(int argc, char** argv) {
       std::replace(folder.begin(), folder.end(), ' ', '_');
       const auto dir = keep.empty() ? tmp : std::filesystem::path(keep) / folder;
       twin::truth::RunSpec spec;
-      spec.plant.J = 0.0084;
-      spec.plant.B = 0.016;
-      spec.plant.Tc_pos = 0.23;
-      spec.plant.Tc_neg = 0.17;
+      if (y_plant) {
+        // The Y drive, perturbed from nominal as the clean example's Y is.
+        spec.plant = twin::truth::fadal_y_plant();
+        spec.axis = "y";
+        spec.plant.J = 0.0105;
+        spec.plant.B = 0.34;
+        spec.plant.Tc_pos = 0.26;
+        spec.plant.Tc_neg = 0.32;
+      } else {
+        spec.plant.J = 0.0084;
+        spec.plant.B = 0.016;
+        spec.plant.Tc_pos = 0.23;
+        spec.plant.Tc_neg = 0.17;
+      }
       spec.reference_mm = ref;
       c.set(spec.effects);
       try {
@@ -134,8 +153,9 @@ int main(int argc, char** argv) {
         std::string added;
         for (const auto& a : r.added) added += (added.empty() ? "" : "+") + a.candidate.effect;
         if (added.empty()) added = "none";
-        const auto& b = r.error_before[0];
-        const auto& a = r.error_after[0];
+        const std::size_t ax = twin::index(run.axes.front());
+        const auto& b = r.error_before[ax];
+        const auto& a = r.error_after[ax];
         // One effect: the first added must be it. Two ("a+b"): exactly those two, in any order.
         std::vector<std::string> want, got;
         for (std::size_t p = 0, q; p <= c.effect.size(); p = q + 1) {

@@ -96,7 +96,8 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
 
   std::filesystem::create_directories(out_dir);
   std::FILE* f = std::fopen((out_dir / "trace.csv").c_str(), "w");
-  std::fprintf(f, "t_s,x_ref_mm,x_mm,x_u_V,x_i_A\n");
+  const char* a = sp.axis.c_str();
+  std::fprintf(f, "t_s,%s_ref_mm,%s_mm,%s_u_V,%s_i_A\n", a, a, a, a);
   const int sub = 20;
   const double h = Ts / sub;
   const double dv = 1e-4;  // Karnopp band, rad/s
@@ -194,7 +195,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   }
   std::fclose(f);
   std::ofstream meta(out_dir / "meta.json");
-  meta << "{\"machine\": \"fadal2216\", \"axes\": [\"x\"], \"controller_period_s\": " << Ts
+  meta << "{\"machine\": \"fadal2216\", \"axes\": [\"" << sp.axis << "\"], \"controller_period_s\": " << Ts
        << ", \"sample_period_s\": " << Ts << ", \"encoder_resolution_mm\": " << sp.resolution_mm
        << ", \"description\": \"truth simulator of the calibration tests\"}\n";
   return ref.size();

@@ -17,6 +17,21 @@ struct Plant {
   double Kp{500.0}, Ki{70.0}, Kd{0.3}, K1{0.0}, K2{-2.37e-6}, u_max{10.0};
 };
 
+/// The FADAL Y drive: Ozcan et al. 2017 Table 1 (Ka, J, B) and Table 3 (gains).
+inline Plant fadal_y_plant() {
+  Plant p;
+  p.Ka = 7.5768;
+  p.J = 0.0098109;
+  p.B = 0.28438;
+  p.Tc_pos = 0.30;
+  p.Tc_neg = 0.28;
+  p.Kp = 462.539;
+  p.Ki = 64.75;
+  p.Kd = 0.278;
+  p.K2 = 5.55e-4;
+  return p;
+}
+
 struct Effects {
   double stribeck_Ts{0.0}, stribeck_ws{1.0};               // on when Ts > 0
   double cogging_A{0.0}, cogging_n{1.0}, cogging_phase{0.0};
@@ -41,9 +56,12 @@ struct RunSpec {
   /// Reference positions, one per controller period; empty: the built-in
   /// program of trapezoidal moves and dwells.
   std::vector<double> reference_mm;
+  /// The axis the run is written as ("x" or "y"); its gains and drive
+  /// constants must be the shipped machine's for that axis.
+  std::string axis{"x"};
 };
 
-/// Simulates and writes dir/trace.csv and dir/meta.json for axis x of the
+/// Simulates and writes dir/trace.csv and dir/meta.json for one axis (spec.axis) of the
 /// shipped fadal2216 machine. Returns the number of rows.
 std::size_t write_truth_run(const std::filesystem::path& dir, const RunSpec& spec);
 
