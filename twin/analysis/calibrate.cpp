@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include <fmt/format.h>
 
@@ -29,18 +30,18 @@ std::vector<double> tracking_residual(const MeasuredRun& run, const ReplayResult
 
 // Chooses among the candidate's parameter sets (its own and its grid) the one
 // whose replay has the lowest error on the fitting rows; the held-out rows
-// play no part. Other axes keep `machine`'s model.
+// play no part. Then, for the parameters the candidate names in `refine`, a
+// coordinate search on the fitting rows: each parameter times and divided by
+// its step, the step's square root in a second round. Other axes keep
+// `machine`'s model.
 // Returns false when no set improves the fitting part (a candidate judged by
 // the hunting statistic excepted): it is not tried on the held-out part.
 bool choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& machine, const ReplayResult& current,
                         EffectCandidate& c, std::size_t n_fit, double max_hunt_ratio, int& replays) {
-  if (c.param_grid.empty() || n_fit < 2) return true;
-  std::vector<std::vector<std::pair<std::string, double>>> sets{c.params};
+  if ((c.param_grid.empty() && c.refine.empty()) || n_fit < 2) return true;
+  using ParamSet = std::vector<std::pair<std::string, double>>;
+  std::vector<ParamSet> sets{c.params};
   sets.insert(sets.end(), c.param_grid.begin(), c.param_grid.end());
-  // (rank, score): rank 1 for a hunting candidate's set that does not
-  // reproduce the hunt's size, ranked after every set that does.
-  std::pair<int, double> best_score{0, 0.0};
-  std::size_t best = sets.size();
   // Each error relative to the current model's on the same rows (the
   // tracking error sits on an encoder-noise floor that no model moves).
   const AxisErrors base = axis_errors(run, current, c.axis, 0, n_fit);
@@ -48,11 +49,14 @@ bool choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
   // independent without a cut).
   MeasuredRun one = run;
   one.axes = {c.axis};
-  for (std::size_t j = 0; j < sets.size(); ++j) {
+  // (rank, score): rank 1 for a hunting candidate's set that does not
+  // reproduce the hunt's size, ranked after every set that does; nullopt
+  // when the set cannot be replayed.
+  auto score_of = [&](const ParamSet& params, const DriveIdentification& drive) -> std::optional<std::pair<int, double>> {
     sim::MachineDefinition trial = machine;
     EffectCandidate v = c;
-    v.params = sets[j];
-    if (j > 0 && c.grid_base.size() == c.param_grid.size()) v.base = c.grid_base[j - 1];
+    v.params = params;
+    v.base = drive;
     try {
       apply_candidate(trial.axes[index(c.axis)], v);
       trial.validate();
@@ -64,33 +68,62 @@ bool choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
       // by point, i.e. most nearly in phase with the run.
       const double hunt_ratio = base.hunt > 0.0 ? e.hunt / base.hunt : 1.0;
       const bool off_hunt = c.judged_by_hunting && hunt_ratio > max_hunt_ratio;
-      const std::pair<int, double> score{off_hunt ? 1 : 0, off_hunt ? hunt_ratio : base.relative(e)};
-      if (best == sets.size() || score < best_score) {
-        best_score = score;
-        best = j;
-      }
+      return std::pair<int, double>{off_hunt ? 1 : 0, off_hunt ? hunt_ratio : base.relative(e)};
     } catch (const Error&) {
-      continue;
+      return std::nullopt;
+    }
+  };
+  std::pair<int, double> best_score{0, 0.0};
+  std::size_t best = sets.size();
+  for (std::size_t j = 0; j < sets.size(); ++j) {
+    const auto score = score_of(sets[j], j > 0 && c.grid_base.size() == c.param_grid.size() ? c.grid_base[j - 1] : c.base);
+    if (score && (best == sets.size() || *score < best_score)) {
+      best_score = *score;
+      best = j;
     }
   }
   if (best == sets.size()) return true;
   c.params = sets[best];
   if (best > 0 && c.grid_base.size() == c.param_grid.size()) c.base = c.grid_base[best - 1];
-  c.evidence += fmt::format("; of {} parameter sets replayed on the fitting part, the best:", sets.size());
+  std::size_t tried = sets.size();
+  for (int round = 0; round < 2; ++round)
+    for (const auto& [name, step0] : c.refine) {
+      const double step = round == 0 ? step0 : std::sqrt(step0);
+      const auto it = std::find_if(c.params.begin(), c.params.end(), [&](const auto& p) { return p.first == name; });
+      if (it == c.params.end() || !(step > 1.0)) continue;
+      const auto i = static_cast<std::size_t>(it - c.params.begin());
+      for (double f : {step, 1.0 / step}) {
+        ParamSet trial = c.params;
+        trial[i].second *= f;
+        const auto score = score_of(trial, c.base);
+        ++tried;
+        if (score && *score < best_score) {
+          best_score = *score;
+          c.params = trial;
+          break;
+        }
+      }
+    }
+  c.evidence += fmt::format("; of {} parameter sets replayed on the fitting part, the best:", tried);
   for (const auto& [k, v] : c.params) c.evidence += fmt::format(" {} = {:.4g}", k, v);
   c.evidence += fmt::format(" (fitting-part {} {:.3f} of the current model's)",
                             best_score.first == 0 ? "errors" : "hunting statistic", best_score.second);
   c.param_grid.clear();
   c.grid_base.clear();
+  c.refine.clear();
   return c.judged_by_hunting || best_score.second < 1.0;
 }
 
-// The errors are kept to 6 significant digits: below that two replays differ
-// only by the rounding of their arithmetic, and the held-out rule compares
-// the reported numbers themselves.
-double six_digits(double v) {
+// The errors are kept to 4 significant digits, the precision the replay
+// supports: the tracking error of a quantised run sits on an encoder-noise
+// floor, and any change of the model (a parameter moved by a part in a
+// thousand, a friction band where the tracking error is noise) moves where
+// the replay crosses the encoder counts and so the 5th digit of its NRMS.
+// The held-out rule compares these reported numbers themselves.
+double reported_digits(double v) {
+  constexpr int kDigits = 4;
   if (!(v > 0.0) || !std::isfinite(v)) return v;
-  const double scale = std::pow(10.0, 5 - static_cast<int>(std::floor(std::log10(v))));
+  const double scale = std::pow(10.0, kDigits - 1 - static_cast<int>(std::floor(std::log10(v))));
   return std::round(v * scale) / scale;
 }
 
@@ -126,9 +159,9 @@ AxisErrors axis_errors(const MeasuredRun& run, const ReplayResult& model, Axis a
     const auto ls = lowpass(std::span<const double>(mod.data(), rows), fc, fs);
     e.u = nrms(lm, ls, from, rows);
   }
-  e.err_mm = six_digits(e.err_mm);
-  e.u = six_digits(e.u);
-  e.hunt = six_digits(e.hunt);
+  e.err_mm = reported_digits(e.err_mm);
+  e.u = reported_digits(e.u);
+  e.hunt = reported_digits(e.hunt);
   return e;
 }
 
@@ -254,7 +287,7 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
         if (cands[i].size() <= static_cast<std::size_t>(k)) continue;
         const AxisErrors e = axis_errors(run, rep, a, r.n_fit);
         auto& c = cands[i][static_cast<std::size_t>(k)];
-        c.evidence += fmt::format("; replayed held-out error: tracking {:.6f} -> {:.6f}, u {:.6f} -> {:.6f}",
+        c.evidence += fmt::format("; replayed held-out error: tracking {:.4g} -> {:.4g}, u {:.4g} -> {:.4g}",
                                   cur_err[i].err_mm, e.err_mm, cur_err[i].u, e.u);
         // Each error relative to its own value before: the tracking error of a
         // quantised run sits on a floor of encoder noise that no model moves.

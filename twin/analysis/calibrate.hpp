@@ -81,7 +81,7 @@ struct CalibrationResult {
 };
 
 /// Errors of `model` against the run on rows [from, to) (to clipped to the
-/// run), to 6 significant digits: the numbers the held-out rule compares and
+/// run), to 4 significant digits: the numbers the held-out rule compares and
 /// report.json carries.
 AxisErrors axis_errors(const MeasuredRun& run, const ReplayResult& model, Axis a, std::size_t from,
                        std::size_t to = static_cast<std::size_t>(-1));

@@ -792,6 +792,8 @@ void try_compliance(const Ctx& c, const std::vector<double>& e_res, std::vector<
   out.back().min_t = kMinProminence;
   for (double ratio : {1.8, 2.6}) out.back().param_grid.push_back(set_for(std::pow(ratio * w_peak, 2) * mu));
   for (double K : {1200.0, 2500.0, 5000.0}) out.back().param_grid.push_back(set_for(K));
+  // Then the stiffness and the damping of the best set, finer, on the same rows.
+  out.back().refine = {{"K_Nm_per_rad", 1.3}, {"C_Nm_s_per_rad", 2.5}};
 }
 
 }  // namespace

@@ -32,6 +32,9 @@ struct EffectCandidate {
   /// Stribeck speed below what the low-pass resolves): calibrate replays
   /// each and keeps the one with the lowest error on the fitting part.
   std::vector<std::vector<std::pair<std::string, double>>> param_grid;
+  /// Parameters calibrate refines on the fitting part after the grid, by a
+  /// coordinate search: name and multiplicative step.
+  std::vector<std::pair<std::string, double>> refine;
   /// J, B, Tc refitted with each grid set (empty: `base` serves every set).
   std::vector<DriveIdentification> grid_base;
   DriveIdentification base; ///< J, B, Tc fitted together with the effect
