@@ -98,9 +98,23 @@ double cogging_work_J(const DriveParams& p, double xa_mm, double xb_mm) {
   return -(c.amplitude_Nm / n) * (std::cos(n * tb + c.phase_rad) - std::cos(n * ta + c.phase_rad));
 }
 
+// Deflection of the coupling spring, rad: the twist between motor and load,
+// less the gap of a backlash in the coupling.
+double spring_deflection_rad(const DriveParams& p, double xm_mm, double xl_mm) {
+  const double twist_rad = (xm_mm - xl_mm) / p.rg_mm_per_rad;
+  if (!p.effects.backlash.enabled) return twist_rad;
+  const double half_rad = 0.5 * p.effects.backlash.gap_mm / p.rg_mm_per_rad;
+  if (twist_rad > half_rad) return twist_rad - half_rad;
+  if (twist_rad < -half_rad) return twist_rad + half_rad;
+  return 0.0;
+}
+
 double spring_torque_Nm(const DriveParams& p, double xm_mm, double xl_mm, double wm, double wl) {
   const auto& c = p.effects.compliance;
-  return c.K_Nm_per_rad * (xm_mm - xl_mm) / p.rg_mm_per_rad + c.C_Nm_s_per_rad * (wm - wl);
+  const double d_rad = spring_deflection_rad(p, xm_mm, xl_mm);
+  // Inside a gap the coupling carries nothing, its damper included.
+  if (d_rad == 0.0 && p.effects.backlash.enabled) return 0.0;
+  return c.K_Nm_per_rad * d_rad + c.C_Nm_s_per_rad * (wm - wl);
 }
 
 // Net torque on the friction side of an axis at rest (w of that side = 0),
@@ -325,7 +339,7 @@ void DriveBank::Impl::unpack(Group& g, double t_s) {
       s.work_damping_J = r.damping_base_J + y[2];
       s.work_friction_J = r.friction_base_J + y[3];
     }
-    if (a.p.effects.backlash.enabled) {
+    if (a.p.effects.backlash.enabled && !a.compliant) {
       const double half_mm = 0.5 * a.p.effects.backlash.gap_mm;
       if (x_drive_mm - s.x_table_mm > half_mm) s.x_table_mm = x_drive_mm - half_mm;
       if (s.x_table_mm - x_drive_mm > half_mm) s.x_table_mm = x_drive_mm + half_mm;
@@ -623,8 +637,8 @@ double kinetic_energy_J(const DriveParams& p, const DriveState& s) {
 
 double spring_energy_J(const DriveParams& p, const DriveState& s) {
   if (!p.effects.compliance.enabled) return 0.0;
-  const double dtheta = (s.x_mm - s.x_load_mm) / p.rg_mm_per_rad;
-  return 0.5 * p.effects.compliance.K_Nm_per_rad * dtheta * dtheta;
+  const double d_rad = spring_deflection_rad(p, s.x_mm, s.x_load_mm);
+  return 0.5 * p.effects.compliance.K_Nm_per_rad * d_rad * d_rad;
 }
 
 }  // namespace twin::feeddrive

@@ -33,8 +33,11 @@ struct ScrewPitchErrorEffect {
   double period_mm{10.0};
   double phase_rad{0.0};
 };
-/// Lost motion at reversal: the measured (table) position follows the motor
-/// position through a play operator of total width gap_mm.
+/// Lost motion at reversal. Alone: the measured (table) position follows the
+/// motor position through a play operator of total width gap_mm (the loop
+/// closes on the table, across the gap). With compliance: the gap lies in the
+/// coupling, whose spring and damper act only beyond it (the encoder on the
+/// motor, the table with its friction picked up at the end of the gap).
 struct BacklashEffect {
   bool enabled{false};
   double gap_mm{0.0};

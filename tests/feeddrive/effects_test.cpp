@@ -159,6 +159,51 @@ TEST(Backlash, LostMotionAtReversalEqualsGap) {
   EXPECT_NEAR(bank.output(0).x_mm, bank.state(0).x_mm + 0.01, 1e-12);
 }
 
+// Oracle: a gap in the coupling (backlash with compliance). Started centred
+// in the gap, the motor carries no load: under a constant torque Tm with
+// B = 0 it turns as theta = Tm t^2 / (2 Jm) and the load (held by its
+// friction) does not move, until the twist reaches half the gap at
+// t_c = sqrt(gap_rad Jm / Tm); from then on the spring pushes the load. The
+// reported table position is the load's; the measured one the motor's.
+// Tolerances: 1e-9 mm on the motor's parabola (the integrator's relative
+// tolerance on a 10 um path), exact zero for the load inside the gap.
+TEST(Backlash, InTheCouplingTheMotorCrossesTheGapFree) {
+  DriveParams p = fadal_x();
+  p.B_kg_m2_per_s = 0.0;
+  p.effects.compliance.enabled = true;
+  p.effects.compliance.K_Nm_per_rad = 5000.0;
+  p.effects.compliance.C_Nm_s_per_rad = 0.5;
+  p.effects.compliance.load_fraction = 0.5;
+  p.effects.backlash.enabled = true;
+  p.effects.backlash.gap_mm = 0.02;
+  const double Jm = 0.5 * p.J_kg_m2;
+  const double u_V = 0.02;  // Tm = 0.062 N m, below the load's friction 0.2 N m
+  const double Tm = p.Ka_A_per_V * p.Kt_Nm_per_A * u_V;
+  ASSERT_LT(Tm, p.Tc_pos_Nm);
+  const double t_contact_s = std::sqrt(0.02 / p.rg_mm_per_rad * Jm / Tm);
+  DriveBank bank({p}, kTs_s);
+  bank.reset({0.0});
+  int k = 0;
+  for (; (k + 1) * kTs_s < t_contact_s; ++k) {
+    run_constant(bank, u_V, 1, k);
+    const double t_s = (k + 1) * kTs_s;
+    EXPECT_NEAR(bank.state(0).x_mm, p.rg_mm_per_rad * Tm * t_s * t_s / (2.0 * Jm), 1e-9) << "t = " << t_s;
+    EXPECT_EQ(bank.state(0).x_load_mm, 0.0);
+    EXPECT_EQ(bank.output(0).x_mm, 0.0);
+    EXPECT_EQ(bank.output(0).x_meas_mm, bank.state(0).x_mm);
+  }
+  ASSERT_GT(k, 10);
+  // The impact (peak spring torque sqrt(Jm K) w_c, about 2 N m here) breaks
+  // the load loose for a moment; once all has come to rest, the load is
+  // stuck (Tm is below its friction) and the spring holds the motor against
+  // it: the twist is half the gap plus Tm / K. Tolerance 1e-7 mm: the
+  // damped spring's remainder after 0.3 s.
+  run_constant(bank, u_V, 3000, k);
+  EXPECT_GT(bank.state(0).x_load_mm, 0.0);
+  EXPECT_NEAR(bank.state(0).x_mm - bank.state(0).x_load_mm, 0.01 + p.rg_mm_per_rad * Tm / 5000.0, 1e-7);
+  EXPECT_EQ(bank.output(0).x_mm, bank.state(0).x_load_mm);
+}
+
 // Oracle: the lead error enters only the measured position,
 // x_meas - x = A sin(2 pi x / P + phase), and never the dynamics (bit-equal
 // states with and without). Tolerance 1e-12 mm: formula evaluation.
