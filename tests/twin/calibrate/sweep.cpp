@@ -40,6 +40,7 @@ struct Case {
 struct EffectAt {
   std::string name;
   void (*set)(Effects&, double m);
+  std::string variant{};  ///< appended to the case name where one effect has two forms
 };
 
 std::vector<EffectAt> catalogue() {
@@ -48,6 +49,10 @@ std::vector<EffectAt> catalogue() {
       {"cogging", [](Effects& e, double m) { e.cogging_A = 0.15 * m; e.cogging_n = 6; e.cogging_phase = 1.0; }},
       {"screw_pitch_error", [](Effects& e, double m) { e.screw_A_mm = 0.01 * m; e.screw_P_mm = 9.0; }},
       {"backlash", [](Effects& e, double m) { e.backlash_mm = 0.01 * m; }},
+      {"backlash", [](Effects& e, double m) {
+         e.backlash_mm = 0.01 * m;
+         e.backlash_in_coupling = true;
+       }, "in coupling"},
       {"constant_load", [](Effects& e, double m) { e.load_Nm = -0.3 * m; }},
       {"position_dependent_friction", [](Effects& e, double m) { e.pdf_dTc = 0.3 * m; e.pdf_x0 = 4.0; e.pdf_x1 = 10.0; }},
       {"delay", [](Effects& e, double m) { e.delay_ticks = static_cast<int>(4 * m); }},
@@ -62,7 +67,7 @@ std::vector<Case> cases() {
   c.push_back({"none", "none", [](Effects&) {}});
   for (double m : {0.5, 1.0, 2.0}) {
     const std::string s = "x" + std::to_string(m).substr(0, 3);
-    for (const EffectAt& f : effects) c.push_back({f.name + " " + s, f.name, [f, m](Effects& e) { f.set(e, m); }});
+    for (const EffectAt& f : effects) c.push_back({f.name + (f.variant.empty() ? "" : " " + f.variant) + " " + s, f.name, [f, m](Effects& e) { f.set(e, m); }});
   }
   // Two effects at once, at the middle magnitudes.
   auto find = [&](const std::string& name) {

@@ -64,7 +64,10 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   const Effects& e = sp.effects;
   const double Ts = sp.Ts_s;
   const std::vector<double> ref = sp.reference_mm.empty() ? make_reference(Ts, sp.cycles) : sp.reference_mm;
-  const bool two_mass = e.compliance_K > 0.0;
+  const bool coupling_gap = e.backlash_in_coupling && e.backlash_mm > 0.0;
+  const bool two_mass = e.compliance_K > 0.0 || coupling_gap;
+  const double K_c = e.compliance_K > 0.0 ? e.compliance_K : 20000.0;
+  const double half_gap_rad = coupling_gap ? 0.5 * e.backlash_mm / p.rg : 0.0;
   const double Jm = two_mass ? p.J * (1.0 - e.compliance_frac) : p.J;
   const double Jl = two_mass ? p.J * e.compliance_frac : 0.0;
   std::mt19937 rng(sp.seed);
@@ -104,7 +107,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   for (std::size_t k = 0; k < ref.size(); ++k) {
     // Sensor: the encoder on the motor (two-mass) or the table (backlash), screw error, quantiser.
     const double x_mot = s.th_m * p.rg;
-    double x_sense = e.backlash_mm > 0.0 ? table_mm : x_mot;
+    double x_sense = e.backlash_mm > 0.0 && !coupling_gap ? table_mm : x_mot;
     if (e.screw_A_mm != 0.0) x_sense += e.screw_A_mm * std::sin(2 * kPi * x_sense / e.screw_P_mm);
     const double x_meas = sp.resolution_mm > 0 ? std::round(x_sense / sp.resolution_mm) * sp.resolution_mm : x_sense;
     // FADAL law.
@@ -163,7 +166,11 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
         s.w_l = s.w_m;
       } else {
         // Two-mass: semi-implicit Euler with the small step (spring at a few hundred Hz, h = 5 us).
-        const double Tsp = e.compliance_K * (s.th_m - s.th_l) + e.compliance_C * (s.w_m - s.w_l);
+        // Spring (and its damping) only in contact: the deflection beyond the gap.
+        const double d = s.th_m - s.th_l;
+        const double defl = d > half_gap_rad ? d - half_gap_rad : (d < -half_gap_rad ? d + half_gap_rad : 0.0);
+        const double C_c = e.compliance_K > 0.0 ? e.compliance_C : 1.3;
+        const double Tsp = K_c * defl + (defl != 0.0 ? C_c * (s.w_m - s.w_l) : 0.0);
         s.w_m += h * (Tm - p.B * s.w_m - Tsp - T_cog) / Jm;
         s.th_m += h * s.w_m;
         const double Fl = Tsp - e.load_Nm;
@@ -187,7 +194,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
         s.th_l += h * s.w_l;
       }
     }
-    if (e.backlash_mm > 0.0) {
+    if (e.backlash_mm > 0.0 && !coupling_gap) {
       const double xm = s.th_m * p.rg, half = 0.5 * e.backlash_mm;
       if (xm - table_mm > half) table_mm = xm - half;
       if (table_mm - xm > half) table_mm = xm + half;

@@ -37,6 +37,11 @@ struct Effects {
   double cogging_A{0.0}, cogging_n{1.0}, cogging_phase{0.0};
   double screw_A_mm{0.0}, screw_P_mm{10.0};
   double backlash_mm{0.0};
+  /// false: the gap lies between the drive and a massless table that carries
+  /// the encoder (the loop closes across the gap); true: the gap lies in the
+  /// coupling between motor and table (two masses, friction on the table,
+  /// contact stiffness compliance_K or 20000 N m/rad), the encoder on the motor.
+  bool backlash_in_coupling{false};
   double load_Nm{0.0};
   double pdf_dTc{0.0}, pdf_x0{0.0}, pdf_x1{0.0};
   int delay_ticks{0};
