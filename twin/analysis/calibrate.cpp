@@ -305,10 +305,13 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
           better = hr <= opt.max_hunt_ratio && no_worse;
           ratio = hr;
         }
-        // Only as the first effect on an axis: after one, the levels are fitted
-        // jointly with it and a second effect must earn its place in the replay.
-        const bool tie_strong = present[i].empty() && c.replay_blind && c.signal_gain >= opt.strong_signal_gain &&
-                                c.t_stat >= opt.strong_t && no_worse;
+        // As a second effect on an axis only where the replay is the same
+        // (the exact reparametrisation of the levels fitted with the first
+        // effect): a variant that changes the replay must earn its place there.
+        const bool same_replay = e.err_mm == cur_err[i].err_mm && e.u == cur_err[i].u;
+        const bool tie_strong = (present[i].empty() || same_replay) && c.replay_blind &&
+                                c.signal_gain >= opt.strong_signal_gain && c.t_stat >= opt.strong_t &&
+                                cur_err[i].err_mm < opt.tie_max_err_nrms && no_worse;
         if (tie_strong && !better)
           c.evidence += "; the replayed errors are not above before and the signature decides";
         const bool first_choice = best_k[i] < 0;

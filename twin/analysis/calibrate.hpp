@@ -30,6 +30,10 @@ struct CalibrateOptions {
   /// min_improvement, a signature this strong decides: signal gain and t above these.
   double strong_signal_gain{0.3};
   double strong_t{2.0};
+  /// A tie is evidence only where the model follows the run at all: the
+  /// held-out tracking NRMS before must be below this (a run in a limit
+  /// cycle, near 1, leaves friction levels the identification distorts).
+  double tie_max_err_nrms{0.9};
   /// A candidate judged by the hunting statistic (EffectCandidate::judged_by_hunting)
   /// must cut AxisErrors::hunt to this fraction (and, as every candidate,
   /// leave the point-by-point errors not above before).
