@@ -189,8 +189,9 @@ void try_stribeck(const Ctx& c, std::vector<EffectCandidate>& out) {
     return base_of(g, c.d);
   };
   auto& cand = out.back();
-  for (double ws : {0.125, 0.18, 0.25, 0.37, 0.5})
+  for (double ws : {0.125, 0.18, 0.25, 0.37, 0.5, 0.75, 1.0})
     for (double m : {1.25, 1.75, 2.25}) {
+      if (ws >= 0.75 && m > 2.0) continue;
       const double Ts = Tc_mean + m * excess;
       cand.param_grid.push_back({{"Ts_static", Ts}, {"ws", ws * ws_best}});
       cand.grid_base.push_back(refit(Ts, ws * ws_best));
