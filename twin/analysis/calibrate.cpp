@@ -73,10 +73,15 @@ bool choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
       return std::nullopt;
     }
   };
+  // J, B, Tc of set j: its own refit where the grid carries one.
+  const bool per_set_base = c.grid_base.size() == c.param_grid.size();
+  auto base_for = [&](std::size_t j) -> const DriveIdentification& {
+    return j > 0 && per_set_base ? c.grid_base[j - 1] : c.base;
+  };
   std::pair<int, double> best_score{0, 0.0};
   std::size_t best = sets.size();
   for (std::size_t j = 0; j < sets.size(); ++j) {
-    const auto score = score_of(sets[j], j > 0 && c.grid_base.size() == c.param_grid.size() ? c.grid_base[j - 1] : c.base);
+    const auto score = score_of(sets[j], base_for(j));
     if (score && (best == sets.size() || *score < best_score)) {
       best_score = *score;
       best = j;
@@ -84,7 +89,7 @@ bool choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
   }
   if (best == sets.size()) return true;
   c.params = sets[best];
-  if (best > 0 && c.grid_base.size() == c.param_grid.size()) c.base = c.grid_base[best - 1];
+  c.base = DriveIdentification(base_for(best));
   std::size_t tried = sets.size();
   for (int round = 0; round < 2; ++round)
     for (const auto& [name, step0] : c.refine) {

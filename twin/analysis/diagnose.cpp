@@ -111,6 +111,21 @@ std::vector<double> kinematic_torque(const AxisSignals& s, const std::vector<dou
   return r;
 }
 
+// Rows where the reference reverses (its speed, above 0.05 mm/s, changes
+// sign), each with the new direction.
+std::vector<std::pair<std::size_t, double>> reversals(const AxisSignals& s) {
+  std::vector<std::pair<std::size_t, double>> r;
+  double last = 0.0;
+  for (std::size_t k = 0; k < s.n; ++k) {
+    const double v = s.v_ref_mm_per_s[k];
+    if (std::abs(v) <= 0.05) continue;
+    const double sg = v > 0.0 ? 1.0 : -1.0;
+    if (last != 0.0 && sg != last) r.emplace_back(k, sg);
+    last = sg;
+  }
+  return r;
+}
+
 struct Ctx {
   const AxisSignals& s;
   const std::vector<double>& T;
@@ -120,6 +135,7 @@ struct Ctx {
   DriveIdentification base;
   double travel_mm{0.0};  ///< range of x over the fitting rows
   std::size_t current_lag{0};  ///< samples the logged current lags Ka u (measure_current_lag)
+  std::vector<std::pair<std::size_t, double>> reversals{};  ///< reversals(s)
 };
 
 void add(std::vector<EffectCandidate>& out, const Ctx& c, const std::string& effect, const Fit& f,
@@ -280,27 +296,12 @@ void try_screw(const Ctx& c, std::vector<EffectCandidate>& out) {
 // reference, in the new direction. The median over reversals of the peak of
 // that signed residual (measured minus model tracking error) in the 50 ms
 // after each reversal sizes the gap; a grid around it goes to the replay.
-// Rows where the reference reverses (its speed, above 0.05 mm/s, changes
-// sign), each with the new direction.
-std::vector<std::pair<std::size_t, double>> reversals(const AxisSignals& s) {
-  std::vector<std::pair<std::size_t, double>> r;
-  double last = 0.0;
-  for (std::size_t k = 0; k < s.n; ++k) {
-    const double v = s.v_ref_mm_per_s[k];
-    if (std::abs(v) <= 0.05) continue;
-    const double sg = v > 0.0 ? 1.0 : -1.0;
-    if (last != 0.0 && sg != last) r.emplace_back(k, sg);
-    last = sg;
-  }
-  return r;
-}
-
 void try_backlash_reversals(const Ctx& c, const std::vector<double>& e_res, std::vector<EffectCandidate>& out) {
   if (e_res.size() != c.s.n) return;
   const double q = c.s.encoder_resolution_mm > 0.0 ? c.s.encoder_resolution_mm : 0.001;
   const auto span = static_cast<std::size_t>(std::lround(0.05 / c.s.dt_s));
   std::vector<double> fit_peaks, held_peaks;
-  for (const auto& [k, sg] : reversals(c.s)) {
+  for (const auto& [k, sg] : c.reversals) {
     if (k + span > c.s.n) continue;
     // e_res is model minus measured position: positive where the table lags.
     double peak = -1e300;
@@ -815,7 +816,7 @@ void try_compliance(const Ctx& c, const std::vector<double>& e_res, bool with_co
   // (damping ratio 0.1), then gap, stiffness and damping refined.
   if (!with_coupling_gap) return;
   std::size_t rev_fit = 0, rev_held = 0;
-  for (const auto& [k, sg] : reversals(c.s)) ++(k < c.s.n_fit ? rev_fit : rev_held);
+  for (const auto& [k, sg] : c.reversals) ++(k < c.s.n_fit ? rev_fit : rev_held);
   if (rev_fit < 4 || rev_held < 2) return;
   auto gap_set = [&](double gap_mm, double K) {
     return std::vector<std::pair<std::string, double>>{{"gap_mm", gap_mm},
@@ -863,6 +864,7 @@ std::vector<EffectCandidate> diagnose_axis(const AxisSignals& s, const std::vect
   }
   if (!c.base.ok) return out;
   c.current_lag = measure_current_lag(c);
+  c.reversals = reversals(s);
   auto wanted = [&](const char* e) { return std::find(present.begin(), present.end(), e) == present.end(); };
   if (wanted("stribeck")) try_stribeck(c, out);
   if (wanted("cogging")) try_cogging(c, out);

@@ -16,7 +16,10 @@ namespace twin::analysis {
 struct EffectCandidate {
   std::string effect;  ///< catalogue name
   Axis axis{Axis::kX};
-  std::vector<std::pair<std::string, double>> params;  ///< parameter names of the table, without "<effect>."
+  /// Parameter names of the table, without "<effect>."; a name with a dot
+  /// belongs to another effect the candidate carries (a gap in the coupling
+  /// carries the coupling's "compliance.K_Nm_per_rad").
+  std::vector<std::pair<std::string, double>> params;
   double signal_gain{0.0};  ///< 1 - rms(residual with effect) / rms(residual without), held out, where it acts
   double t_stat{0.0};       ///< fitted size over its standard error (for a spectral peak: its prominence)
   double min_t{3.0};        ///< what t_stat must reach for the candidate to be replayed

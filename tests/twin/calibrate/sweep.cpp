@@ -131,20 +131,8 @@ int main(int argc, char** argv) {
       std::replace(folder.begin(), folder.end(), ' ', '_');
       const auto dir = keep.empty() ? tmp : std::filesystem::path(keep) / folder;
       twin::truth::RunSpec spec;
-      if (y_plant) {
-        // The Y drive, perturbed from nominal as the clean example's Y is.
-        spec.plant = twin::truth::fadal_y_plant();
-        spec.axis = "y";
-        spec.plant.J = 0.0105;
-        spec.plant.B = 0.34;
-        spec.plant.Tc_pos = 0.26;
-        spec.plant.Tc_neg = 0.32;
-      } else {
-        spec.plant.J = 0.0084;
-        spec.plant.B = 0.016;
-        spec.plant.Tc_pos = 0.23;
-        spec.plant.Tc_neg = 0.17;
-      }
+      spec.plant = y_plant ? twin::truth::perturbed_y_plant() : twin::truth::perturbed_x_plant();
+      if (y_plant) spec.axis = "y";
       spec.reference_mm = ref;
       c.set(spec.effects);
       try {

@@ -32,6 +32,26 @@ inline Plant fadal_y_plant() {
   return p;
 }
 
+/// The plants of the calibration tests and sweep: J, B and Coulomb levels
+/// moved from nominal (X: as far as the clean example's X is; Y: as the
+/// clean example's Y is), so identification is needed.
+inline Plant perturbed_x_plant() {
+  Plant p;
+  p.J = 0.0084;
+  p.B = 0.016;
+  p.Tc_pos = 0.23;
+  p.Tc_neg = 0.17;
+  return p;
+}
+inline Plant perturbed_y_plant() {
+  Plant p = fadal_y_plant();
+  p.J = 0.0105;
+  p.B = 0.34;
+  p.Tc_pos = 0.26;
+  p.Tc_neg = 0.32;
+  return p;
+}
+
 struct Effects {
   double stribeck_Ts{0.0}, stribeck_ws{1.0};               // on when Ts > 0
   double cogging_A{0.0}, cogging_n{1.0}, cogging_phase{0.0};

@@ -21,10 +21,7 @@ namespace {
 
 truth::RunSpec perturbed() {
   truth::RunSpec s;
-  s.plant.J = 0.0084;
-  s.plant.B = 0.016;
-  s.plant.Tc_pos = 0.23;
-  s.plant.Tc_neg = 0.17;
+  s.plant = truth::perturbed_x_plant();
   return s;
 }
 
@@ -171,11 +168,7 @@ TEST(TruthBacklash, LostMotionAtReversalsNamesBacklash) {
 TEST(TruthBacklash, GapInTheCouplingOnTheYDrive) {
   auto y_run = [](const std::string& folder, bool gap) {
     truth::RunSpec spec;
-    spec.plant = truth::fadal_y_plant();
-    spec.plant.J = 0.0105;
-    spec.plant.B = 0.34;
-    spec.plant.Tc_pos = 0.26;
-    spec.plant.Tc_neg = 0.32;
+    spec.plant = truth::perturbed_y_plant();
     spec.axis = "y";
     spec.reference_mm = example_reference("y");
     if (gap) {
