@@ -188,7 +188,8 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
   for (Axis a : run.axes) {
     std::string note;
     auto& ax = machine.axes[index(a)];
-    sig[index(a)] = prepare_axis_signals(run, a, ax.drive, machine.encoder_resolution_mm, opt.fit_fraction, &note);
+    sig[index(a)] = prepare_axis_signals(run, a, ax.drive, machine.encoder_resolution_mm, machine.Ts_s,
+                                         opt.fit_fraction, &note);
     if (!note.empty()) r.notes.push_back(note);
     if (sig[index(a)].n == 0) continue;
     if (!sig[index(a)].has_u)

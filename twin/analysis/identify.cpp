@@ -2,15 +2,18 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "twin/analysis/signal.hpp"
 
 namespace twin::analysis {
 
 AxisSignals prepare_axis_signals(const MeasuredRun& run, Axis axis, const feeddrive::DriveParams& nominal,
-                                 double encoder_resolution_mm, double fit_fraction, std::string* note) {
+                                 double encoder_resolution_mm, double controller_period_s, double fit_fraction,
+                                 std::string* note) {
   AxisSignals s;
   s.axis = axis;
   const std::string a(axis_name(axis));
@@ -28,7 +31,7 @@ AxisSignals prepare_axis_signals(const MeasuredRun& run, Axis axis, const feeddr
   }
   const std::size_t n = x->size();
   s.dt_s = run.sample_period_s;
-  s.controller_period_s = run.meta.controller_period_s.value_or(s.dt_s);
+  s.controller_period_s = controller_period_s > 0.0 ? controller_period_s : s.dt_s;
   const double fs = 1.0 / s.dt_s;
   // 50 Hz keeps the drive's rigid-body motion (S-curves of a few Hz to tens of Hz)
   // and removes the encoder-count chatter; coarse logs get a fifth of their rate.
@@ -67,7 +70,47 @@ AxisSignals prepare_axis_signals(const MeasuredRun& run, Axis axis, const feeddr
   // Moving: faster than 2 mm/s or than 20 encoder counts over the filter's time scale.
   const double v_min = std::max(2.0, 20.0 * encoder_resolution_mm * s.fc_Hz);
   s.w_moving_rad_per_s = v_min / s.rg_mm_per_rad;
+  std::string pattern;
+  s.phase_locked = phase_locked_rows(s.v_ref_mm_per_s, s.dt_s, s.controller_period_s, encoder_resolution_mm, &pattern);
+  const auto locked = static_cast<std::size_t>(std::count(s.phase_locked.begin(), s.phase_locked.end(), 1));
+  if (locked == 0) {
+    s.phase_locked.clear();
+  } else if (note) {
+    *note = fmt::format("axis {}: {} of {} rows left out of the fits: at their steady speed the log samples the "
+                        "encoder-count chatter at a few of its phases only ({})",
+                        a, locked, n, pattern);
+  }
   return s;
+}
+
+std::vector<char> phase_locked_rows(const std::vector<double>& v_ref_mm_per_s, double dt_s, double Ts_s,
+                                    double resolution_mm, std::string* pattern) {
+  std::vector<char> locked(v_ref_mm_per_s.size(), 0);
+  if (!(resolution_mm > 0.0) || !(Ts_s > 0.0) || !(dt_s > 0.0)) return locked;
+  const double ratio = dt_s / Ts_s;
+  const long M = std::lround(ratio);
+  if (M < 2 || std::abs(ratio - static_cast<double>(M)) > 1e-6 * ratio) return locked;
+  constexpr long kMaxPattern = 12;
+  // Counts per tick within this of p / L: the pattern's phase drifts by less
+  // than one count in half a second, so a steady move keeps it locked.
+  const double tol = Ts_s / 0.5;
+  for (std::size_t k = 0; k < locked.size(); ++k) {
+    const double r = std::abs(v_ref_mm_per_s[k]) * Ts_s / resolution_mm;
+    if (r < tol) continue;
+    for (long L = 1; L <= kMaxPattern; ++L) {
+      const double p = std::round(r * static_cast<double>(L));
+      if (std::abs(r - p / static_cast<double>(L)) >= tol) continue;
+      const long g = std::gcd(M, L);
+      if (g > 1) {
+        if (pattern && pattern->empty())
+          *pattern = fmt::format("e.g. {:.4g} mm/s: a pattern of {} ticks, sampled every {} ticks at {} of its phases",
+                                 std::abs(v_ref_mm_per_s[k]), L, M, L / g);
+        locked[k] = 1;
+      }
+      break;
+    }
+  }
+  return locked;
 }
 
 std::vector<std::size_t> moving_rows(const AxisSignals& s, std::size_t from, std::size_t to, double w_min) {
@@ -77,7 +120,7 @@ std::vector<std::size_t> moving_rows(const AxisSignals& s, std::size_t from, std
   const std::size_t guard = static_cast<std::size_t>(std::ceil(0.05 / s.dt_s));
   to = std::min(to, s.n > guard ? s.n - guard : 0);
   for (std::size_t k = std::max(from, guard); k < to; ++k)
-    if (std::abs(s.w_rad_per_s[k]) > w_min) rows.push_back(k);
+    if (std::abs(s.w_rad_per_s[k]) > w_min && (s.phase_locked.empty() || !s.phase_locked[k])) rows.push_back(k);
   return rows;
 }
 
@@ -135,6 +178,39 @@ DriveIdentification identify_drive(const AxisSignals& s, const std::vector<doubl
   id.B_stderr = r.stderr_theta[1];
   id.Tc_pos_stderr = r.stderr_theta[2];
   id.Tc_neg_stderr = r.stderr_theta[3];
+  // Where the data pins a parameter down less tightly than the machine
+  // definition does (a coarse log, a short run), the estimate is the
+  // inverse-variance weighted mean of both (each treated as Gaussian, the
+  // cross-correlations of the fit left aside). At the controller's rate the
+  // standard errors are hundreds of times smaller than the prior's and the
+  // fit stands alone.
+  struct Param {
+    double* value;
+    double* stderr_value;
+    double nominal;
+    const char* name;
+  };
+  const Param params[] = {{&id.J_kg_m2, &id.J_stderr, nominal.J_kg_m2, "J"},
+                          {&id.B_kg_m2_per_s, &id.B_stderr, nominal.B_kg_m2_per_s, "B"},
+                          {&id.Tc_pos_Nm, &id.Tc_pos_stderr, nominal.Tc_pos_Nm, "Tc_pos"},
+                          {&id.Tc_neg_Nm, &id.Tc_neg_stderr, nominal.Tc_neg_Nm, "Tc_neg"}};
+  std::vector<std::string> leaned;
+  for (const Param& p : params) {
+    const double sp = kNominalRelativeSpread * std::abs(p.nominal);
+    const double se = *p.stderr_value;
+    if (!(sp > 0.0) || !(se > 0.0) || !std::isfinite(se)) continue;
+    const double w_fit = 1.0 / (se * se), w_nom = 1.0 / (sp * sp);
+    const double share = w_nom / (w_fit + w_nom);
+    if (share < 0.01) continue;
+    const double fitted = *p.value;
+    *p.value = (w_fit * fitted + w_nom * p.nominal) / (w_fit + w_nom);
+    *p.stderr_value = 1.0 / std::sqrt(w_fit + w_nom);
+    leaned.push_back(fmt::format("{} {:.4g} (+-{:.2g}) -> {:.4g}", p.name, fitted, se, *p.value));
+  }
+  if (!leaned.empty())
+    notes.push_back(fmt::format("the data pins down some parameters less tightly than the machine definition "
+                                "(+-{:.0f} %): weighted with its values: {}",
+                                100.0 * kNominalRelativeSpread, fmt::join(leaned, ", ")));
   auto clamp_min = [&](double& v, double lo, const char* name) {
     if (v < lo) {
       notes.push_back(fmt::format("{} = {:.4g} came out below {:.3g} and was clamped to {:.3g}", name, v, lo, lo));

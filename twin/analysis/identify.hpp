@@ -37,12 +37,30 @@ struct AxisSignals {
   std::vector<double> v_ref_mm_per_s;  ///< reference speed (backward differences, low-passed)
   std::vector<double> T_Nm;            ///< low-passed motor torque from the command or current
   double w_moving_rad_per_s{0.0};      ///< |w| above this counts as moving
+  /// 1 where a log coarser than the loop samples the encoder-count chatter of
+  /// a steady speed at only some of its phases (see phase_locked_rows); these
+  /// rows are left out of every fit. Empty when no row is.
+  std::vector<char> phase_locked;
 };
+
+/// Rows of a log sampled every `dt_s` (a whole multiple M > 1 of the loop's
+/// period `Ts_s`) whose reference speed makes the loop's encoder-count
+/// pattern periodic over L ticks (L up to 12: v Ts / resolution = p / L,
+/// held for about half a second) with gcd(M, L) > 1: the samples then visit
+/// only L / gcd(M, L) of the pattern's L phases, and the mean of the sampled
+/// command or current is off by the chatter's uneven phases (several amperes
+/// on the FADAL drives). Returns the flags and, in `pattern`, the L and the
+/// phases visited of the first such row.
+std::vector<char> phase_locked_rows(const std::vector<double>& v_ref_mm_per_s, double dt_s, double Ts_s,
+                                    double resolution_mm, std::string* pattern = nullptr);
 
 /// Prepares the signals of `axis`; nullopt-like: returns n == 0 and a note
 /// when the run lacks what identification needs (position, and u or current).
+/// `controller_period_s` is the loop's period of the machine the run is
+/// replayed on (the run's own where its meta gives it).
 AxisSignals prepare_axis_signals(const MeasuredRun& run, Axis axis, const feeddrive::DriveParams& nominal,
-                                 double encoder_resolution_mm, double fit_fraction, std::string* note);
+                                 double encoder_resolution_mm, double controller_period_s, double fit_fraction,
+                                 std::string* note);
 
 struct DriveIdentification {
   bool ok{false};
@@ -56,9 +74,17 @@ struct DriveIdentification {
 /// Rows of the signals in [from, to) where the axis moves (|w| above the threshold).
 std::vector<std::size_t> moving_rows(const AxisSignals& s, std::size_t from, std::size_t to, double w_min_rad_per_s);
 
+/// How far a machine definition's J, B and Coulomb levels are taken to be
+/// from a real drive's (one standard deviation, relative): the example runs'
+/// plants differ from the FADAL 2216 definition by 4 to 24 %.
+inline constexpr double kNominalRelativeSpread = 0.25;
+
 /// Least squares of the inverse dynamics on the fitting rows, with the
 /// torque `T_Nm` (the signals' own, or one from which an effect's torque was
-/// taken out). Parameters that come out non-physical are clamped and said.
+/// taken out). A parameter the rows determine less tightly than
+/// kNominalRelativeSpread of its nominal value is weighted with the nominal
+/// (inverse-variance mean; said in the note). Parameters that come out
+/// non-physical are clamped and said.
 DriveIdentification identify_drive(const AxisSignals& s, const std::vector<double>& T_Nm,
                                    const feeddrive::DriveParams& nominal);
 

@@ -86,16 +86,26 @@ MeasuredRun load_run(const std::filesystem::path& dir) {
 
 sim::MachineDefinition machine_for_run(const MeasuredRun& run, const std::string& machine_override,
                                        std::vector<std::string>* notes) {
-  std::string name = machine_override;
-  if (name.empty()) {
-    if (!run.meta.machine)
-      throw ConfigError(fmt::format("{}: meta.json names no machine: pass --machine FILE", run.dir.string()));
-    name = *run.meta.machine;
+  std::string name = machine_override.empty() ? run.meta.machine.value_or("") : machine_override;
+  auto path = io::resolve_machine_path(name);
+  if (name.empty() || !std::filesystem::exists(path)) {
+    if (!machine_override.empty())
+      throw ConfigError(fmt::format("--machine {}: no such machine file ({} does not exist)", machine_override,
+                                    path.string()));
+    // A run from a machine the twin does not know (real data often names
+    // none): the shipped definition stands in, and the notes say so, since
+    // its gains, drive constants and encoder are then assumed, not known.
+    const std::string said =
+        run.meta.machine ? fmt::format("names machine '{}', which the twin does not ship", *run.meta.machine)
+                         : std::string("names no machine");
+    name = io::kDefaultMachineName;
+    path = io::resolve_machine_path(name);
+    if (notes)
+      notes->push_back(fmt::format("meta.json {}: the {} definition is assumed (its loop gains, Ka, Kt, rg, Ts, "
+                                   "encoder resolution and limits where the run does not give them); pass "
+                                   "--machine FILE for the machine the run was made on",
+                                   said, name));
   }
-  const auto path = io::resolve_machine_path(name);
-  if (!std::filesystem::exists(path))
-    throw ConfigError(fmt::format("{}: machine '{}' is not one the twin ships ({} does not exist): pass --machine FILE",
-                                  run.dir.string(), name, path.string()));
   sim::MachineDefinition m = io::load_machine(path);
   if (run.meta.controller_period_s && std::abs(*run.meta.controller_period_s - m.Ts_s) > 1e-12) {
     if (notes)
@@ -110,6 +120,42 @@ sim::MachineDefinition machine_for_run(const MeasuredRun& run, const std::string
       throw ConfigError(fmt::format("{}: the run has axis {} but machine {} does not define it", run.dir.string(),
                                     axis_name(a), m.name));
   return m;
+}
+
+std::vector<double> upsample_reference(const std::vector<double>& r, std::int64_t m) {
+  const std::size_t n = r.size();
+  if (n == 0 || m <= 1) return r;
+  // Secant slopes per sample interval, and at each sample the centred
+  // difference (exact through constant acceleration), set to zero where the
+  // reference turns or stops and limited to 3 times the smaller secant so
+  // that no interval overshoots its end values (Fritsch and Carlson, SIAM
+  // J. Numer. Anal. 17 (1980) 238-246).
+  std::vector<double> d(n > 1 ? n - 1 : 0), slope(n, 0.0);
+  for (std::size_t i = 0; i + 1 < n; ++i) d[i] = r[i + 1] - r[i];
+  if (n > 1) {
+    slope.front() = d.front();
+    slope.back() = d.back();
+  }
+  for (std::size_t i = 1; i + 1 < n; ++i) {
+    if (d[i - 1] * d[i] <= 0.0) continue;
+    const double c = 0.5 * (d[i - 1] + d[i]);
+    const double lim = 3.0 * std::min(std::abs(d[i - 1]), std::abs(d[i]));
+    slope[i] = std::copysign(std::min(std::abs(c), lim), c);
+  }
+  std::vector<double> out(static_cast<std::size_t>((static_cast<std::int64_t>(n) - 1) * m + 1));
+  for (std::size_t k = 0; k < out.size(); ++k) {
+    const std::size_t i = k / static_cast<std::size_t>(m);
+    const double f = static_cast<double>(k % static_cast<std::size_t>(m)) / static_cast<double>(m);
+    if (f == 0.0) {
+      out[k] = r[i];
+      continue;
+    }
+    // Cubic Hermite on [i, i+1] in the unit parameter f.
+    const double f2 = f * f, f3 = f2 * f;
+    out[k] = (2 * f3 - 3 * f2 + 1) * r[i] + (f3 - 2 * f2 + f) * slope[i] + (-2 * f3 + 3 * f2) * r[i + 1] +
+             (f3 - f2) * slope[i + 1];
+  }
+  return out;
 }
 
 ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& machine_in, std::size_t rows,
@@ -131,7 +177,7 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
   const std::size_t n_rows = rows == 0 ? run.trace.num_rows() : std::min(rows, run.trace.num_rows());
   if (m > 1)
     res.notes.push_back(fmt::format("trace sampled every {} s = {} controller periods: the reference is interpolated "
-                                    "linearly to Ts = {} s and the twin's outputs are taken at the trace's samples",
+                                    "by a monotone cubic to Ts = {} s and the twin's outputs are taken at the trace's samples",
                                     run.sample_period_s, m, Ts));
   const auto& t = run.trace.at("t_s");
   const std::int64_t n_ticks = static_cast<std::int64_t>(n_rows - 1) * m + 1;
@@ -141,12 +187,7 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
     const std::string n(axis_name(a));
     const auto& r = run.trace.at(n + "_ref_mm");
     auto& dst = ref[index(a)];
-    dst.resize(static_cast<std::size_t>(n_ticks));
-    for (std::int64_t k = 0; k < n_ticks; ++k) {
-      const std::size_t i = static_cast<std::size_t>(k / m);
-      const double f = static_cast<double>(k % m) / static_cast<double>(m);
-      dst[static_cast<std::size_t>(k)] = f == 0.0 ? r[i] : r[i] + f * (r[i + 1] - r[i]);
-    }
+    dst = upsample_reference(std::vector<double>(r.begin(), r.begin() + static_cast<std::ptrdiff_t>(n_rows)), m);
     const auto* xm = run.trace.find(n + "_mm");
     x0[index(a)] = xm ? (*xm)[0] : r[0];
     // The machine that made the run did not alarm: the following-error limit

@@ -9,6 +9,9 @@
 
 namespace twin::io {
 
+/// The machine a run that names none (or one not shipped) is taken to be from.
+inline constexpr const char* kDefaultMachineName = "fadal2216";
+
 /// The folder holding the shipped scenarios and machines.
 std::filesystem::path scenarios_dir();
 /// A name of a shipped machine ("fadal2216") or a path to a YAML file.

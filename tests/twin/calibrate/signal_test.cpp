@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include "twin/analysis/diagnose.hpp"
+#include "twin/analysis/identify.hpp"
 #include "twin/analysis/signal.hpp"
 #include "twin/core/error.hpp"
 
@@ -158,6 +159,52 @@ TEST(WindowSpread, ClosedForms) {
   ASSERT_EQ(cs.size(), 2u);
   EXPECT_NEAR(cs[1], 0.0, 1e-15);
   EXPECT_TRUE(window_spread(ramp, 0, 30, 0).empty());
+}
+
+// phase_locked_rows against the arithmetic of sampling a periodic count
+// pattern. At a steady speed the loop's count increments per tick,
+// floor(r k + phi) - floor(r (k - 1) + phi) with r = v Ts / resolution,
+// repeat over L ticks where r = p / L; a log every M ticks sees their true
+// mean r only where it visits all L phases, i.e. gcd(M, L) = 1. Checked:
+// the rows flagged are exactly those whose sampled mean misses r (by at least
+// 1/6 here, for every phase phi of the pattern) and the others hit it to
+// rounding over a whole number of patterns.
+TEST(PhaseLock, FlagsExactlyTheSpeedsWhoseSampledCountPatternIsBiased) {
+  const double Ts = 1e-4, res = 1e-3;
+  struct Case {
+    double counts_per_tick;
+    long M;
+    bool locked;
+  };
+  for (const Case c : {Case{5.0 / 6.0, 10, true},    // 500 mm/min at 1 ms: 3 of 6 phases
+                       Case{5.0 / 6.0, 100, true},   // ... at 10 ms
+                       Case{5.0 / 6.0, 7, false},    // 7 and 6 coprime: all phases
+                       Case{5.0 / 3.0, 10, false},   // 1000 mm/min at 1 ms
+                       Case{1.0 / 4.0, 10, true},    // 2 of 4 phases
+                       Case{0.3 + 1e-3, 10, false}}) // drifts through a count in 0.1 s
+  {
+    const double v = c.counts_per_tick * res / Ts;
+    const auto flags = phase_locked_rows(std::vector<double>(50, v), c.M * Ts, Ts, res);
+    for (char f : flags) ASSERT_EQ(f != 0, c.locked) << "r " << c.counts_per_tick << " M " << c.M;
+    if (c.counts_per_tick > 1.0) continue;  // the increments below are for r < 1
+    for (double phi : {0.0, 0.1, 0.45, 0.9}) {
+      double sum = 0.0;
+      const int n = 6000;  // samples: a whole number of patterns of up to 12 ticks
+      for (int j = 1; j <= n; ++j) {
+        const double k = static_cast<double>(j * c.M);
+        sum += std::floor(c.counts_per_tick * k + phi) - std::floor(c.counts_per_tick * (k - 1) + phi);
+      }
+      const double bias = std::abs(sum / n - c.counts_per_tick);
+      if (c.locked) {
+        EXPECT_GT(bias, 1.0 / 6.0 - 1e-9) << "r " << c.counts_per_tick << " M " << c.M << " phi " << phi;
+      } else if (c.counts_per_tick * 12 == std::round(c.counts_per_tick * 12)) {
+        EXPECT_LT(bias, 1e-9);
+      }
+    }
+  }
+  // A log at the controller's rate, or no known resolution: nothing to flag.
+  for (char f : phase_locked_rows(std::vector<double>(5, 8.333), Ts, Ts, res)) EXPECT_EQ(f, 0);
+  for (char f : phase_locked_rows(std::vector<double>(5, 8.333), 10 * Ts, Ts, 0.0)) EXPECT_EQ(f, 0);
 }
 
 }  // namespace
