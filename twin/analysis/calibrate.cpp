@@ -192,6 +192,9 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
                                          opt.fit_fraction, &note);
     if (!note.empty()) r.notes.push_back(note);
     if (sig[index(a)].n == 0) continue;
+    r.loop[index(a)] = identify_loop_gains(sig[index(a)], ax.loop);
+    if (!r.loop[index(a)].note.empty()) r.notes.push_back(r.loop[index(a)].note);
+    if (r.loop[index(a)].differs) ax.loop = r.loop[index(a)].gains;
     if (!sig[index(a)].has_u)
       r.notes.push_back(fmt::format("axis {}: no {}_u_V: torque from the current (Tm = Kt i); the u error is measured "
                                     "on the current",
@@ -370,8 +373,17 @@ nlohmann::json calibration_report_json(const CalibrationResult& r) {
   for (Axis a : r.axes) {
     if (!r.identified_axis[index(a)]) continue;
     const auto& d = r.final_machine.axes[index(a)].drive;
-    j["parameters_identified"][std::string(axis_name(a))] = {
-        {"J", d.J_kg_m2}, {"B", d.B_kg_m2_per_s}, {"Tc_pos", d.Tc_pos_Nm}, {"Tc_neg", d.Tc_neg_Nm}};
+    auto& p = j["parameters_identified"][std::string(axis_name(a))];
+    p = {{"J", d.J_kg_m2}, {"B", d.B_kg_m2_per_s}, {"Tc_pos", d.Tc_pos_Nm}, {"Tc_neg", d.Tc_neg_Nm}};
+    // Loop gains only where the run's u shows other gains than the machine's.
+    if (r.loop[index(a)].differs) {
+      const auto& g = r.loop[index(a)].gains;
+      p["Kp"] = g.Kp_V_per_mm;
+      p["Ki"] = g.Ki_V_per_s_mm;
+      p["Kd"] = g.Kd_V_s_per_mm;
+      p["K1"] = g.K1_V_s2_per_mm;
+      p["K2"] = g.K2_V_s_per_mm;
+    }
   }
   j["effects_added"] = nlohmann::json::array();
   for (const auto& ad : r.added) {

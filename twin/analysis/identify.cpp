@@ -225,4 +225,94 @@ DriveIdentification identify_drive(const AxisSignals& s, const std::vector<doubl
   return id;
 }
 
+LoopIdentification identify_loop_gains(const AxisSignals& s, const controller::PositionLoopParams& machine_gains) {
+  LoopIdentification out;
+  out.gains = machine_gains;
+  const double Ts = s.controller_period_s;
+  const std::string a(axis_name(s.axis));
+  if (s.u_raw_V.size() != s.n || s.n < 1000 || !(Ts > 0.0) || std::abs(s.dt_s - Ts) > 1e-6 * Ts) return out;
+  const std::size_t n = s.n;
+  std::vector<double> e(n), I(n), D(n, 0.0), acc(n, 0.0), vel(n, 0.0), one(n, 1.0);
+  double integral = 0.0;
+  for (std::size_t k = 0; k < n; ++k) {
+    e[k] = s.x_ref_mm[k] - s.x_mm[k];
+    integral += Ts * e[k];
+    I[k] = integral;
+    if (k >= 1) {
+      D[k] = (e[k] - e[k - 1]) / Ts;
+      vel[k] = (s.x_ref_mm[k] - s.x_ref_mm[k - 1]) / Ts;
+    }
+    if (k >= 2) acc[k] = (vel[k] - vel[k - 1]) / Ts;
+  }
+  std::vector<std::size_t> rows;
+  const double u_lim = 0.999 * machine_gains.u_max_V;
+  for (std::size_t k = 2; k < n; ++k)
+    if (std::abs(s.u_raw_V[k]) < u_lim) rows.push_back(k);
+  using Field = double controller::PositionLoopParams::*;
+  struct Term {
+    const std::vector<double>* column;
+    Field field;  ///< nullptr for the constant
+    const char* name;
+  };
+  const Term all[] = {{&e, &controller::PositionLoopParams::Kp_V_per_mm, "Kp"},
+                      {&I, &controller::PositionLoopParams::Ki_V_per_s_mm, "Ki"},
+                      {&D, &controller::PositionLoopParams::Kd_V_s_per_mm, "Kd"},
+                      {&acc, &controller::PositionLoopParams::K1_V_s2_per_mm, "K1"},
+                      {&vel, &controller::PositionLoopParams::K2_V_s_per_mm, "K2"},
+                      {&one, nullptr, "constant"}};
+  auto rms_on_rows = [&](const std::vector<double>& c) {
+    double ss = 0.0;
+    for (std::size_t k : rows) ss += c[k] * c[k];
+    return rows.empty() ? 0.0 : std::sqrt(ss / static_cast<double>(rows.size()));
+  };
+  // A column the run never excites (no motion: no speed, no acceleration) is
+  // left out; its gain stays the machine's.
+  std::vector<const Term*> terms;
+  std::vector<const std::vector<double>*> columns;
+  for (const Term& t : all)
+    if (rms_on_rows(*t.column) > 0.0) {
+      terms.push_back(&t);
+      columns.push_back(t.column);
+    }
+  const double u_rms = rms_on_rows(s.u_raw_V);
+  const LsqResult fit = least_squares(columns, s.u_raw_V, rows);
+  if (!fit.ok || !(u_rms > 0.0)) return out;
+  out.checked = true;
+  out.residual_rel = fit.residual_rms / u_rms;
+  if (!(out.residual_rel < kLoopLawTolerance)) {
+    out.note = fmt::format("axis {}: {}_u_V does not follow the FADAL loop law with any gains (the best fit leaves "
+                           "{:.1f} % of its RMS): the machine's gains are kept",
+                           a, a, 100.0 * out.residual_rel);
+    return out;
+  }
+  out.law_holds = true;
+  std::vector<std::string> moved;
+  std::string start;
+  for (std::size_t j = 0; j < terms.size(); ++j) {
+    const Term& t = *terms[j];
+    const double fitted = fit.theta[j];
+    const double machine = t.field ? machine_gains.*t.field : 0.0;
+    if (std::abs(fitted - machine) * rms_on_rows(*t.column) / u_rms <= 0.005) continue;
+    if (!t.field) {
+      start = fmt::format("; u holds a constant {:.3g} V (an integrator that did not start at zero; the replay "
+                          "starts it at zero)",
+                          fitted);
+      continue;
+    }
+    out.differs = true;
+    moved.push_back(fmt::format("{} {:.4g} (machine {:.4g})", t.name, fitted, machine));
+  }
+  // Where any gain moves, the fit's are all taken: it is exact to the log's rounding.
+  if (out.differs)
+    for (std::size_t j = 0; j < terms.size(); ++j)
+      if (terms[j]->field) out.gains.*(terms[j]->field) = fit.theta[j];
+  if (out.differs)
+    out.note = fmt::format("axis {}: {}_u_V follows the FADAL loop law (to {:.2g} % of its RMS) with gains other than "
+                           "the machine's: {}; the replay uses them{}",
+                           a, a, 100.0 * out.residual_rel, fmt::join(moved, ", "), start);
+  else if (!start.empty())
+    out.note = fmt::format("axis {}: {}_u_V follows the FADAL loop law with the machine's gains{}", a, a, start);
+  return out;
+}
+
 }  // namespace twin::analysis

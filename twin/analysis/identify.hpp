@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "controller/position_loop.hpp"
 #include "feeddrive/drive_params.hpp"
 #include "twin/analysis/replay.hpp"
 
@@ -87,6 +88,27 @@ inline constexpr double kNominalRelativeSpread = 0.25;
 /// non-physical are clamped and said.
 DriveIdentification identify_drive(const AxisSignals& s, const std::vector<double>& T_Nm,
                                    const feeddrive::DriveParams& nominal);
+
+/// The FADAL position-loop law (spec/measured-data.md) checked against a
+/// run that logs u at the loop's own rate: u[k] regressed on e[k], the
+/// integral Ts sum e, the difference (e[k] - e[k-1]) / Ts, the reference's
+/// backward-difference acceleration and speed, and a constant (an integrator
+/// that did not start at zero), on the rows where u is inside its limit. On
+/// the twin's own law the fit is exact to the log's rounding.
+struct LoopIdentification {
+  bool checked{false};    ///< u at the loop's rate with enough rows: the law could be checked
+  bool law_holds{false};  ///< the fit leaves under kLoopLawTolerance of u's RMS
+  bool differs{false};    ///< ... and with gains other than the machine's (see identify_loop_gains)
+  controller::PositionLoopParams gains;  ///< the machine's, or the identified ones where `differs`
+  double residual_rel{0.0};              ///< RMS of the fit's residual over RMS of u
+  std::string note;
+};
+inline constexpr double kLoopLawTolerance = 0.02;
+
+/// Checks the loop law on the signals (see LoopIdentification). A gain
+/// differs where replacing the machine's by the fitted one moves u by more
+/// than 0.5 % of its RMS; where one does, all fitted gains are taken.
+LoopIdentification identify_loop_gains(const AxisSignals& s, const controller::PositionLoopParams& machine_gains);
 
 /// The regressor columns of the base model for the signals: a, w, [w>0], -[w<0].
 struct BaseRegressors {

@@ -3,6 +3,7 @@
 // model lacks, a quantised position and current noise. calibrate() is given
 // the run folder only; the test checks the effect and axis it names and the
 // held-out errors before and after.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -13,6 +14,7 @@
 
 #include "truth_sim.hpp"
 #include "twin/analysis/calibrate.hpp"
+#include "twin/analysis/identify.hpp"
 #include "twin/io/atomic_file.hpp"
 #include "twin/io/trace_csv.hpp"
 
@@ -215,6 +217,46 @@ TEST(TruthDelay, AfterTheCurrentSensor) {
   EXPECT_NEAR(param(r.added[0].candidate, "delay_s"), 5e-4, 1e-4);
   EXPECT_LE(r.error_after[0].err_mm, r.error_before[0].err_mm);
   EXPECT_LE(r.error_after[0].u, r.error_before[0].u);
+}
+
+// A machine tuned away from its definition: the truth's X loop runs with
+// Kp 400 V/mm, Kd 0.24 V s/mm and K2 1e-4 V s/mm (the machine file says 500,
+// 0.3, -2.37e-6). The run logs u at the loop's rate, so the law can be
+// checked: calibrate must find those gains from u to 0.5 % (u is logged to
+// 1e-5 V; the fit is exact to that rounding), replay with them, and add no
+// effect. The same run with u logged 3 ticks late no longer follows the law
+// with any gains: the check must say so and keep the machine's.
+TEST(TruthLoop, GainsOtherThanTheMachinesAreFoundFromU) {
+  truth::RunSpec spec = perturbed();
+  spec.plant.Kp = 400.0;
+  spec.plant.Kd = 0.24;
+  spec.plant.K2 = 1e-4;
+  const auto dir = run_dir("loop_gains");
+  truth::write_truth_run(dir, spec);
+  const MeasuredRun run = load_run(dir);
+  std::vector<std::string> notes;
+  const auto machine = machine_for_run(run, "", &notes);
+  const CalibrationResult r = calibrate(run, machine);
+  const auto& loop = r.loop[index(Axis::kX)];
+  std::printf("  %s\n", loop.note.c_str());
+  ASSERT_TRUE(loop.differs);
+  EXPECT_NEAR(loop.gains.Kp_V_per_mm, 400.0, 2.0);
+  EXPECT_NEAR(loop.gains.Kd_V_s_per_mm, 0.24, 0.0012);
+  EXPECT_NEAR(loop.gains.K2_V_s_per_mm, 1e-4, 0.5e-6);
+  EXPECT_NEAR(loop.gains.Ki_V_per_s_mm, 70.0, 0.35);
+  EXPECT_DOUBLE_EQ(r.final_machine.axes[index(Axis::kX)].loop.Kp_V_per_mm, loop.gains.Kp_V_per_mm);
+  for (const auto& a : r.added) std::printf("  ADDED %s: %s\n", a.candidate.effect.c_str(), a.candidate.evidence.c_str());
+  EXPECT_TRUE(r.added.empty());
+
+  std::string note;
+  AxisSignals s = prepare_axis_signals(run, Axis::kX, machine.axes[0].drive, 0.001, machine.Ts_s, 0.6, &note);
+  std::rotate(s.u_raw_V.rbegin(), s.u_raw_V.rbegin() + 3, s.u_raw_V.rend());
+  const LoopIdentification late = identify_loop_gains(s, machine.axes[0].loop);
+  EXPECT_TRUE(late.checked);
+  EXPECT_FALSE(late.law_holds);
+  EXPECT_FALSE(late.differs);
+  EXPECT_DOUBLE_EQ(late.gains.Kp_V_per_mm, 500.0);
+  EXPECT_NE(late.note.find("does not follow the FADAL loop law"), std::string::npos);
 }
 
 // No effect beyond the contract's plant: nothing may be added.
