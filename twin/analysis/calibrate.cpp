@@ -455,8 +455,9 @@ std::string calibration_report_markdown(const CalibrationResult& r, const std::s
   s += "\n## Notes\n\n";
   if (r.notes.empty()) s += "none\n";
   for (const auto& n : r.notes) s += "- " + n + "\n";
-  s += "\nPlots: residual_before.png, residual_after.png (measured minus model tracking error and low-passed u), "
-       "evidence.png (the chosen effect's signature).\n";
+  s += "\nPlots: residual_before.png, residual_after.png (measured minus model tracking error and low-passed u, "
+       "for the axes whose position is logged)";
+  s += r.added.empty() ? ".\n" : ", evidence.png (the first added effect's signature).\n";
   return s;
 }
 

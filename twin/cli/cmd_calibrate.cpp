@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cstdio>
 #include <memory>
 #include <string>
@@ -18,9 +19,17 @@
 namespace twin::cli {
 namespace {
 
+// The run's axes whose measured position is logged: the ones with residuals to plot.
+std::vector<Axis> measured_axes(const analysis::MeasuredRun& run) {
+  std::vector<Axis> axes;
+  for (Axis a : run.axes)
+    if (run.trace.find(std::string(axis_name(a)) + "_mm")) axes.push_back(a);
+  return axes;
+}
+
 // residuals.csv: measured minus model, before and after, every few rows.
 void write_residuals(const std::filesystem::path& path, const analysis::MeasuredRun& run,
-                     const analysis::CalibrationResult& r) {
+                     const analysis::CalibrationResult& r, const std::vector<Axis>& axes) {
   std::vector<std::string> names{"t_s"};
   const double fs = 1.0 / run.sample_period_s;
   const double fc = std::min(200.0, 0.4 * fs);
@@ -28,7 +37,7 @@ void write_residuals(const std::filesystem::path& path, const analysis::Measured
     std::vector<double> eb, ea, ub, ua, x;
   };
   AxisArray<Cols> cols;
-  for (Axis a : run.axes) {
+  for (Axis a : axes) {
     const std::string n(axis_name(a));
     names.insert(names.end(), {n + "_mm", n + "_err_res_before_mm", n + "_err_res_after_mm", n + "_u_res_before",
                                n + "_u_res_after"});
@@ -67,7 +76,7 @@ void write_residuals(const std::filesystem::path& path, const analysis::Measured
   for (std::size_t k = 0; k < rows; k += step) {
     row.clear();
     row.push_back(t[k]);
-    for (Axis a : run.axes) {
+    for (Axis a : axes) {
       const auto& c = cols[index(a)];
       row.insert(row.end(), {c.x[k], c.eb[k], c.ea[k], c.ub[k], c.ua[k]});
     }
@@ -85,12 +94,14 @@ std::string tmp_png(const std::filesystem::path& p) {
 
 std::vector<std::filesystem::path> make_plots(const std::filesystem::path& out, const analysis::MeasuredRun& run,
                                               const analysis::CalibrationResult& r) {
+  const std::vector<Axis> axes = measured_axes(run);
+  if (axes.empty()) throw ConfigError("no axis logs its measured position <a>_mm: no residual to plot");
   const auto data = out / "residuals.csv";
-  write_residuals(data, run, r);
+  write_residuals(data, run, r, axes);
   const std::string d = analysis::gnuplot_quote(data);
   std::string script = "set datafile separator ','\nset key autotitle columnhead\nset grid\n";
   std::vector<std::filesystem::path> outputs;
-  const std::size_t na = run.axes.size();
+  const std::size_t na = axes.size();
   for (const char* which : {"before", "after"}) {
     const auto png = out / fmt::format("residual_{}.png", which);
     outputs.push_back(png);
@@ -98,7 +109,7 @@ std::vector<std::filesystem::path> make_plots(const std::filesystem::path& out, 
                           300 * na, tmp_png(png), na);
     for (std::size_t j = 0; j < na; ++j) {
       const std::size_t c0 = 2 + 5 * j;  // gnuplot columns are 1-based: t_s is 1
-      const std::string an(axis_name(run.axes[j]));
+      const std::string an(axis_name(axes[j]));
       const std::size_t ce = c0 + (std::string(which) == "before" ? 1 : 2);
       const std::size_t cu = c0 + (std::string(which) == "before" ? 3 : 4);
       script += fmt::format("set title '{} tracking error, measured minus model ({})'\nset xlabel 't s'\n"
@@ -110,11 +121,11 @@ std::vector<std::filesystem::path> make_plots(const std::filesystem::path& out, 
     }
     script += "unset multiplot\n";
   }
-  if (!r.added.empty()) {
+  if (!r.added.empty() && std::find(axes.begin(), axes.end(), r.added.front().candidate.axis) != axes.end()) {
     const auto& c = r.added.front().candidate;
     std::size_t j = 0;
     for (; j < na; ++j)
-      if (run.axes[j] == c.axis) break;
+      if (axes[j] == c.axis) break;
     const std::size_t c0 = 2 + 5 * j;
     const auto png = out / "evidence.png";
     outputs.push_back(png);

@@ -4,17 +4,21 @@
 // run: the effect put in, what calibrate added, and the held-out errors before
 // and after. Not a test: a table for docs/calibration.md.
 //
-//   calibrate_sweep [--example RUN_DIR] [--filter NAME] [--program NAME] [--keep DIR] [--verbose]
+//   calibrate_sweep [--example RUN_DIR] [--filter NAME] [--program NAME] [--magnitudes 0.5,1,2]
+//                   [--keep DIR] [--verbose]
 //
 // With --example, further motion programs are the x and y reference of that
 // measured run, each on the truth's X plant, and its y reference on the Y
 // plant written as axis y ("Y example y"). --filter and --program
 // keep the cases and programs whose names contain the text; --keep writes the
-// runs under DIR (one folder each) instead of one temporary folder.
+// runs under DIR (one folder each) instead of one temporary folder;
+// --magnitudes sets the multiples m of each effect's middle magnitude.
 #include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -61,12 +65,14 @@ std::vector<EffectAt> catalogue() {
   };
 }
 
-std::vector<Case> cases() {
+std::vector<Case> cases(const std::vector<double>& magnitudes) {
   const std::vector<EffectAt> effects = catalogue();
   std::vector<Case> c;
   c.push_back({"none", "none", [](Effects&) {}});
-  for (double m : {0.5, 1.0, 2.0}) {
-    const std::string s = "x" + std::to_string(m).substr(0, 3);
+  for (double m : magnitudes) {
+    char s_buf[32];
+    std::snprintf(s_buf, sizeof s_buf, std::abs(m * 10.0 - std::round(m * 10.0)) < 1e-9 ? "x%.1f" : "x%.2f", m);
+    const std::string s = s_buf;
     for (const EffectAt& f : effects) c.push_back({f.name + (f.variant.empty() ? "" : " " + f.variant) + " " + s, f.name, [f, m](Effects& e) { f.set(e, m); }});
   }
   // Two effects at once, at the middle magnitudes.
@@ -89,6 +95,7 @@ std::vector<Case> cases() {
 
 int main(int argc, char** argv) {
   std::string example, filter, program, keep;
+  std::vector<double> magnitudes{0.5, 1.0, 2.0};
   bool verbose = false;
   for (int i = 1; i < argc; ++i) {
     const bool has_value = i + 1 < argc;
@@ -100,6 +107,17 @@ int main(int argc, char** argv) {
       filter = argv[++i];
     } else if (!std::strcmp(argv[i], "--program") && has_value) {
       program = argv[++i];
+    } else if (!std::strcmp(argv[i], "--magnitudes") && has_value) {
+      magnitudes.clear();
+      for (char* t = std::strtok(argv[++i], ","); t; t = std::strtok(nullptr, ",")) {
+        char* end = nullptr;
+        const double m = std::strtod(t, &end);
+        if (end == t || *end != '\0' || !(m > 0.0)) {
+          std::fprintf(stderr, "calibrate_sweep: --magnitudes takes positive numbers separated by commas, not '%s'\n", t);
+          return 2;
+        }
+        magnitudes.push_back(m);
+      }
     } else if (!std::strcmp(argv[i], "--keep") && has_value) {
       keep = argv[++i];
     } else {
@@ -124,7 +142,7 @@ int main(int argc, char** argv) {
   const auto tmp = std::filesystem::temp_directory_path() / ("calibrate_sweep_" + std::to_string(::getpid()));
   int wrong = 0, rose = 0, total = 0;
   for (const auto& [prog, ref, y_plant] : programs)
-    for (const Case& c : cases()) {
+    for (const Case& c : cases(magnitudes)) {
       if (!filter.empty() && c.name.find(filter) == std::string::npos) continue;
       if (!program.empty() && prog.find(program) == std::string::npos) continue;
       std::string folder = prog + " " + c.name;

@@ -3,11 +3,13 @@
 // file at a final name in OUT.
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -16,6 +18,7 @@ namespace twin {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 struct Result {
   int exit_code{0};
@@ -125,6 +128,59 @@ TEST(Cli, RunWritesTraceSummaryAndPlots) {
   const std::string header = slurp(out / "trace.csv").substr(0, 200);
   EXPECT_THAT(header, HasSubstr("t_s,x_ref_mm,x_mm,x_u_V,x_i_A,y_ref_mm"));
   EXPECT_THAT(slurp(out / "summary.json"), HasSubstr("\"cycle_time_s\""));
+}
+
+// A run as real machines log it: from a machine the meta does not name, with
+// y's reference but not its measured position. The twin's own simulated trace
+// (twin run) stands in for the measurement. calibrate must finish, write its
+// report, model, trace and residual plots (for x, the axis it can compare),
+// and say in report.md what it assumed and what it could not do.
+TEST(Cli, CalibrateRunOfAnUnnamedMachineWithAnAxisUnmeasured) {
+  const auto prog = file("partial/program.nc", "G21 G90 G64 P0.01\nG1 X10 Y5 F3000\nX0 Y0\nX10\nX0\nM30\n");
+  static_cast<void>(prog);
+  const auto scen = file("partial/scenario.yaml",
+                         "name: partial\nmachine: fadal2216\nprogram: program.nc\nstart_mm: [0, 0, 0]\nsettle_s: 0.05\n");
+  const auto sim = work() / "sim";
+  std::filesystem::remove_all(sim);
+  const Result made = twin_cmd("run " + scen.string() + " -o " + sim.string() + " --no-plots");
+  ASSERT_EQ(made.exit_code, 0) << made.err;
+  // Keep t_s, x_ref_mm, x_mm, x_u_V and y_ref_mm of the simulated trace.
+  std::ifstream in(sim / "trace.csv");
+  std::string line;
+  std::getline(in, line);
+  std::vector<std::string> header;
+  {
+    std::stringstream ss(line);
+    for (std::string c; std::getline(ss, c, ',');) header.push_back(c);
+  }
+  const std::vector<std::string> keep{"t_s", "x_ref_mm", "x_mm", "x_u_V", "y_ref_mm"};
+  std::vector<std::size_t> idx;
+  for (const auto& k : keep) {
+    const auto it = std::find(header.begin(), header.end(), k);
+    ASSERT_NE(it, header.end()) << k;
+    idx.push_back(static_cast<std::size_t>(it - header.begin()));
+  }
+  std::string csv = "t_s,x_ref_mm,x_mm,x_u_V,y_ref_mm\n";
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    for (std::string c; std::getline(ss, c, ',');) cells.push_back(c);
+    for (std::size_t j = 0; j < idx.size(); ++j) csv += cells.at(idx[j]) + (j + 1 < idx.size() ? "," : "\n");
+  }
+  file("partial_run/trace.csv", csv);
+  file("partial_run/meta.json", R"({"machine": null, "axes": ["x", "y"], "controller_period_s": 0.0001, )"
+                                R"("sample_period_s": 0.0001, "encoder_resolution_mm": 0.001})");
+  const auto out = work() / "out_partial";
+  std::filesystem::remove_all(out);
+  const Result r = twin_cmd("calibrate " + (work() / "partial_run").string() + " -o " + out.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* f : {"report.json", "report.md", "machine.yaml", "trace.csv", "trace_before.csv"})
+    EXPECT_TRUE(std::filesystem::exists(out / f)) << f;
+  const std::string report = slurp(out / "report.md");
+  EXPECT_THAT(report, HasSubstr("names no machine: the fadal2216 definition is assumed"));
+  EXPECT_THAT(report, HasSubstr("axis y: no y_mm column"));
+  EXPECT_THAT(report, Not(HasSubstr("plots not drawn")));
+  EXPECT_TRUE(std::filesystem::exists(out / "residual_before.png") || report.find("gnuplot") != std::string::npos);
 }
 
 }  // namespace
