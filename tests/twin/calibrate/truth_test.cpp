@@ -280,10 +280,13 @@ namespace {
 // u column, only current. calibrate must still identify the drive from the
 // current (torque Kt i) and replay at the controller period without throwing,
 // and say in its notes that u was missing. J must come within 15 % (the
-// acceleration phases are long against 1 ms). The Coulomb levels are not
-// checked: the truth's speeds make the encoder-count rate a whole multiple of
-// 1 kHz, so the sampled current aliases the count chatter to a speed-dependent
-// offset that no inverse-dynamics fit can remove (docs/calibration.md).
+// acceleration phases are long against 1 ms). At 3 mm/s the count pattern
+// repeats every 10 ticks and a 1 ms log samples one of its phases: the mean
+// sampled current there is -14.1 A for a true +0.6 A. Those rows must be left
+// out and said. Elsewhere the X drive's stick/slip chatter (12 to 14 A RMS)
+// leaves the Coulomb levels with standard errors of 0.3 to 0.7 N m, so they
+// are weighted with the nominal levels (said in a note) and must come within
+// 0.08 N m of the truth's 0.23 and 0.17 (the nominal's own distance is 0.03).
 TEST(TruthCoarse, CurrentOnlyAtOneKilohertz) {
   truth::RunSpec spec = perturbed();
   const auto dir = run_dir("coarse_current_only");
@@ -307,9 +310,16 @@ TEST(TruthCoarse, CurrentOnlyAtOneKilohertz) {
   std::printf("  J %g B %g Tc %g %g\n", r.identification[0].J_kg_m2, r.identification[0].B_kg_m2_per_s, r.identification[0].Tc_pos_Nm, r.identification[0].Tc_neg_Nm);
   ASSERT_TRUE(r.identified_axis[0]);
   EXPECT_NEAR(r.identification[0].J_kg_m2, 0.0084, 0.15 * 0.0084);
-  bool said = false;
-  for (const auto& n : r.notes) said = said || n.find("no x_u_V") != std::string::npos;
-  EXPECT_TRUE(said);
+  EXPECT_NEAR(r.identification[0].Tc_pos_Nm, 0.23, 0.08);
+  EXPECT_NEAR(r.identification[0].Tc_neg_Nm, 0.17, 0.08);
+  auto said = [&](const char* what) {
+    for (const auto& n : r.notes)
+      if (n.find(what) != std::string::npos) return true;
+    return false;
+  };
+  EXPECT_TRUE(said("no x_u_V"));
+  EXPECT_TRUE(said("left out of the fits"));
+  EXPECT_TRUE(said("weighted with its values"));
   const auto j = calibration_report_json(r);
   EXPECT_TRUE(j["error_before"].contains("x_i_A"));
   EXPECT_TRUE(j["effects_added"].empty());
