@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <numeric>
 
 #include <fmt/format.h>
@@ -94,21 +95,27 @@ std::vector<char> phase_locked_rows(const std::vector<double>& v_ref_mm_per_s, d
   // Counts per tick within this of p / L: the pattern's phase drifts by less
   // than one count in half a second, so a steady move keeps it locked.
   const double tol = Ts_s / 0.5;
+  // The most frequent locked pattern (speed to 0.01 mm/s, L), for the note.
+  std::map<std::pair<long, long>, std::size_t> seen;
   for (std::size_t k = 0; k < locked.size(); ++k) {
     const double r = std::abs(v_ref_mm_per_s[k]) * Ts_s / resolution_mm;
     if (r < tol) continue;
     for (long L = 1; L <= kMaxPattern; ++L) {
       const double p = std::round(r * static_cast<double>(L));
       if (std::abs(r - p / static_cast<double>(L)) >= tol) continue;
-      const long g = std::gcd(M, L);
-      if (g > 1) {
-        if (pattern && pattern->empty())
-          *pattern = fmt::format("e.g. {:.4g} mm/s: a pattern of {} ticks, sampled every {} ticks at {} of its phases",
-                                 std::abs(v_ref_mm_per_s[k]), L, M, L / g);
+      if (std::gcd(M, L) > 1) {
         locked[k] = 1;
+        ++seen[{std::lround(100.0 * std::abs(v_ref_mm_per_s[k])), L}];
       }
       break;
     }
+  }
+  if (pattern && !seen.empty()) {
+    const auto top = std::max_element(seen.begin(), seen.end(),
+                                      [](const auto& a, const auto& b) { return a.second < b.second; });
+    const long L = top->first.second;
+    *pattern = fmt::format("most at {:.2f} mm/s: a pattern of {} ticks, sampled every {} ticks at {} of its phases",
+                           0.01 * static_cast<double>(top->first.first), L, M, L / std::gcd(M, L));
   }
   return locked;
 }

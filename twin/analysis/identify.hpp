@@ -50,8 +50,8 @@ struct AxisSignals {
 /// held for about half a second) with gcd(M, L) > 1: the samples then visit
 /// only L / gcd(M, L) of the pattern's L phases, and the mean of the sampled
 /// command or current is off by the chatter's uneven phases (several amperes
-/// on the FADAL drives). Returns the flags and, in `pattern`, the L and the
-/// phases visited of the first such row.
+/// on the FADAL drives). Returns the flags and, in `pattern`, the speed, L
+/// and phases visited of the most frequent such pattern.
 std::vector<char> phase_locked_rows(const std::vector<double>& v_ref_mm_per_s, double dt_s, double Ts_s,
                                     double resolution_mm, std::string* pattern = nullptr);
 
