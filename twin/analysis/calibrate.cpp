@@ -180,6 +180,7 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
   r.t_split_s = t[std::min(r.n_fit, r.n - 1)];
   r.t_end_s = t.back();
   sim::MachineDefinition machine = start;
+  r.notes = run.notes;
 
   AxisArray<AxisSignals> sig;
   AxisArray<std::vector<double>> T_cur;

@@ -68,6 +68,25 @@ MeasuredRun load_run(const std::filesystem::path& dir) {
     if (std::find(run.axes.begin(), run.axes.end(), a) == run.axes.end())
       throw IoError(fmt::format("{}: meta.json lists axis {} but the trace has no {}_ref_mm column", run.trace.source,
                                 axis_name(a), axis_name(a)));
+  for (Axis a : run.axes) {
+    const std::string n(axis_name(a));
+    const auto& ref = run.trace.at(n + "_ref_mm");
+    const auto [rlo, rhi] = std::minmax_element(ref.begin(), ref.end());
+    if (*rlo == *rhi) continue;  // a still axis may well hold u and current constant
+    for (const std::string& col : {n + "_u_V", n + "_i_A"}) {
+      const auto it = std::find(run.trace.names.begin(), run.trace.names.end(), col);
+      if (it == run.trace.names.end()) continue;
+      const auto c = static_cast<std::size_t>(it - run.trace.names.begin());
+      const auto& v = run.trace.columns[c];
+      const auto [lo, hi] = std::minmax_element(v.begin(), v.end());
+      if (*lo != *hi) continue;
+      run.notes.push_back(fmt::format("{}: {} holds {} over the whole run while axis {} moves: a channel that was not "
+                                      "recorded; left out",
+                                      run.trace.source, col, *lo, n));
+      run.trace.names.erase(it);
+      run.trace.columns.erase(run.trace.columns.begin() + static_cast<std::ptrdiff_t>(c));
+    }
+  }
   const auto& t = run.trace.at("t_s");
   if (t.size() < 3) throw IoError(fmt::format("{}: {} rows are too few to replay", run.trace.source, t.size()));
   const double dt = (t.back() - t.front()) / static_cast<double>(t.size() - 1);

@@ -28,9 +28,12 @@ struct MeasuredRun {
   io::TraceTable trace;
   std::vector<Axis> axes;          ///< axes with a <a>_ref_mm column
   double sample_period_s{0.0};     ///< from the time column (uniform within 1 %)
+  std::vector<std::string> notes;  ///< what load_run left out of the trace, and why
 };
 
 /// Reads RUN/meta.json and RUN/trace.csv(.gz); checks the columns and time.
+/// A u or current column that holds one value over the whole run while its
+/// axis moves (a channel that was not recorded) is left out, with a note.
 MeasuredRun load_run(const std::filesystem::path& dir);
 
 /// The machine a run is replayed on: `machine_override` (name or path; one

@@ -28,7 +28,7 @@ void register_replay(CLI::App& app) {
   cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.J=0.008")->take_all();
   cmd->callback([opt]() {
     const analysis::MeasuredRun run = analysis::load_run(opt->run);
-    std::vector<std::string> notes;
+    std::vector<std::string> notes = run.notes;
     sim::MachineDefinition machine = analysis::machine_for_run(run, opt->machine, &notes);
     apply_sets(machine, opt->sets);
     analysis::ReplayResult r = analysis::replay_run(run, machine);

@@ -185,6 +185,20 @@ TEST(Replay, UnknownMachineIsAssumedToBeTheShippedOneAndSaid) {
   }
 }
 
+// A current channel that holds one value while its axis moves was not
+// recorded: load_run leaves it out and says so; on an axis that stands still
+// a constant current is a measurement and stays.
+TEST(Replay, AConstantCurrentOfAMovingAxisIsLeftOutAndSaid) {
+  std::string csv = "t_s,x_ref_mm,x_mm,x_i_A,y_ref_mm,y_mm,y_i_A\n";
+  for (int i = 0; i < 100; ++i)
+    csv += std::to_string(i * 1e-4) + "," + std::to_string(0.001 * i) + "," + std::to_string(0.001 * i) + ",0,5,5,0\n";
+  const auto run = analysis::load_run(make_run("dead_current", kMeta, csv));
+  EXPECT_EQ(run.trace.find("x_i_A"), nullptr);
+  EXPECT_NE(run.trace.find("y_i_A"), nullptr);
+  ASSERT_EQ(run.notes.size(), 1u);
+  EXPECT_THAT(run.notes[0], HasSubstr("x_i_A holds 0 over the whole run while axis x moves"));
+}
+
 // The reference of a coarse log rebuilt at the controller period, against
 // closed forms: a constant acceleration is reproduced exactly between
 // samples (the centred slopes of a parabola are its derivative, and a cubic
