@@ -196,6 +196,11 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
     r.loop[index(a)] = identify_loop_gains(sig[index(a)], ax.loop);
     if (!r.loop[index(a)].note.empty()) r.notes.push_back(r.loop[index(a)].note);
     if (r.loop[index(a)].differs) ax.loop = r.loop[index(a)].gains;
+    r.amplifier[index(a)] = check_amplifier(sig[index(a)], ax.drive.Ka_A_per_V);
+    const AmplifierCheck& amp = r.amplifier[index(a)];
+    if (!amp.note.empty()) r.notes.push_back(amp.note);
+    if (amp.gain_differs) ax.drive.Ka_A_per_V = amp.gain_A_per_V;
+    if (amp.sign_flipped) take_torque_from_u(sig[index(a)], ax.drive);
     if (!sig[index(a)].has_u)
       r.notes.push_back(fmt::format("axis {}: no {}_u_V: torque from the current (Tm = Kt i); the u error is measured "
                                     "on the current",
@@ -376,6 +381,7 @@ nlohmann::json calibration_report_json(const CalibrationResult& r) {
     const auto& d = r.final_machine.axes[index(a)].drive;
     auto& p = j["parameters_identified"][std::string(axis_name(a))];
     p = {{"J", d.J_kg_m2}, {"B", d.B_kg_m2_per_s}, {"Tc_pos", d.Tc_pos_Nm}, {"Tc_neg", d.Tc_neg_Nm}};
+    if (r.amplifier[index(a)].gain_differs) p["Ka"] = d.Ka_A_per_V;
     // Loop gains only where the run's u shows other gains than the machine's.
     if (r.loop[index(a)].differs) {
       const auto& g = r.loop[index(a)].gains;

@@ -74,6 +74,7 @@ struct CalibrationResult {
   AxisArray<DriveIdentification> identification;
   AxisArray<bool> identified_axis{};
   AxisArray<LoopIdentification> loop;  ///< the loop law checked on u, where logged at the loop's rate
+  AxisArray<AmplifierCheck> amplifier; ///< the current against Ka u, where both are logged
   std::vector<AddedEffect> added;
   std::vector<EffectCandidate> rejected;  ///< replayed and not good enough (with their figures)
   std::vector<EffectCandidate> considered;///< every candidate of every round with its signal figures

@@ -322,4 +322,57 @@ LoopIdentification identify_loop_gains(const AxisSignals& s, const controller::P
   return out;
 }
 
+AmplifierCheck check_amplifier(const AxisSignals& s, double Ka_A_per_V) {
+  AmplifierCheck out;
+  if (s.u_raw_V.size() != s.n || s.i_raw_A.size() != s.n || s.n < 200 || !(Ka_A_per_V > 0.0)) return out;
+  const std::string a(axis_name(s.axis));
+  double i_max = 0.0;
+  for (double v : s.i_raw_A) i_max = std::max(i_max, std::abs(v));
+  if (!(i_max > 0.0)) return out;
+  const auto max_lag = static_cast<std::size_t>(std::min(60.0, std::floor(0.01 / s.dt_s)));
+  double best = 0.0;
+  for (std::size_t L = 0; L <= max_lag && L + 100 < s.n; ++L) {
+    double iu = 0.0, uu = 0.0, ii = 0.0;
+    for (std::size_t k = L; k < s.n; ++k) {
+      const double i = s.i_raw_A[k], u = s.u_raw_V[k - L];
+      if (std::abs(i) >= 0.9 * i_max) continue;
+      iu += i * u;
+      uu += u * u;
+      ii += i * i;
+    }
+    if (!(uu > 0.0) || !(ii > 0.0)) continue;
+    const double r = iu / std::sqrt(uu * ii);
+    if (std::abs(r) > std::abs(best)) {
+      best = r;
+      out.lag_samples = L;
+      out.gain_A_per_V = iu / uu;
+    }
+  }
+  out.correlation = best;
+  if (std::abs(best) < 0.9) return out;
+  out.checked = true;
+  if (out.gain_A_per_V < 0.0) {
+    out.sign_flipped = true;
+    out.note = fmt::format("axis {}: {}_i_A is {:.3g} times {}_u_V (correlation {:.3f}): the current is logged with the "
+                           "opposite sign of u; the torque is taken from u",
+                           a, a, out.gain_A_per_V, a, best);
+  } else if (std::abs(out.gain_A_per_V / Ka_A_per_V - 1.0) > 0.02) {
+    out.gain_differs = true;
+    out.note = fmt::format("axis {}: {}_i_A is {:.4g} times {}_u_V {} samples later (correlation {:.3f}), not the "
+                           "machine's Ka = {:.4g} A/V: the amplifier's gain is taken from the run",
+                           a, a, out.gain_A_per_V, a, out.lag_samples, best, Ka_A_per_V);
+  }
+  return out;
+}
+
+void take_torque_from_u(AxisSignals& s, const feeddrive::DriveParams& drive) {
+  if (s.u_raw_V.size() != s.n || s.n == 0) return;
+  s.torque_from_u = true;
+  s.torque_per_unit = drive.Kt_Nm_per_A * drive.Ka_A_per_V;
+  s.cmd_raw = s.u_raw_V;
+  std::vector<double> T(s.n);
+  for (std::size_t k = 0; k < s.n; ++k) T[k] = s.torque_per_unit * s.cmd_raw[k];
+  s.T_Nm = lowpass(T, s.fc_Hz, 1.0 / s.dt_s);
+}
+
 }  // namespace twin::analysis

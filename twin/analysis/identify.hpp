@@ -110,6 +110,28 @@ inline constexpr double kLoopLawTolerance = 0.02;
 /// than 0.5 % of its RMS; where one does, all fitted gains are taken.
 LoopIdentification identify_loop_gains(const AxisSignals& s, const controller::PositionLoopParams& machine_gains);
 
+/// The amplifier checked against a run that logs both u and the current:
+/// i[k] against u[k - L] at the lag L (0 to 10 ms) where they correlate
+/// best, on the rows where the current is below 90 % of its largest value
+/// (a current limit cuts the rest). Where they correlate (|r| >= 0.9), the
+/// slope is the amplifier's gain: a slope off the machine's Ka by more than
+/// 2 % replaces it, and a negative one says that the current is logged with
+/// the opposite sign of u.
+struct AmplifierCheck {
+  bool checked{false};
+  double correlation{0.0};
+  double gain_A_per_V{0.0};  ///< the slope
+  std::size_t lag_samples{0};
+  bool sign_flipped{false};  ///< the slope is negative
+  bool gain_differs{false};  ///< positive, and off the machine's Ka by more than 2 %
+  std::string note;
+};
+AmplifierCheck check_amplifier(const AxisSignals& s, double Ka_A_per_V);
+
+/// Makes the signals' torque Kt Ka u (from the command), for a current that
+/// cannot be used (see AmplifierCheck::sign_flipped).
+void take_torque_from_u(AxisSignals& s, const feeddrive::DriveParams& drive);
+
 /// The regressor columns of the base model for the signals: a, w, [w>0], -[w<0].
 struct BaseRegressors {
   std::vector<double> acc, vel, pos, neg;

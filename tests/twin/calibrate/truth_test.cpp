@@ -259,6 +259,41 @@ TEST(TruthLoop, GainsOtherThanTheMachinesAreFoundFromU) {
   EXPECT_NE(late.note.find("does not follow the FADAL loop law"), std::string::npos);
 }
 
+// The current channel as real drives may log it: scaled (another amplifier
+// gain, or a sensor in other units) or with the opposite sign of u. The truth
+// logs i = Ka u; the test rescales the column in memory. Checked against the
+// scale applied: 1.2 Ka is taken as the amplifier's gain (to 0.5 %, the
+// current noise of 0.01 A against a 20 A chatter), said, and reported as Ka;
+// a negative current is said, the torque taken from u, and J comes within
+// 10 % of the truth as from a clean run. Neither adds an effect.
+TEST(TruthAmplifier, ScaledOrSignFlippedCurrent) {
+  const auto dir = run_dir("amplifier");
+  truth::write_truth_run(dir, perturbed());
+  for (const double scale : {1.2, -1.0}) {
+    MeasuredRun run = load_run(dir);
+    auto it = std::find(run.trace.names.begin(), run.trace.names.end(), "x_i_A");
+    ASSERT_NE(it, run.trace.names.end());
+    for (double& v : run.trace.columns[static_cast<std::size_t>(it - run.trace.names.begin())]) v *= scale;
+    std::vector<std::string> notes;
+    const auto machine = machine_for_run(run, "", &notes);
+    const CalibrationResult r = calibrate(run, machine);
+    const AmplifierCheck& amp = r.amplifier[index(Axis::kX)];
+    std::printf("  scale %g: %s\n", scale, amp.note.c_str());
+    ASSERT_TRUE(amp.checked);
+    EXPECT_TRUE(r.added.empty());
+    if (scale > 0.0) {
+      EXPECT_TRUE(amp.gain_differs);
+      EXPECT_NEAR(amp.gain_A_per_V, 1.2 * 6.4898, 0.005 * 1.2 * 6.4898);
+      EXPECT_DOUBLE_EQ(r.final_machine.axes[index(Axis::kX)].drive.Ka_A_per_V, amp.gain_A_per_V);
+      EXPECT_TRUE(calibration_report_json(r)["parameters_identified"]["x"].contains("Ka"));
+    } else {
+      EXPECT_TRUE(amp.sign_flipped);
+      EXPECT_NE(amp.note.find("opposite sign"), std::string::npos);
+      EXPECT_NEAR(r.identification[index(Axis::kX)].J_kg_m2, 0.0084, 0.1 * 0.0084);
+    }
+  }
+}
+
 // No effect beyond the contract's plant: nothing may be added.
 TEST(TruthNone, NothingAdded) {
   const CalibrationResult r = calibrate_case(Case{"none", {}});
