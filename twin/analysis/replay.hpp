@@ -34,6 +34,8 @@ struct MeasuredRun {
 /// Reads RUN/meta.json and RUN/trace.csv(.gz); checks the columns and time.
 /// A u or current column that holds one value over the whole run while its
 /// axis moves (a channel that was not recorded) is left out, with a note.
+/// t_s must be uniform within 1 %, or jitter by at most a fifth of a period
+/// about a uniform grid (taken as on it, with a note).
 MeasuredRun load_run(const std::filesystem::path& dir);
 
 /// The machine a run is replayed on: `machine_override` (name or path; one

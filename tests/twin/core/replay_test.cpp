@@ -185,6 +185,22 @@ TEST(Replay, UnknownMachineIsAssumedToBeTheShippedOneAndSaid) {
   }
 }
 
+// Time stamps that jitter by up to a fifth of a period about a uniform grid
+// (a logger's clock) are taken as on the grid, and said; a missing row (a
+// step of two periods) stays an error naming the rows.
+TEST(Replay, JitteringTimeStampsAreTakenAsUniformAndSaid) {
+  std::string csv = "t_s,x_ref_mm\n";
+  for (int i = 0; i < 100; ++i) csv += std::to_string(i * 1e-3 + (i % 3 == 1 ? 1.5e-4 : (i % 3 == 2 ? -1e-4 : 0.0))) + ",0\n";
+  const auto meta = R"({"machine": "fadal2216", "controller_period_s": 0.0001, "encoder_resolution_mm": 0.001})";
+  const auto run = analysis::load_run(make_run("jitter_ok", meta, csv));
+  EXPECT_NEAR(run.sample_period_s, 1e-3, 1e-5);
+  ASSERT_EQ(run.notes.size(), 1u);
+  EXPECT_THAT(run.notes[0], HasSubstr("jitters by up to"));
+  std::string gap = "t_s,x_ref_mm\n";
+  for (int i = 0; i < 100; ++i) gap += std::to_string((i < 50 ? i : i + 1) * 1e-3) + ",0\n";
+  EXPECT_THROW(analysis::load_run(make_run("gap", meta, gap)), Error);
+}
+
 // A current channel that holds one value while its axis moves was not
 // recorded: load_run leaves it out and says so; on an axis that stands still
 // a constant current is a measurement and stays.
