@@ -5,14 +5,16 @@
 // and after. Not a test: a table for docs/calibration.md.
 //
 //   calibrate_sweep [--example RUN_DIR] [--filter NAME] [--program NAME] [--magnitudes 0.5,1,2]
-//                   [--keep DIR] [--verbose]
+//                   [--log-every M] [--current-only] [--keep DIR] [--verbose]
 //
 // With --example, further motion programs are the x and y reference of that
 // measured run, each on the truth's X plant, and its y reference on the Y
 // plant written as axis y ("Y example y"). --filter and --program
 // keep the cases and programs whose names contain the text; --keep writes the
 // runs under DIR (one folder each) instead of one temporary folder;
-// --magnitudes sets the multiples m of each effect's middle magnitude.
+// --magnitudes sets the multiples m of each effect's middle magnitude;
+// --log-every M keeps every M-th row of each run (a coarse log) and
+// --current-only drops its u column.
 #include <unistd.h>
 
 #include <algorithm>
@@ -29,6 +31,8 @@
 #include "truth_sim.hpp"
 #include "twin/analysis/calibrate.hpp"
 #include "twin/core/error.hpp"
+#include "twin/io/atomic_file.hpp"
+#include "twin/io/trace_csv.hpp"
 
 namespace {
 
@@ -91,12 +95,37 @@ std::vector<Case> cases(const std::vector<double>& magnitudes) {
   return c;
 }
 
+// Rewrites a truth run as a CNC's trace would log it: every m-th row, and
+// without u when `current_only`.
+void log_coarsely(const std::filesystem::path& dir, long m, bool current_only) {
+  const auto full = twin::io::read_trace_csv(dir / "trace.csv");
+  std::vector<std::string> names;
+  for (const auto& n : full.names)
+    if (!(current_only && n.size() > 4 && n.compare(n.size() - 4, 4, "_u_V") == 0)) names.push_back(n);
+  {
+    twin::io::TraceWriter w(dir / "trace.csv", names);
+    std::vector<double> row(names.size());
+    for (std::size_t k = 0; k < full.num_rows(); k += static_cast<std::size_t>(m)) {
+      for (std::size_t c = 0; c < names.size(); ++c) row[c] = full.at(names[c])[k];
+      w.write_row(row);
+    }
+    w.commit();
+  }
+  auto meta = twin::io::read_file(dir / "meta.json");
+  const std::string key = "\"sample_period_s\": ";
+  const auto p = meta.find(key);
+  const auto e = meta.find(',', p);
+  meta.replace(p + key.size(), e - p - key.size(), std::to_string(1e-4 * static_cast<double>(m)));
+  twin::io::write_file_atomic(dir / "meta.json", meta);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string example, filter, program, keep;
   std::vector<double> magnitudes{0.5, 1.0, 2.0};
-  bool verbose = false;
+  long log_every = 1;
+  bool verbose = false, current_only = false;
   for (int i = 1; i < argc; ++i) {
     const bool has_value = i + 1 < argc;
     if (!std::strcmp(argv[i], "--verbose")) {
@@ -118,6 +147,14 @@ int main(int argc, char** argv) {
         }
         magnitudes.push_back(m);
       }
+    } else if (!std::strcmp(argv[i], "--log-every") && has_value) {
+      log_every = std::strtol(argv[++i], nullptr, 10);
+      if (log_every < 1) {
+        std::fprintf(stderr, "calibrate_sweep: --log-every takes a whole number of controller periods >= 1\n");
+        return 2;
+      }
+    } else if (!std::strcmp(argv[i], "--current-only")) {
+      current_only = true;
     } else if (!std::strcmp(argv[i], "--keep") && has_value) {
       keep = argv[++i];
     } else {
@@ -155,6 +192,7 @@ int main(int argc, char** argv) {
       c.set(spec.effects);
       try {
         twin::truth::write_truth_run(dir, spec);
+        if (log_every > 1) log_coarsely(dir, log_every, current_only);
         const auto run = twin::analysis::load_run(dir);
         std::vector<std::string> notes;
         const auto machine = twin::analysis::machine_for_run(run, "", &notes);
