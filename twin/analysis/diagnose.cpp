@@ -576,8 +576,51 @@ void try_delay(const Ctx& c, std::vector<EffectCandidate>& out) {
   out.push_back(std::move(e));
 }
 
+// Without u, a current limit shows in the logged current alone: samples pile
+// up at one magnitude in both directions, where a current that is not
+// limited thins out into a tail (the count chatter's 20 A spikes make a
+// smooth one). A pile is at least 20 samples, each direction holding a fifth
+// of them, within 0.5 % (+ 0.02 A) of the largest magnitude, and 5 times as
+// dense as the band of three such widths just below it.
+void try_saturation_from_current(const Ctx& c, std::vector<EffectCandidate>& out) {
+  double hi = 0.0;
+  for (double i : c.s.i_raw_A) hi = std::max(hi, std::abs(i));
+  if (!(hi > 0.0)) return;
+  const double tol = 0.005 * hi + 0.02;
+  std::size_t n_pos = 0, n_neg = 0, n_below = 0;
+  std::vector<double> top;
+  for (double i : c.s.i_raw_A) {
+    const double a = std::abs(i);
+    if (a >= hi - tol) {
+      top.push_back(a);
+      (i > 0.0 ? n_pos : n_neg)++;
+    } else if (a >= hi - 4.0 * tol) {
+      ++n_below;
+    }
+  }
+  const double density_ratio = static_cast<double>(top.size()) / std::max(1.0, static_cast<double>(n_below) / 3.0);
+  if (top.size() < 20 || 5 * std::min(n_pos, n_neg) < top.size() || density_ratio < 5.0) return;
+  const double i_max = median_of(top);
+  EffectCandidate e;
+  e.effect = "current_saturation";
+  e.axis = c.s.axis;
+  e.params = {{"i_max_A", i_max}};
+  e.signal_gain =
+      std::max(0.1, std::min(1.0, static_cast<double>(top.size()) / std::max(1.0, 0.01 * static_cast<double>(c.s.n))));
+  e.t_stat = density_ratio;
+  e.evidence = fmt::format("with no u logged, the current piles up at +-{:.2f} A: {} samples ({} in +, {} in -) within "
+                           "{:.2f} A of it, {:.0f} times as dense as just below: a limit",
+                           i_max, top.size(), n_pos, n_neg, tol, density_ratio);
+  e.base = c.base;
+  e.T_after_Nm = c.T;
+  out.push_back(std::move(e));
+}
+
 void try_saturation(const Ctx& c, std::vector<EffectCandidate>& out) {
-  if (!c.s.has_u) return;
+  if (!c.s.has_u) {
+    if (c.s.has_current) try_saturation_from_current(c, out);
+    return;
+  }
   const double Ka = c.d.Ka_A_per_V;
   const double Kt = c.d.Kt_Nm_per_A;
   const double fs = 1.0 / c.s.dt_s;
