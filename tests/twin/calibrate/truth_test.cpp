@@ -259,6 +259,46 @@ TEST(TruthLoop, GainsOtherThanTheMachinesAreFoundFromU) {
   EXPECT_NE(late.note.find("does not follow the FADAL loop law"), std::string::npos);
 }
 
+// A current limit in a log without u: the FADAL Y drive limited to 16 A on
+// the example's y reference, logged at 1 ms with position and current only.
+// No command to compare the current with, so the limit must be read from the
+// current alone (samples piling up at +-16 A). Checked: current_saturation
+// named on y without being told, the limit within 1 % (the current noise is
+// 0.01 A), the held-out tracking error at most a tenth of before (the limit
+// holds the drive 12 mm behind the reference in the fast moves) and the
+// current error not above before.
+TEST(TruthCoarse, CurrentLimitFromTheCurrentAlone) {
+  truth::RunSpec spec;
+  spec.plant = truth::perturbed_y_plant();
+  spec.axis = "y";
+  spec.reference_mm = example_reference("y");
+  spec.effects.i_max_A = 16.0;
+  const auto dir = run_dir("current_limit_1ms");
+  truth::write_truth_run(dir, spec);
+  const io::TraceTable full = io::read_trace_csv(dir / "trace.csv");
+  {
+    io::TraceWriter w(dir / "trace.csv", {"t_s", "y_ref_mm", "y_mm", "y_i_A"});
+    for (std::size_t k = 0; k < full.num_rows(); k += 10)
+      w.write_row({full.at("t_s")[k], full.at("y_ref_mm")[k], full.at("y_mm")[k], full.at("y_i_A")[k]});
+    w.commit();
+  }
+  io::write_file_atomic(dir / "meta.json",
+                        "{\"machine\": \"fadal2216\", \"axes\": [\"y\"], \"controller_period_s\": 0.0001, "
+                        "\"sample_period_s\": 0.001, \"encoder_resolution_mm\": 0.001}\n");
+  const MeasuredRun run = load_run(dir);
+  std::vector<std::string> notes;
+  const CalibrationResult r = calibrate(run, machine_for_run(run, "", &notes));
+  ASSERT_FALSE(r.added.empty());
+  std::printf("  ADDED %s: %s\n", r.added[0].candidate.effect.c_str(), r.added[0].candidate.evidence.c_str());
+  EXPECT_EQ(r.added[0].candidate.effect, "current_saturation");
+  EXPECT_EQ(r.added[0].candidate.axis, Axis::kY);
+  EXPECT_NEAR(param(r.added[0].candidate, "i_max_A"), 16.0, 0.16);
+  const auto& b = r.error_before[index(Axis::kY)];
+  const auto& a = r.error_after[index(Axis::kY)];
+  EXPECT_LE(a.err_mm, 0.1 * b.err_mm);
+  EXPECT_LE(a.u, b.u);
+}
+
 // The current channel as real drives may log it: scaled (another amplifier
 // gain, or a sensor in other units) or with the opposite sign of u. The truth
 // logs i = Ka u; the test rescales the column in memory. Checked against the
