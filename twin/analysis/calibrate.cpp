@@ -200,7 +200,7 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
     const AmplifierCheck& amp = r.amplifier[index(a)];
     if (!amp.note.empty()) r.notes.push_back(amp.note);
     if (amp.gain_differs) ax.drive.Ka_A_per_V = amp.gain_A_per_V;
-    if (amp.sign_flipped) take_torque_from_u(sig[index(a)], ax.drive);
+    if (amp.sign_flipped) set_torque_source(sig[index(a)], true, ax.drive);
     if (!sig[index(a)].has_u)
       r.notes.push_back(fmt::format("axis {}: no {}_u_V: torque from the current (Tm = Kt i); the u error is measured "
                                     "on the current",

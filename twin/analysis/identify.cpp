@@ -46,17 +46,11 @@ AxisSignals prepare_axis_signals(const MeasuredRun& run, Axis axis, const feeddr
   s.rg_mm_per_rad = nominal.rg_mm_per_rad;
   s.has_u = u != nullptr;
   s.has_current = i != nullptr;
-  // The measured current is the torque itself (Tm = Kt i): it carries what
-  // happens between the command and the motor (a delay, a current limit),
-  // which the command does not. u makes the torque only where no current is logged.
-  s.torque_from_u = u != nullptr && i == nullptr;
-  s.torque_per_unit = s.torque_from_u ? nominal.Kt_Nm_per_A * nominal.Ka_A_per_V : nominal.Kt_Nm_per_A;
   s.encoder_resolution_mm = encoder_resolution_mm;
   s.x_ref_mm = *ref;
   s.x_mm = *x;
   if (u) s.u_raw_V = *u;
   if (i) s.i_raw_A = *i;
-  s.cmd_raw = s.torque_from_u ? *u : *i;
   s.x_lp_mm = lowpass(s.x_mm, s.fc_Hz, fs);
   const auto v = derivative(s.x_lp_mm, s.dt_s);
   s.w_rad_per_s.resize(n);
@@ -65,9 +59,10 @@ AxisSignals prepare_axis_signals(const MeasuredRun& run, Axis axis, const feeddr
   std::vector<double> vr(n, 0.0);
   for (std::size_t k = 1; k < n; ++k) vr[k] = (s.x_ref_mm[k] - s.x_ref_mm[k - 1]) / s.dt_s;
   s.v_ref_mm_per_s = lowpass(vr, s.fc_Hz, fs);
-  std::vector<double> T(n);
-  for (std::size_t k = 0; k < n; ++k) T[k] = s.torque_per_unit * s.cmd_raw[k];
-  s.T_Nm = lowpass(T, s.fc_Hz, fs);
+  // The measured current is the torque itself (Tm = Kt i): it carries what
+  // happens between the command and the motor (a delay, a current limit),
+  // which the command does not. u makes the torque only where no current is logged.
+  set_torque_source(s, u != nullptr && i == nullptr, nominal);
   // Moving: faster than 2 mm/s or than 20 encoder counts over the filter's time scale.
   const double v_min = std::max(2.0, 20.0 * encoder_resolution_mm * s.fc_Hz);
   s.w_moving_rad_per_s = v_min / s.rg_mm_per_rad;
@@ -365,11 +360,12 @@ AmplifierCheck check_amplifier(const AxisSignals& s, double Ka_A_per_V) {
   return out;
 }
 
-void take_torque_from_u(AxisSignals& s, const feeddrive::DriveParams& drive) {
-  if (s.u_raw_V.size() != s.n || s.n == 0) return;
-  s.torque_from_u = true;
-  s.torque_per_unit = drive.Kt_Nm_per_A * drive.Ka_A_per_V;
-  s.cmd_raw = s.u_raw_V;
+void set_torque_source(AxisSignals& s, bool from_u, const feeddrive::DriveParams& drive) {
+  const auto& src = from_u ? s.u_raw_V : s.i_raw_A;
+  if (src.size() != s.n || s.n == 0) return;
+  s.torque_from_u = from_u;
+  s.torque_per_unit = from_u ? drive.Kt_Nm_per_A * drive.Ka_A_per_V : drive.Kt_Nm_per_A;
+  s.cmd_raw = src;
   std::vector<double> T(s.n);
   for (std::size_t k = 0; k < s.n; ++k) T[k] = s.torque_per_unit * s.cmd_raw[k];
   s.T_Nm = lowpass(T, s.fc_Hz, 1.0 / s.dt_s);

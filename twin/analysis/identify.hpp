@@ -128,9 +128,11 @@ struct AmplifierCheck {
 };
 AmplifierCheck check_amplifier(const AxisSignals& s, double Ka_A_per_V);
 
-/// Makes the signals' torque Kt Ka u (from the command), for a current that
-/// cannot be used (see AmplifierCheck::sign_flipped).
-void take_torque_from_u(AxisSignals& s, const feeddrive::DriveParams& drive);
+/// Sets what the signals' torque is made of, and the torque itself (low-passed
+/// as the position is): Kt Ka u from the command (`from_u`), else Kt i from
+/// the current. prepare_axis_signals takes the current where it is logged;
+/// calibrate switches to u for a current it cannot use (AmplifierCheck::sign_flipped).
+void set_torque_source(AxisSignals& s, bool from_u, const feeddrive::DriveParams& drive);
 
 /// The regressor columns of the base model for the signals: a, w, [w>0], -[w<0].
 struct BaseRegressors {
