@@ -587,6 +587,7 @@ void try_saturation_from_current(const Ctx& c, std::vector<EffectCandidate>& out
   for (double i : c.s.i_raw_A) hi = std::max(hi, std::abs(i));
   if (!(hi > 0.0)) return;
   const double tol = 0.005 * hi + 0.02;
+  if (hi - 4.0 * tol < 0.5 * hi) return;  // a current of a few tenths of an ampere at most: no limit to read
   std::size_t n_pos = 0, n_neg = 0, n_below = 0;
   std::vector<double> top;
   for (double i : c.s.i_raw_A) {
