@@ -576,6 +576,24 @@ void try_delay(const Ctx& c, std::vector<EffectCandidate>& out) {
   out.push_back(std::move(e));
 }
 
+// A current limit read from the logged current at i_max in `samples` rows.
+// The torque is the measured current: the base model fitted on it already
+// holds the limit's consequences; the limit itself goes to the replay.
+void add_limit(std::vector<EffectCandidate>& out, const Ctx& c, double i_max, std::size_t samples, double t_stat,
+               std::string evidence) {
+  EffectCandidate e;
+  e.effect = "current_saturation";
+  e.axis = c.s.axis;
+  e.params = {{"i_max_A", i_max}};
+  e.signal_gain =
+      std::max(0.1, std::min(1.0, static_cast<double>(samples) / std::max(1.0, 0.01 * static_cast<double>(c.s.n))));
+  e.t_stat = t_stat;
+  e.evidence = std::move(evidence);
+  e.base = c.base;
+  e.T_after_Nm = c.T;
+  out.push_back(std::move(e));
+}
+
 // Without u, a current limit shows in the logged current alone: samples pile
 // up at one magnitude in both directions, where a current that is not
 // limited thins out into a tail (the count chatter's 20 A spikes make a
@@ -602,19 +620,10 @@ void try_saturation_from_current(const Ctx& c, std::vector<EffectCandidate>& out
   const double density_ratio = static_cast<double>(top.size()) / std::max(1.0, static_cast<double>(n_below) / 3.0);
   if (top.size() < 20 || 5 * std::min(n_pos, n_neg) < top.size() || density_ratio < 5.0) return;
   const double i_max = median_of(top);
-  EffectCandidate e;
-  e.effect = "current_saturation";
-  e.axis = c.s.axis;
-  e.params = {{"i_max_A", i_max}};
-  e.signal_gain =
-      std::max(0.1, std::min(1.0, static_cast<double>(top.size()) / std::max(1.0, 0.01 * static_cast<double>(c.s.n))));
-  e.t_stat = density_ratio;
-  e.evidence = fmt::format("with no u logged, the current piles up at +-{:.2f} A: {} samples ({} in +, {} in -) within "
-                           "{:.2f} A of it, {:.0f} times as dense as just below: a limit",
-                           i_max, top.size(), n_pos, n_neg, tol, density_ratio);
-  e.base = c.base;
-  e.T_after_Nm = c.T;
-  out.push_back(std::move(e));
+  add_limit(out, c, i_max, top.size(), density_ratio,
+            fmt::format("with no u logged, the current piles up at +-{:.2f} A: {} samples ({} in +, {} in -) within "
+                        "{:.2f} A of it, {:.0f} times as dense as just below: a limit",
+                        i_max, top.size(), n_pos, n_neg, tol, density_ratio));
 }
 
 void try_saturation(const Ctx& c, std::vector<EffectCandidate>& out) {
@@ -643,20 +652,9 @@ void try_saturation(const Ctx& c, std::vector<EffectCandidate>& out) {
     }
     if (tops.size() < 20) return;
     const double i_max = median_of(tops);
-    // The torque is the measured current: the base model fitted on it already
-    // holds the limit's consequences; the limit itself goes to the replay.
-    EffectCandidate e;
-    e.effect = "current_saturation";
-    e.axis = c.s.axis;
-    e.params = {{"i_max_A", i_max}};
-    e.signal_gain =
-        std::max(0.1, std::min(1.0, static_cast<double>(tops.size()) / std::max(1.0, 0.01 * static_cast<double>(c.s.n))));
-    e.t_stat = static_cast<double>(tops.size());
-    e.evidence = fmt::format("the current is flat at {:.2f} A in {} samples where Ka u{} asks for more (noise {:.3f} A)",
-                             i_max, tops.size(), lag > 0 ? fmt::format(" ({} samples earlier)", lag) : "", noise);
-    e.base = c.base;
-    e.T_after_Nm = c.T;
-    out.push_back(std::move(e));
+    add_limit(out, c, i_max, tops.size(), static_cast<double>(tops.size()),
+              fmt::format("the current is flat at {:.2f} A in {} samples where Ka u{} asks for more (noise {:.3f} A)",
+                          i_max, tops.size(), lag > 0 ? fmt::format(" ({} samples earlier)", lag) : "", noise));
     return;
   }
   std::vector<double> a = iu;

@@ -31,8 +31,6 @@
 #include "truth_sim.hpp"
 #include "twin/analysis/calibrate.hpp"
 #include "twin/core/error.hpp"
-#include "twin/io/atomic_file.hpp"
-#include "twin/io/trace_csv.hpp"
 
 namespace {
 
@@ -93,30 +91,6 @@ std::vector<Case> cases(const std::vector<double>& magnitudes) {
                  }});
   }
   return c;
-}
-
-// Rewrites a truth run as a CNC's trace would log it: every m-th row, and
-// without u when `current_only`.
-void log_coarsely(const std::filesystem::path& dir, long m, bool current_only) {
-  const auto full = twin::io::read_trace_csv(dir / "trace.csv");
-  std::vector<std::string> names;
-  for (const auto& n : full.names)
-    if (!(current_only && n.size() > 4 && n.compare(n.size() - 4, 4, "_u_V") == 0)) names.push_back(n);
-  {
-    twin::io::TraceWriter w(dir / "trace.csv", names);
-    std::vector<double> row(names.size());
-    for (std::size_t k = 0; k < full.num_rows(); k += static_cast<std::size_t>(m)) {
-      for (std::size_t c = 0; c < names.size(); ++c) row[c] = full.at(names[c])[k];
-      w.write_row(row);
-    }
-    w.commit();
-  }
-  auto meta = twin::io::read_file(dir / "meta.json");
-  const std::string key = "\"sample_period_s\": ";
-  const auto p = meta.find(key);
-  const auto e = meta.find(',', p);
-  meta.replace(p + key.size(), e - p - key.size(), std::to_string(1e-4 * static_cast<double>(m)));
-  twin::io::write_file_atomic(dir / "meta.json", meta);
 }
 
 }  // namespace
@@ -191,8 +165,9 @@ int main(int argc, char** argv) {
       spec.reference_mm = ref;
       c.set(spec.effects);
       try {
+        spec.log_every = static_cast<int>(log_every);
+        spec.log_current_only = current_only;
         twin::truth::write_truth_run(dir, spec);
-        if (log_every > 1) log_coarsely(dir, log_every, current_only);
         const auto run = twin::analysis::load_run(dir);
         std::vector<std::string> notes;
         const auto machine = twin::analysis::machine_for_run(run, "", &notes);

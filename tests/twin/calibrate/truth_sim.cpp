@@ -100,7 +100,11 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   std::filesystem::create_directories(out_dir);
   std::FILE* f = std::fopen((out_dir / "trace.csv").c_str(), "w");
   const char* a = sp.axis.c_str();
-  std::fprintf(f, "t_s,%s_ref_mm,%s_mm,%s_u_V,%s_i_A\n", a, a, a, a);
+  const auto every = static_cast<std::size_t>(std::max(1, sp.log_every));
+  if (sp.log_current_only)
+    std::fprintf(f, "t_s,%s_ref_mm,%s_mm,%s_i_A\n", a, a, a);
+  else
+    std::fprintf(f, "t_s,%s_ref_mm,%s_mm,%s_u_V,%s_i_A\n", a, a, a, a);
   const int sub = 20;
   const double h = Ts / sub;
   const double dv = 1e-4;  // Karnopp band, rad/s
@@ -129,7 +133,13 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     if (e.i_max_A > 0.0) i = std::clamp(i, -e.i_max_A, e.i_max_A);
     const double Tm = p.Kt * i;
     const double i_logged = e.delay_after_current ? p.Ka * u : i;
-    std::fprintf(f, "%.4f,%.4f,%.3f,%.5f,%.4f\n", static_cast<double>(k) * Ts, ref[k], x_meas, u, i_logged + noise(rng));
+    const double i_measured = i_logged + noise(rng);
+    if (k % every == 0) {
+      if (sp.log_current_only)
+        std::fprintf(f, "%.4f,%.4f,%.3f,%.4f\n", static_cast<double>(k) * Ts, ref[k], x_meas, i_measured);
+      else
+        std::fprintf(f, "%.4f,%.4f,%.3f,%.5f,%.4f\n", static_cast<double>(k) * Ts, ref[k], x_meas, u, i_measured);
+    }
 
     for (int j = 0; j < sub; ++j) {
       // Friction side: the load (two-mass) or the motor.
@@ -203,7 +213,8 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   std::fclose(f);
   std::ofstream meta(out_dir / "meta.json");
   meta << "{\"machine\": \"fadal2216\", \"axes\": [\"" << sp.axis << "\"], \"controller_period_s\": " << Ts
-       << ", \"sample_period_s\": " << Ts << ", \"encoder_resolution_mm\": " << sp.resolution_mm
+       << ", \"sample_period_s\": " << Ts * static_cast<double>(every)
+       << ", \"encoder_resolution_mm\": " << sp.resolution_mm
        << ", \"description\": \"truth simulator of the calibration tests\"}\n";
   return ref.size();
 }

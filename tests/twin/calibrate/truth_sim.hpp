@@ -84,6 +84,10 @@ struct RunSpec {
   /// The axis the run is written as ("x" or "y"); its gains and drive
   /// constants must be the shipped machine's for that axis.
   std::string axis{"x"};
+  /// Logged as a CNC's trace would: every log_every-th controller sample,
+  /// and without the u column when log_current_only.
+  int log_every{1};
+  bool log_current_only{false};
 };
 
 /// Simulates and writes dir/trace.csv and dir/meta.json for one axis (spec.axis) of the

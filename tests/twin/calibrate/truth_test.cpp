@@ -15,8 +15,6 @@
 #include "truth_sim.hpp"
 #include "twin/analysis/calibrate.hpp"
 #include "twin/analysis/identify.hpp"
-#include "twin/io/atomic_file.hpp"
-#include "twin/io/trace_csv.hpp"
 
 namespace twin::analysis {
 namespace {
@@ -273,18 +271,10 @@ TEST(TruthCoarse, CurrentLimitFromTheCurrentAlone) {
   spec.axis = "y";
   spec.reference_mm = example_reference("y");
   spec.effects.i_max_A = 16.0;
+  spec.log_every = 10;
+  spec.log_current_only = true;
   const auto dir = run_dir("current_limit_1ms");
   truth::write_truth_run(dir, spec);
-  const io::TraceTable full = io::read_trace_csv(dir / "trace.csv");
-  {
-    io::TraceWriter w(dir / "trace.csv", {"t_s", "y_ref_mm", "y_mm", "y_i_A"});
-    for (std::size_t k = 0; k < full.num_rows(); k += 10)
-      w.write_row({full.at("t_s")[k], full.at("y_ref_mm")[k], full.at("y_mm")[k], full.at("y_i_A")[k]});
-    w.commit();
-  }
-  io::write_file_atomic(dir / "meta.json",
-                        "{\"machine\": \"fadal2216\", \"axes\": [\"y\"], \"controller_period_s\": 0.0001, "
-                        "\"sample_period_s\": 0.001, \"encoder_resolution_mm\": 0.001}\n");
   const MeasuredRun run = load_run(dir);
   std::vector<std::string> notes;
   const CalibrationResult r = calibrate(run, machine_for_run(run, "", &notes));
@@ -364,18 +354,10 @@ namespace {
 // 0.08 N m of the truth's 0.23 and 0.17 (the nominal's own distance is 0.03).
 TEST(TruthCoarse, CurrentOnlyAtOneKilohertz) {
   truth::RunSpec spec = perturbed();
+  spec.log_every = 10;
+  spec.log_current_only = true;
   const auto dir = run_dir("coarse_current_only");
   truth::write_truth_run(dir, spec);
-  const io::TraceTable full = io::read_trace_csv(dir / "trace.csv");
-  {
-    io::TraceWriter w(dir / "trace.csv", {"t_s", "x_ref_mm", "x_mm", "x_i_A"});
-    for (std::size_t k = 0; k < full.num_rows(); k += 10)
-      w.write_row({full.at("t_s")[k], full.at("x_ref_mm")[k], full.at("x_mm")[k], full.at("x_i_A")[k]});
-    w.commit();
-  }
-  io::write_file_atomic(dir / "meta.json",
-                        "{\"machine\": \"fadal2216\", \"axes\": [\"x\"], \"controller_period_s\": 0.0001, "
-                        "\"sample_period_s\": 0.001, \"encoder_resolution_mm\": 0.001, \"description\": \"coarse\"}\n");
   const MeasuredRun run = load_run(dir);
   std::vector<std::string> notes;
   const auto machine = machine_for_run(run, "", &notes);
