@@ -1,22 +1,65 @@
 #pragma once
-/// The FADAL digital position loop of spec/measured-data.md, at period Ts:
-///   e[k]     = x_ref[k] - x_meas[k]
+/// The CNC's digital position loop per axis, at period Ts, with two laws
+/// (spec/measured-data.md):
+///
+/// FADAL (the shipped fadal2216), e[k] = x_ref[k] - x_meas[k]:
 ///   v_ref[k] = (x_ref[k] - x_ref[k-1]) / Ts,  a_ref[k] = (v_ref[k] - v_ref[k-1]) / Ts
 ///   I[k]     = I[k-1] + Ts e[k]
 ///   u[k]     = Kp e + Ki I + Kd (e[k] - e[k-1]) / Ts + K1 a_ref + K2 v_ref, clamped to +-u_max
+///
+/// Cascade (most industrial CNCs): a P position loop, a PI velocity loop on the
+/// motor speed, a current loop as a first-order lag, a torque limit:
+///   vcmd[k]  = Kv e[k] + kff v_ref[k]                               (mm/s)
+///   ev[k]    = (vcmd[k] - v_meas[k]) / rg                           (rad/s at the motor)
+///   Iv[k]    = Iv[k-1] + Ts ev[k]   (frozen while the torque command is limited: anti-windup)
+///   Tc[k]    = Kvp (ev[k] + Iv[k] / Tn) + Jff a_ref[k] / rg, clamped to +-T_max
+///   Tf[k]    = a Tf[k-1] + (1 - a) Tc[k],  a = exp(-Ts / tau_i)     (current loop sampled at Ts)
+///   u[k]     = Tf[k] / (Ka Kt)   so that the drive's i = Ka u = Tf / Kt and Tm = Tf.
+/// Tn = 0 switches the integral off; tau_i = 0 makes the current loop ideal.
+/// v_meas is the motor speed the drive's own sensor gives (rg w); where the
+/// caller has none, the encoder's backward difference.
+///
 /// u[k] is held by the drive until the next sample.
 #include <cstdint>
+#include <limits>
+#include <optional>
 #include <string_view>
 
 namespace twin::controller {
 
+enum class LoopLaw { kFadal, kCascade };
+std::string_view loop_law_name(LoopLaw law) noexcept;
+/// "fadal" or "cascade"; nullopt for anything else.
+std::optional<LoopLaw> parse_loop_law(std::string_view name) noexcept;
+
+/// Gains of the cascade law. The torque unit is N m, or the log's own unit
+/// for a drive identified in it (then Kt = 1).
+struct CascadeGains {
+  double Kv_per_s{0.0};          ///< position-loop gain
+  double kff{0.0};               ///< velocity feedforward fraction
+  double Kvp_torque_s_per_rad{0.0};  ///< velocity-loop proportional gain
+  double Tn_s{0.0};              ///< velocity-loop integral time (0: no integral)
+  double tau_i_s{0.0};           ///< current-loop lag (0: ideal)
+  double T_max{1e9};             ///< torque limit
+  double Jff_torque_s2_per_rad{0.0};  ///< acceleration (torque) feedforward
+};
+
+/// What the cascade needs of the drive it commands.
+struct DriveScale {
+  double rg_mm_per_rad{1.0};
+  double Ka_A_per_V{1.0};
+  double Kt_Nm_per_A{1.0};
+};
+
 struct PositionLoopParams {
+  LoopLaw law{LoopLaw::kFadal};
   double Kp_V_per_mm{0.0};
   double Ki_V_per_s_mm{0.0};
   double Kd_V_s_per_mm{0.0};
   double K1_V_s2_per_mm{0.0};
   double K2_V_s_per_mm{0.0};
   double u_max_V{10.0};
+  CascadeGains cascade;
   double Ts_s{1e-4};
   void validate(std::string_view where) const;
 };
@@ -26,28 +69,37 @@ struct PositionLoopState {
   double e_prev_mm{0.0};
   double x_ref_prev_mm{0.0};
   double v_ref_prev_mm_per_s{0.0};
+  // Cascade only.
+  double Iv_rad{0.0};
+  double T_filtered{0.0};
+  double x_meas_prev_mm{0.0};
   std::int64_t last_k{-1};
 };
 
 /// One output of the law at a tick, with its terms (for traces and analysis).
 struct PositionLoopOutput {
-  double u_V{0.0};            ///< clamped command
-  double u_unclamped_V{0.0};  ///< before the clamp
+  double u_V{0.0};            ///< clamped command to the drive
+  double u_unclamped_V{0.0};  ///< before the clamp (FADAL) or the torque limit (cascade), in V
   double e_mm{0.0};
   double v_ref_mm_per_s{0.0};
   double a_ref_mm_per_s2{0.0};
+  double vcmd_mm_per_s{0.0};  ///< cascade: the position loop's velocity command
+  double torque_cmd{0.0};     ///< cascade: the torque command after the current loop
   bool saturated{false};
 };
 
 class PositionLoop {
  public:
-  explicit PositionLoop(const PositionLoopParams& params);
+  explicit PositionLoop(const PositionLoopParams& params, const DriveScale& drive = {});
   /// Starts from rest at x_ref0: v_ref and a_ref are 0 at the first tick and
   /// the derivative term sees e[-1] = e[0] (no kick at the first sample).
   void reset(double x_ref0_mm, double x_meas0_mm) noexcept;
   /// Must be called once per tick with k = last k + 1 (the first call after
   /// reset may take any k). Throws InternalError when out of order.
-  PositionLoopOutput step(std::int64_t k, double x_ref_mm, double x_meas_mm);
+  /// `v_meas_mm_per_s` is the drive's speed sensor (cascade only; NaN: the
+  /// encoder's backward difference).
+  PositionLoopOutput step(std::int64_t k, double x_ref_mm, double x_meas_mm,
+                          double v_meas_mm_per_s = std::numeric_limits<double>::quiet_NaN());
   const PositionLoopParams& params() const noexcept { return params_; }
   const PositionLoopState& state() const noexcept { return state_; }
   void set_state(const PositionLoopState& s) noexcept {
@@ -56,7 +108,10 @@ class PositionLoop {
   }
 
  private:
+  void cascade_step(PositionLoopOutput& out, double x_meas_mm, double v_meas_mm_per_s);
   PositionLoopParams params_;
+  DriveScale drive_;
+  double lag_a_{0.0};
   PositionLoopState state_;
   bool primed_{false};
 };

@@ -71,9 +71,18 @@ sim::MachineDefinition load_machine(const std::filesystem::path& path) {
   sim::MachineDefinition m;
   m.source = where;
   m.name = path.stem().string();
+  // The loop law first: it decides which gains the axes may hold.
+  controller::LoopLaw law = controller::LoopLaw::kFadal;
+  if (const YAML::Node c = root["controller"]; c) {
+    const std::string name = yaml_string(c, where + ": controller");
+    const auto parsed = controller::parse_loop_law(name);
+    if (!parsed) throw ConfigError(fmt::format("{}: controller: unknown law '{}' (fadal or cascade)", where, name));
+    law = *parsed;
+  }
   bool have_axes = false;
   for (const auto& kv : root) {
     const std::string key = kv.first.as<std::string>();
+    if (key == "controller") continue;
     if (key == "name") {
       m.name = yaml_string(kv.second, where + ": name");
     } else if (key == "description") {
@@ -98,6 +107,9 @@ sim::MachineDefinition load_machine(const std::filesystem::path& path) {
           const auto* spec = sim::find_axis_param(pk);
           if (spec == nullptr || spec->enables != nullptr)
             throw ConfigError(fmt::format("{}: unknown key '{}'", w, pk));
+          if (spec->law && *spec->law != law)
+            throw ConfigError(fmt::format("{}: {} is a gain of the {} law; this machine's controller is {}", w, pk,
+                                          controller::loop_law_name(*spec->law), controller::loop_law_name(law)));
           sim::set_axis_param(def, *spec, yaml_number(p.second, w + "." + pk));
         }
       }
@@ -109,6 +121,7 @@ sim::MachineDefinition load_machine(const std::filesystem::path& path) {
   }
   if (!have_axes) throw ConfigError(fmt::format("{}: missing key 'axes'", where));
   for (auto& ax : m.axes) ax.loop.Ts_s = m.Ts_s;
+  sim::set_machine_loop_law(m, law);
   m.validate();
   return m;
 }
@@ -119,6 +132,9 @@ std::string machine_to_yaml(const sim::MachineDefinition& m, const std::string& 
   std::istringstream hc(header_comment);
   for (std::string line; std::getline(hc, line);) o << "# " << line << "\n";
   o << "name: " << m.name << "\n";
+  const controller::LoopLaw law = sim::machine_loop_law(m);
+  if (law != controller::LoopLaw::kFadal)
+    o << "controller: " << controller::loop_law_name(law) << "    # position-loop law (spec/measured-data.md)\n";
   for (const auto& s : sim::machine_param_specs())
     o << s.name << ": " << s.ref(const_cast<sim::MachineDefinition&>(m)) << "    # " << s.unit << ", " << s.doc << "\n";
   o << "axes:\n";
@@ -130,6 +146,7 @@ std::string machine_to_yaml(const sim::MachineDefinition& m, const std::string& 
     std::string current_effect;
     for (const auto& s : sim::axis_param_specs()) {
       const double v = sim::get_axis_param(ax, s);
+      if (s.law && *s.law != law) continue;
       if (s.enables == nullptr) {
         o << "    " << s.name << ": " << v << "    # " << s.unit << ", " << s.doc << "\n";
         continue;

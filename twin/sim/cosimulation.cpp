@@ -34,7 +34,8 @@ CoSimulation::CoSimulation(MachineDefinition machine, std::shared_ptr<const Refe
     x0.push_back(x0_mm[index(a)]);
     controller::PositionLoopParams lp = machine_.axes[index(a)].loop;
     lp.Ts_s = machine_.Ts_s;
-    loops_.emplace_back(lp);
+    const feeddrive::DriveParams& d = machine_.axes[index(a)].drive;
+    loops_.emplace_back(lp, controller::DriveScale{d.rg_mm_per_rad, d.Ka_A_per_V, d.Kt_Nm_per_A});
   }
   drives_.reset(x0);
   inputs_.assign(axes_.size(), feeddrive::DriveInput{});
@@ -106,8 +107,9 @@ const Snapshot& CoSimulation::step() {
     const std::size_t a = index(axes_[i]);
     AxisSnapshot& s = row.axes[a];
     s.x_ref_mm = ref.x_mm[a];
-    const controller::PositionLoopOutput lo = loops_[i].step(k_, s.x_ref_mm, s.x_mm);
+    const controller::PositionLoopOutput lo = loops_[i].step(k_, s.x_ref_mm, s.x_mm, s.v_mm_per_s);
     s.e_mm = lo.e_mm;
+    s.vcmd_mm_per_s = lo.vcmd_mm_per_s;
     s.u_V = lo.u_V;
     s.saturated = lo.saturated;
     s.Td_Nm = F_avg_N[a] * drives_.params(i).rg_mm_per_rad * kMPerMm;
@@ -147,9 +149,13 @@ const Snapshot& CoSimulation::step() {
       w.ticks_in_block = w.saturated_ticks = w.flips = 0;
       if (w.bad_blocks >= 3)
         throw ModelError(fmt::format(
-            "axis {} unstable at t = {:.4f} s (tick {}): u oscillates between the +-{:g} V clamps for 60 ms "
+            "axis {} unstable at t = {:.4f} s (tick {}): the command oscillates between its limits ({}) for 60 ms "
             "(tracking error {:.3g} mm); check the gains",
-            axis_name(axes_[i]), t, k_, machine_.axes[a].loop.u_max_V, s.e_mm));
+            axis_name(axes_[i]), t, k_,
+            machine_.axes[a].loop.law == controller::LoopLaw::kCascade
+                ? fmt::format("torque +-{:g}", machine_.axes[a].loop.cascade.T_max)
+                : fmt::format("+-{:g} V", machine_.axes[a].loop.u_max_V),
+            s.e_mm));
     }
     v_real2 += s.v_mm_per_s * s.v_mm_per_s;
     dev[a] = s.x_true_mm - s.x_ref_mm;

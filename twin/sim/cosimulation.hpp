@@ -33,6 +33,7 @@ struct AxisSnapshot {
   double Tm_Nm{0.0};
   double Td_Nm{0.0};         ///< cutting load torque held over the tick
   double v_mm_per_s{0.0};    ///< true axis speed
+  double vcmd_mm_per_s{0.0}; ///< cascade law: the position loop's velocity command (0 for the FADAL law)
   bool saturated{false};
 };
 struct Snapshot {

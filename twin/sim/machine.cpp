@@ -13,6 +13,8 @@ namespace {
 
 #define TWIN_AXIS_PARAM(NAME, UNIT, DOC, EXPR) \
   AxisParamSpec { NAME, UNIT, DOC, [](AxisDefinition& a) -> double& { return EXPR; }, nullptr }
+#define TWIN_LAW_PARAM(NAME, UNIT, DOC, EXPR, LAW)                                        \
+  AxisParamSpec { NAME, UNIT, DOC, [](AxisDefinition& a) -> double& { return EXPR; }, nullptr, LAW }
 #define TWIN_EFFECT_PARAM(NAME, UNIT, DOC, EFFECT, FIELD)                                   \
   AxisParamSpec {                                                                          \
     NAME, UNIT, DOC, [](AxisDefinition& a) -> double& { return a.drive.effects.EFFECT.FIELD; }, \
@@ -26,14 +28,21 @@ std::vector<AxisParamSpec> make_axis_specs() {
       TWIN_AXIS_PARAM("J", "kg m^2", "inertia reflected to the motor shaft", a.drive.J_kg_m2),
       TWIN_AXIS_PARAM("B", "kg m^2/s", "viscous damping", a.drive.B_kg_m2_per_s),
       TWIN_AXIS_PARAM("rg", "mm/rad", "transmission (ballscrew lead / 2 pi)", a.drive.rg_mm_per_rad),
-      TWIN_AXIS_PARAM("Kp", "V/mm", "proportional gain", a.loop.Kp_V_per_mm),
-      TWIN_AXIS_PARAM("Ki", "V/(s mm)", "integral gain", a.loop.Ki_V_per_s_mm),
-      TWIN_AXIS_PARAM("Kd", "V s/mm", "derivative gain", a.loop.Kd_V_s_per_mm),
-      TWIN_AXIS_PARAM("K1", "V s^2/mm", "acceleration feedforward", a.loop.K1_V_s2_per_mm),
-      TWIN_AXIS_PARAM("K2", "V s/mm", "velocity feedforward", a.loop.K2_V_s_per_mm),
+      TWIN_LAW_PARAM("Kp", "V/mm", "proportional gain", a.loop.Kp_V_per_mm, controller::LoopLaw::kFadal),
+      TWIN_LAW_PARAM("Ki", "V/(s mm)", "integral gain", a.loop.Ki_V_per_s_mm, controller::LoopLaw::kFadal),
+      TWIN_LAW_PARAM("Kd", "V s/mm", "derivative gain", a.loop.Kd_V_s_per_mm, controller::LoopLaw::kFadal),
+      TWIN_LAW_PARAM("K1", "V s^2/mm", "acceleration feedforward", a.loop.K1_V_s2_per_mm, controller::LoopLaw::kFadal),
+      TWIN_LAW_PARAM("K2", "V s/mm", "velocity feedforward", a.loop.K2_V_s_per_mm, controller::LoopLaw::kFadal),
       TWIN_AXIS_PARAM("Tc_pos", "N m", "Coulomb friction torque moving in +", a.drive.Tc_pos_Nm),
       TWIN_AXIS_PARAM("Tc_neg", "N m", "Coulomb friction torque moving in - (positive)", a.drive.Tc_neg_Nm),
-      TWIN_AXIS_PARAM("u_max", "V", "amplifier command limit (symmetric)", a.loop.u_max_V),
+      TWIN_LAW_PARAM("u_max", "V", "amplifier command limit (symmetric)", a.loop.u_max_V, controller::LoopLaw::kFadal),
+      TWIN_LAW_PARAM("Kv", "1/s", "cascade: position-loop gain", a.loop.cascade.Kv_per_s, controller::LoopLaw::kCascade),
+      TWIN_LAW_PARAM("kff", "1", "cascade: velocity feedforward fraction", a.loop.cascade.kff, controller::LoopLaw::kCascade),
+      TWIN_LAW_PARAM("Kvp", "torque unit s/rad", "cascade: velocity-loop proportional gain", a.loop.cascade.Kvp_torque_s_per_rad, controller::LoopLaw::kCascade),
+      TWIN_LAW_PARAM("Tn", "s", "cascade: velocity-loop integral time (0: none)", a.loop.cascade.Tn_s, controller::LoopLaw::kCascade),
+      TWIN_LAW_PARAM("tau_i", "s", "cascade: current-loop lag (0: ideal)", a.loop.cascade.tau_i_s, controller::LoopLaw::kCascade),
+      TWIN_LAW_PARAM("T_max", "torque unit", "cascade: torque limit", a.loop.cascade.T_max, controller::LoopLaw::kCascade),
+      TWIN_LAW_PARAM("Jff", "torque unit s^2/rad", "cascade: acceleration (torque) feedforward", a.loop.cascade.Jff_torque_s2_per_rad, controller::LoopLaw::kCascade),
       TWIN_AXIS_PARAM("v_max", "mm/s", "interpolator speed limit", a.v_max_mm_per_s),
       TWIN_AXIS_PARAM("a_max", "mm/s^2", "interpolator acceleration limit", a.a_max_mm_per_s2),
       TWIN_AXIS_PARAM("j_max", "mm/s^3", "interpolator jerk limit", a.j_max_mm_per_s3),
@@ -61,6 +70,7 @@ std::vector<AxisParamSpec> make_axis_specs() {
   };
 }
 #undef TWIN_AXIS_PARAM
+#undef TWIN_LAW_PARAM
 #undef TWIN_EFFECT_PARAM
 
 std::vector<MachineParamSpec> make_machine_specs() {
@@ -103,6 +113,15 @@ void set_axis_param(AxisDefinition& axis, const AxisParamSpec& spec, double valu
   if (spec.enables != nullptr) *spec.enables(axis) = true;
 }
 
+controller::LoopLaw machine_loop_law(const MachineDefinition& m) {
+  for (Axis a : kAllAxes)
+    if (m.axes[index(a)].present) return m.axes[index(a)].loop.law;
+  return controller::LoopLaw::kFadal;
+}
+void set_machine_loop_law(MachineDefinition& m, controller::LoopLaw law) {
+  for (auto& ax : m.axes) ax.loop.law = law;
+}
+
 void MachineDefinition::validate() const {
   const std::string where = source.empty() ? std::string("machine ") + name : source;
   auto positive = [&](const char* key, double v) {
@@ -136,6 +155,8 @@ void MachineDefinition::validate() const {
         !(ax.travel_min_mm < ax.travel_max_mm))
       throw ConfigError(fmt::format("{}: travel [{}, {}] mm must be finite with min < max", w,
                                     ax.travel_min_mm, ax.travel_max_mm));
+    if (ax.loop.law != machine_loop_law(*this))
+      throw ConfigError(fmt::format("{}: the axes close different loop laws; a machine has one `controller`", w));
     if (std::abs(ax.loop.Ts_s - Ts_s) > 1e-15)
       throw ConfigError(fmt::format("{}: loop period {} s differs from the machine's Ts = {} s", w,
                                     ax.loop.Ts_s, Ts_s));
@@ -199,6 +220,10 @@ void apply_set(MachineDefinition& machine, std::string_view assignment) {
   if (!ax.present)
     throw ConfigError(fmt::format("--set '{}': axis {} is not defined in {}", assignment, axis_name(*axis),
                                   machine.source));
+  if (spec->law && *spec->law != ax.loop.law)
+    throw ConfigError(fmt::format("--set '{}': {} is a gain of the {} law; this machine's controller is {}", assignment,
+                                  spec->name, controller::loop_law_name(*spec->law),
+                                  controller::loop_law_name(ax.loop.law)));
   set_axis_param(ax, *spec, value);
 }
 

@@ -54,6 +54,9 @@ struct AxisParamSpec {
   double& (*ref)(AxisDefinition&);
   /// For effect parameters: the flag that setting the parameter switches on.
   bool* (*enables)(AxisDefinition&){nullptr};
+  /// For loop gains: the law they belong to (the other law's gains are not
+  /// written to, nor read from, a machine file of this law).
+  std::optional<controller::LoopLaw> law{};
 };
 struct MachineParamSpec {
   std::string_view name;   ///< "Ts", "encoder_resolution" ...
@@ -69,6 +72,11 @@ const MachineParamSpec* find_machine_param(std::string_view name);
 
 double get_axis_param(const AxisDefinition& axis, const AxisParamSpec& spec);
 void set_axis_param(AxisDefinition& axis, const AxisParamSpec& spec, double value);
+
+/// The loop law of the machine's axes (all axes share one; fadal when none is present).
+controller::LoopLaw machine_loop_law(const MachineDefinition& m);
+/// Sets the loop law of every axis.
+void set_machine_loop_law(MachineDefinition& m, controller::LoopLaw law);
 
 /// Applies one `--set <axis>.<name>=<value>` (or `<name>=<value>` for a
 /// machine-wide parameter). Throws ConfigError for an unknown axis or name,

@@ -1,0 +1,176 @@
+// The cascade position loop (spec/measured-data.md, "Position loops of real
+// machines") closed around the SUNDIALS-integrated drive, against the exact
+// discrete response of the same loop: the plant J dw/dt = T - B w,
+// dx/dt = rg w under the zero-order hold, discretised with Eigen's matrix
+// exponential, and the law written again here from the spec's equations.
+// Friction off and an ideal encoder make the loop linear, so the only
+// difference is the integrator's error over one tick: 1e-9 mm bounds it
+// (the drive's fixed-step ERK is ~1e-12 mm from the exact solution on the
+// FADAL loop, docs/feeddrive.md).
+#include <cmath>
+#include <filesystem>
+#include <memory>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <Eigen/Dense>
+#include <unsupported/Eigen/MatrixFunctions>
+
+#include "twin/core/error.hpp"
+#include "twin/io/atomic_file.hpp"
+#include "twin/io/machine_file.hpp"
+#include "twin/sim/cosimulation.hpp"
+
+namespace twin {
+namespace {
+
+sim::MachineDefinition cascade_x(double Ts_s, const controller::CascadeGains& g) {
+  sim::MachineDefinition m = io::load_machine(io::resolve_machine_path("fadal2216"));
+  m.axes[index(Axis::kY)].present = false;
+  m.axes[index(Axis::kZ)].present = false;
+  m.Ts_s = Ts_s;
+  m.encoder_resolution_mm = 0.0;
+  sim::AxisDefinition& x = m.axes[index(Axis::kX)];
+  x.drive.Tc_pos_Nm = 0.0;
+  x.drive.Tc_neg_Nm = 0.0;
+  x.loop.Ts_s = Ts_s;
+  x.following_error_limit_mm = 50.0;  // a P loop lags v / Kv: several mm at these speeds
+  x.loop.cascade = g;
+  sim::set_machine_loop_law(m, controller::LoopLaw::kCascade);
+  return m;
+}
+
+// A smooth move: 10 mm in 0.1 s with a sine-squared speed profile, then rest.
+std::vector<double> reference(double Ts_s, std::size_t n) {
+  std::vector<double> r(n, 0.0);
+  const double T = 0.1, L = 10.0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const double t = static_cast<double>(k) * Ts_s;
+    r[k] = t >= T ? L : L * (t / T - std::sin(2.0 * M_PI * t / T) / (2.0 * M_PI));
+  }
+  return r;
+}
+
+struct Exact {
+  std::vector<double> x_mm, torque;
+};
+
+Exact exact_response(const sim::MachineDefinition& m, const std::vector<double>& r) {
+  const auto& ax = m.axes[index(Axis::kX)];
+  const double J = ax.drive.J_kg_m2, B = ax.drive.B_kg_m2_per_s, rg = ax.drive.rg_mm_per_rad, Ts = m.Ts_s;
+  const controller::CascadeGains& g = ax.loop.cascade;
+  // Augmented [w, x, T]: T constant over the tick.
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+  A(0, 0) = -B / J;
+  A(0, 2) = 1.0 / J;
+  A(1, 0) = rg;
+  const Eigen::Matrix3d E = (A * Ts).exp();
+  const double lag = g.tau_i_s > 0.0 ? std::exp(-Ts / g.tau_i_s) : 0.0;
+  Exact out;
+  double w = 0.0, x = r[0], Iv = 0.0, Tf = 0.0, r_prev = r[0], v_prev = 0.0;
+  for (double rk : r) {
+    const double e = rk - x;
+    const double v_ref = (rk - r_prev) / Ts;
+    const double a_ref = (v_ref - v_prev) / Ts;
+    const double vcmd = g.Kv_per_s * e + g.kff * v_ref;
+    const double ev = (vcmd - rg * w) / rg;
+    Iv += Ts * ev;
+    const double T = g.Kvp_torque_s_per_rad * (ev + (g.Tn_s > 0 ? Iv / g.Tn_s : 0.0)) + g.Jff_torque_s2_per_rad * a_ref / rg;
+    Tf = lag * Tf + (1.0 - lag) * T;
+    out.x_mm.push_back(x);
+    out.torque.push_back(Tf);
+    const Eigen::Vector3d s = E * Eigen::Vector3d(w, x, Tf);
+    w = s(0);
+    x = s(1);
+    r_prev = rk;
+    v_prev = v_ref;
+  }
+  return out;
+}
+
+void expect_matches_exact(const controller::CascadeGains& g, double Ts_s) {
+  const sim::MachineDefinition m = cascade_x(Ts_s, g);
+  const std::size_t n = static_cast<std::size_t>(0.3 / Ts_s);
+  const std::vector<double> r = reference(Ts_s, n);
+  const Exact ex = exact_response(m, r);
+  AxisArray<std::vector<double>> ref;
+  ref[index(Axis::kX)] = r;
+  sim::CoSimulation cs(m, std::make_shared<sim::SampledReference>(ref, Ts_s), nullptr, {0, 0, 0});
+  double worst = 0.0, e_max = 0.0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const sim::Snapshot& s = cs.step();
+    worst = std::max(worst, std::abs(s.axes[0].x_true_mm - ex.x_mm[k]));
+    e_max = std::max(e_max, std::abs(r[k] - ex.x_mm[k]));
+    ASSERT_NEAR(s.axes[0].Tm_Nm, ex.torque[k], 1e-9 * (1.0 + std::abs(ex.torque[k]))) << "tick " << k;
+  }
+  EXPECT_LT(worst, 1e-9) << "largest difference from the exact discrete response, mm";
+  EXPECT_GT(e_max, 1e-4) << "the move must load the loop, or the comparison shows nothing";
+}
+
+TEST(CascadeLoop, PIVelocityLoopMatchesTheExactDiscreteResponse) {
+  controller::CascadeGains g;
+  g.Kv_per_s = 60.0;
+  g.Kvp_torque_s_per_rad = 0.4;
+  g.Tn_s = 0.01;
+  expect_matches_exact(g, 1e-4);
+}
+
+TEST(CascadeLoop, FeedforwardAndCurrentLagMatchTheExactDiscreteResponse) {
+  controller::CascadeGains g;
+  g.Kv_per_s = 40.0;
+  g.kff = 0.9;
+  g.Kvp_torque_s_per_rad = 0.3;
+  g.Tn_s = 0.02;
+  g.tau_i_s = 5e-4;
+  g.Jff_torque_s2_per_rad = 0.005;
+  expect_matches_exact(g, 1e-4);
+  expect_matches_exact(g, 1e-3);
+}
+
+TEST(CascadeLoop, HoldsTheFollowingErrorOfAPLoopAtConstantSpeed) {
+  // At constant speed v with an integral velocity loop, the position loop's
+  // following error settles to v (1 - kff) / Kv (the P loop's steady state).
+  controller::CascadeGains g;
+  g.Kv_per_s = 50.0;
+  g.kff = 0.5;
+  g.Kvp_torque_s_per_rad = 0.5;
+  g.Tn_s = 0.01;
+  const double Ts = 1e-4, v = 100.0;
+  sim::MachineDefinition m = cascade_x(Ts, g);
+  m.axes[index(Axis::kX)].drive.Tc_pos_Nm = 0.2;  // friction: the integral must carry it
+  m.axes[index(Axis::kX)].drive.Tc_neg_Nm = 0.2;
+  const std::size_t n = 10000;
+  std::vector<double> r(n);
+  for (std::size_t k = 0; k < n; ++k) r[k] = v * static_cast<double>(k) * Ts;
+  AxisArray<std::vector<double>> ref;
+  ref[index(Axis::kX)] = r;
+  sim::CoSimulation cs(m, std::make_shared<sim::SampledReference>(ref, Ts), nullptr, {0, 0, 0});
+  sim::Snapshot last;
+  for (std::size_t k = 0; k < n; ++k) last = cs.step();
+  EXPECT_NEAR(last.axes[0].e_mm, v * (1.0 - g.kff) / g.Kv_per_s, 1e-6);
+  EXPECT_NEAR(last.axes[0].vcmd_mm_per_s, v, 1e-3);
+}
+
+TEST(CascadeLoop, MachineFileChoosesTheLawAndRefusesTheOtherLawsGains) {
+  sim::MachineDefinition m = cascade_x(1e-3, controller::CascadeGains{30.0, 0.0, 0.2, 0.01, 0.0, 5.0, 0.0});
+  const std::string yaml = io::machine_to_yaml(m, "test");
+  EXPECT_NE(yaml.find("controller: cascade"), std::string::npos);
+  EXPECT_EQ(yaml.find("Kp:"), std::string::npos);
+  EXPECT_NE(yaml.find("Kvp:"), std::string::npos);
+  const auto dir = std::filesystem::temp_directory_path() / "twin_cascade_machine_test";
+  std::filesystem::create_directories(dir);
+  io::write_file_atomic(dir / "m.yaml", yaml);
+  const sim::MachineDefinition back = io::load_machine(dir / "m.yaml");
+  EXPECT_EQ(back.axes[0].loop.law, controller::LoopLaw::kCascade);
+  EXPECT_DOUBLE_EQ(back.axes[0].loop.cascade.Kv_per_s, 30.0);
+  EXPECT_DOUBLE_EQ(back.axes[0].loop.cascade.T_max, 5.0);
+  sim::MachineDefinition s = back;
+  EXPECT_THROW(sim::apply_set(s, "x.Kp=100"), ConfigError);
+  EXPECT_NO_THROW(sim::apply_set(s, "x.Kv=45"));
+  io::write_file_atomic(dir / "bad.yaml", yaml + "    Kd: 0.1\n");
+  EXPECT_THROW(io::load_machine(dir / "bad.yaml"), ConfigError);
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace twin
