@@ -152,9 +152,8 @@ sim::MachineDefinition machine_for_run(const MeasuredRun& run, const std::string
   return m;
 }
 
-std::vector<double> upsample_reference(const std::vector<double>& r, std::int64_t m) {
+std::vector<double> monotone_slopes(const std::vector<double>& r) {
   const std::size_t n = r.size();
-  if (n == 0 || m <= 1) return r;
   // Secant slopes per sample interval, and at each sample the centred
   // difference (exact through constant acceleration), set to zero where the
   // reference turns or stops and limited to 3 times the smaller secant so
@@ -172,6 +171,13 @@ std::vector<double> upsample_reference(const std::vector<double>& r, std::int64_
     const double lim = 3.0 * std::min(std::abs(d[i - 1]), std::abs(d[i]));
     slope[i] = std::copysign(std::min(std::abs(c), lim), c);
   }
+  return slope;
+}
+
+std::vector<double> upsample_reference(const std::vector<double>& r, std::int64_t m) {
+  const std::size_t n = r.size();
+  if (n == 0 || m <= 1) return r;
+  const std::vector<double> slope = monotone_slopes(r);
   std::vector<double> out(static_cast<std::size_t>((static_cast<std::int64_t>(n) - 1) * m + 1));
   for (std::size_t k = 0; k < out.size(); ++k) {
     const std::size_t i = k / static_cast<std::size_t>(m);
@@ -242,6 +248,8 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
     res.x_mm[index(a)].reserve(n_rows);
     res.u_V[index(a)].reserve(n_rows);
     res.i_A[index(a)].reserve(n_rows);
+    res.Tm[index(a)].reserve(n_rows);
+    res.vcmd_mm_per_s[index(a)].reserve(n_rows);
   }
   for (std::int64_t k = 0; k < n_ticks; ++k) {
     const sim::Snapshot& s = cosim.step();
@@ -253,6 +261,8 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
       res.x_mm[index(a)].push_back(x.x_mm);
       res.u_V[index(a)].push_back(x.u_V);
       res.i_A[index(a)].push_back(x.i_A);
+      res.Tm[index(a)].push_back(x.Tm_Nm);
+      res.vcmd_mm_per_s[index(a)].push_back(x.vcmd_mm_per_s);
     }
   }
   return res;

@@ -53,6 +53,8 @@ struct ReplayResult {
   AxisArray<std::vector<double>> x_mm;      ///< measured (quantised) position of the twin
   AxisArray<std::vector<double>> u_V;
   AxisArray<std::vector<double>> i_A;
+  AxisArray<std::vector<double>> Tm;        ///< motor torque (the drive's torque unit)
+  AxisArray<std::vector<double>> vcmd_mm_per_s;  ///< cascade law: the velocity command (0 for FADAL)
   std::vector<std::string> notes;           ///< what was handled and how
 };
 
@@ -63,6 +65,11 @@ struct ReplayResult {
 /// off by a dt^2 / 8 in an acceleration (25 um at 10 ms and 2000 mm/s^2),
 /// ten times the tracking error of the FADAL loop.
 std::vector<double> upsample_reference(const std::vector<double>& r_mm, std::int64_t m);
+
+/// The slopes at the samples (per sample interval) of that monotone cubic:
+/// the centred difference, zero where the samples turn or stop, limited to
+/// three times the smaller neighbouring secant.
+std::vector<double> monotone_slopes(const std::vector<double>& r_mm);
 
 /// Replays the run on `machine`. Where the samples are a whole multiple m of
 /// the controller period, the reference is rebuilt by upsample_reference at the

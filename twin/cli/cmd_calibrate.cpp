@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 
 #include "twin/analysis/calibrate.hpp"
+#include "twin/analysis/machine_from_data.hpp"
 #include "twin/analysis/plots.hpp"
 #include "twin/analysis/signal.hpp"
 #include "twin/cli/commands.hpp"
@@ -145,11 +146,129 @@ std::vector<std::filesystem::path> make_plots(const std::filesystem::path& out, 
   return outputs;
 }
 
+
+// Whether a run names a machine the twin ships.
+bool names_known_machine(const analysis::MeasuredRun& run) {
+  return run.meta.machine && !run.meta.machine->empty() &&
+         std::filesystem::exists(io::resolve_machine_path(*run.meta.machine));
+}
+
+// trace.csv of the data path: the twin's positions (rounded as the log's) and
+// its torque in the log's channel and unit, with the velocity command.
+void write_data_trace(const std::filesystem::path& path, const analysis::MeasuredRun& run,
+                      const analysis::DataCalibration& r, const analysis::ReplayResult& rr) {
+  std::vector<std::string> names{"t_s"};
+  std::vector<const std::vector<double>*> cols{&rr.t_s};
+  for (const auto& ax : r.axis) {
+    const std::size_t i = index(ax.axis);
+    if (rr.x_mm[i].empty()) continue;
+    const std::string n(axis_name(ax.axis));
+    names.insert(names.end(), {n + "_ref_mm", n + "_mm"});
+    cols.insert(cols.end(), {&rr.x_ref_mm[i], &rr.x_mm[i]});
+    if (ax.channel.present()) {
+      names.push_back(ax.channel.column);
+      cols.push_back(ax.channel.unit == "A" ? &rr.i_A[i] : (ax.channel.unit == "V" ? &rr.u_V[i] : &rr.Tm[i]));
+    }
+    names.push_back(n + "_vcmd_mm_s");
+    cols.push_back(&rr.vcmd_mm_per_s[i]);
+  }
+  static_cast<void>(run);
+  io::TraceWriter w(path, names);
+  std::vector<double> row(cols.size());
+  for (std::size_t k = 0; k < rr.t_s.size(); ++k) {
+    for (std::size_t c = 0; c < cols.size(); ++c) row[c] = (*cols[c])[k];
+    w.write_row(row);
+  }
+  w.commit();
+}
+
+// Measured against model per axis (torque channel and following error), the
+// fitted and held-out parts marked; and the evidence of the friction model:
+// the channel against the commanded speed, measured and model.
+std::vector<std::filesystem::path> make_data_plots(const std::filesystem::path& out,
+                                                   const analysis::MeasuredRun& run,
+                                                   const analysis::DataCalibration& r) {
+  const auto& rr = r.replay_after;
+  std::vector<analysis::AxisFromData> axes;
+  for (const auto& ax : r.axis)
+    if (ax.identified && !rr.x_mm[index(ax.axis)].empty()) axes.push_back(ax);
+  if (axes.empty()) throw ConfigError("no axis was identified: nothing to plot");
+  const auto data = out / "overlay.csv";
+  std::vector<std::string> names{"t_s"};
+  for (const auto& ax : axes) {
+    const std::string n(axis_name(ax.axis));
+    names.insert(names.end(), {n + "_T_meas", n + "_T_model", n + "_e_meas_mm", n + "_e_model_mm", n + "_v_cmd"});
+  }
+  {
+    io::TraceWriter w(data, names);
+    const auto& t = run.trace.at("t_s");
+    std::vector<double> row;
+    for (std::size_t k = 0; k < t.size(); ++k) {
+      row.assign(1, t[k]);
+      for (const auto& ax : axes) {
+        const std::size_t i = index(ax.axis);
+        const std::string n(axis_name(ax.axis));
+        const auto& ref = run.trace.at(n + "_ref_mm");
+        const auto* x = run.trace.find(n + "_mm");
+        const auto& meas = run.trace.at(ax.channel.column);
+        const auto& model = ax.channel.unit == "A" ? rr.i_A[i] : (ax.channel.unit == "V" ? rr.u_V[i] : rr.Tm[i]);
+        const double v = k > 0 ? (ref[k] - ref[k - 1]) / run.sample_period_s : 0.0;
+        row.insert(row.end(), {meas[k], model[k], x ? ref[k] - (*x)[k] : 0.0, ref[k] - rr.x_mm[i][k], v});
+      }
+      w.write_row(row);
+    }
+    w.commit();
+  }
+  const std::string d = analysis::gnuplot_quote(data);
+  const auto& t = run.trace.at("t_s");
+  const double t_split = t[static_cast<std::size_t>(r.fit_fraction * static_cast<double>(t.size()))];
+  std::string script = "set datafile separator ','\nset key autotitle columnhead\nset grid\n";
+  std::vector<std::filesystem::path> outputs;
+  const auto overlay = out / "overlay.png";
+  outputs.push_back(overlay);
+  script += fmt::format("set terminal pngcairo size 1400,{} noenhanced\nset output {}\nset multiplot layout {},1\n",
+                        380 * 2 * axes.size(), tmp_png(overlay), 2 * axes.size());
+  script += fmt::format("set arrow 1 from {0},graph 0 to {0},graph 1 nohead dt 2 lc rgb 'black'\n", t_split);
+  for (std::size_t j = 0; j < axes.size(); ++j) {
+    const std::size_t c0 = 2 + 5 * j;
+    const std::string an(axis_name(axes[j].axis));
+    const std::string unit = axes[j].channel.unit == "raw" ? "log's unit" : axes[j].channel.unit;
+    script += fmt::format("set title '{0} {1}: measured (grey) and twin (blue); fitted left of the dashed line, held "
+                          "out right of it'\nset xlabel 't s'\nset ylabel '{2}'\n"
+                          "plot {3} using 1:{4} with lines lc rgb '#999999' title 'measured', '' using 1:{5} with lines "
+                          "lc rgb 'blue' title 'twin'\n",
+                          an, axes[j].channel.column, unit, d, c0, c0 + 1);
+    script += fmt::format("set title '{0} following error: measured (grey) and twin (blue)'\nset ylabel 'mm'\n"
+                          "plot {1} using 1:{2} with lines lc rgb '#999999' title 'measured', '' using 1:{3} with "
+                          "lines lc rgb 'blue' title 'twin'\n",
+                          an, d, c0 + 2, c0 + 3);
+  }
+  script += "unset multiplot\nunset arrow 1\n";
+  const auto evidence = out / "evidence.png";
+  outputs.push_back(evidence);
+  script += fmt::format("set terminal pngcairo size 1200,{} noenhanced\nset output {}\nset multiplot layout {},1\n",
+                        420 * axes.size(), tmp_png(evidence), axes.size());
+  for (std::size_t j = 0; j < axes.size(); ++j) {
+    const std::size_t c0 = 2 + 5 * j;
+    const std::string unit = axes[j].channel.unit == "raw" ? "log's unit" : axes[j].channel.unit;
+    script += fmt::format("set title '{0}: {1} against the commanded speed, both directions: measured (grey) and twin "
+                          "(blue); friction levels and the constant load show as the two bands'\n"
+                          "set xlabel 'commanded speed mm/s'\nset ylabel '{2}'\n"
+                          "plot {3} using {4}:{5} with points pt 7 ps 0.3 lc rgb '#999999' title 'measured', '' using "
+                          "{4}:{6} with points pt 7 ps 0.3 lc rgb 'blue' title 'twin'\n",
+                          axis_name(axes[j].axis), axes[j].channel.column, unit, d, c0 + 4, c0, c0 + 1);
+  }
+  script += "unset multiplot\n";
+  analysis::run_gnuplot(out, script, outputs);
+  return outputs;
+}
+
 }  // namespace
 
 void register_calibrate(CLI::App& app) {
   struct Options {
-    std::string run;
+    std::vector<std::string> runs;
+    std::vector<std::string> validate;
     std::string out;
     std::string machine;
     std::vector<std::string> sets;
@@ -160,15 +279,64 @@ void register_calibrate(CLI::App& app) {
       "calibrate",
       "Identify J, B, Tc per axis from a measured run, trace the residual to missing effects, add those that "
       "improve the held-out error; writes OUT/report.json, report.md, machine.yaml, trace.csv, trace_before.csv, plots");
-  cmd->add_option("run", opt->run, "measured run folder (trace.csv + meta.json)")->required();
+  cmd->add_option("runs", opt->runs, "measured run folder(s) (trace.csv + meta.json) to fit on")->required();
+  cmd->add_option("--validate", opt->validate,
+                  "runs of another program on the same machine, not used for fitting: their errors with the nominal "
+                  "and the calibrated machine are reported")
+      ->take_all();
   cmd->add_option("-o,--out", opt->out, "output folder (created if missing)")->required();
   cmd->add_option("--machine", opt->machine, "machine definition (name or YAML file) replacing the run's meta.machine");
   cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.J=0.008")->take_all();
   cmd->add_flag("--no-plots", opt->no_plots, "skip the gnuplot figures");
   cmd->callback([opt]() {
-    const analysis::MeasuredRun run = analysis::load_run(opt->run);
+    std::vector<analysis::MeasuredRun> fit_runs, validate_runs;
+    for (const auto& r : opt->runs) fit_runs.push_back(analysis::load_run(r));
+    for (const auto& r : opt->validate) validate_runs.push_back(analysis::load_run(r));
+    const bool known = !opt->machine.empty() ||
+                       std::all_of(fit_runs.begin(), fit_runs.end(), [](const auto& r) { return names_known_machine(r); });
+    if (!known) {
+      // A machine the twin does not know: calibrated from the data alone.
+      std::vector<std::string> nominal_notes;
+      sim::MachineDefinition nominal = analysis::machine_for_run(fit_runs.front(), "", &nominal_notes);
+      analysis::DataCalibration r = analysis::calibrate_from_data(fit_runs, validate_runs, nominal);
+      r.notes.insert(r.notes.begin(),
+                     "the runs name no machine the twin ships: the machine is identified from the data alone (cascade "
+                     "law, drives in the log's torque unit); the nominal machine the errors are compared with is the "
+                     "shipped " + std::string(io::kDefaultMachineName) + " standing in");
+      const std::filesystem::path out(opt->out);
+      io::ensure_directory(out);
+      write_data_trace(out / "trace_before.csv", fit_runs.front(), r, r.replay_before);
+      write_data_trace(out / "trace.csv", fit_runs.front(), r, r.replay_after);
+      std::string runs_text;
+      for (const auto& s : opt->runs) runs_text += (runs_text.empty() ? "" : " ") + s;
+      io::write_file_atomic(out / "machine.yaml",
+                            io::machine_to_yaml(r.final_machine, fmt::format("identified by twin calibrate from {}: "
+                                                                             "cascade loop and drives in the log's "
+                                                                             "torque unit (Kt = Ka = 1, rg = 1 mm/rad)",
+                                                                             runs_text)));
+      if (!opt->no_plots) {
+        try {
+          make_data_plots(out, fit_runs.front(), r);
+        } catch (const Error& e) {
+          r.notes.push_back(fmt::format("plots not drawn: {}", e.what()));
+        }
+      }
+      io::write_file_atomic(out / "report.json", analysis::data_calibration_report_json(r).dump(2) + "\n");
+      io::write_file_atomic(out / "report.md", analysis::data_calibration_report_markdown(r, runs_text));
+      for (const auto& n : r.notes) std::fprintf(stderr, "twin calibrate: note: %s\n", n.c_str());
+      std::printf("calibrated %s from the data (%zu runs, %d replays); wrote %s\n", runs_text.c_str(),
+                  fit_runs.size(), r.replays, out.c_str());
+      return;
+    }
+    const analysis::MeasuredRun& run = fit_runs.front();
     std::vector<std::string> notes;
     sim::MachineDefinition machine = analysis::machine_for_run(run, opt->machine, &notes);
+    for (std::size_t i = 1; i < fit_runs.size(); ++i) {
+      notes.push_back(fmt::format("{}: the drive calibration of a known machine fits one run; this one is reported as "
+                                  "a validation run",
+                                  fit_runs[i].dir.string()));
+      validate_runs.push_back(fit_runs[i]);
+    }
     apply_sets(machine, opt->sets);
     analysis::CalibrationResult r = analysis::calibrate(run, machine);
     r.notes.insert(r.notes.begin(), notes.begin(), notes.end());
@@ -179,7 +347,7 @@ void register_calibrate(CLI::App& app) {
     io::write_file_atomic(out / "machine.yaml",
                           io::machine_to_yaml(r.final_machine, fmt::format("calibrated by twin calibrate from {}: "
                                                                            "identified J, B, Tc and added effects",
-                                                                           opt->run)));
+                                                                           opt->runs.front())));
     io::write_file_atomic(out / "report.json", analysis::calibration_report_json(r).dump(2) + "\n");
     if (!opt->no_plots) {
       try {
@@ -188,12 +356,12 @@ void register_calibrate(CLI::App& app) {
         r.notes.push_back(fmt::format("plots not drawn: {}", e.what()));
       }
     }
-    io::write_file_atomic(out / "report.md", analysis::calibration_report_markdown(r, opt->run));
+    io::write_file_atomic(out / "report.md", analysis::calibration_report_markdown(r, opt->runs.front()));
     for (const auto& n : r.notes) std::fprintf(stderr, "twin calibrate: note: %s\n", n.c_str());
     std::string added;
     for (const auto& a : r.added)
       added += fmt::format("{}{} on {}", added.empty() ? "" : ", ", a.candidate.effect, axis_name(a.candidate.axis));
-    std::printf("calibrated %s (%zu samples, %d replays): effects added: %s; wrote %s\n", opt->run.c_str(),
+    std::printf("calibrated %s (%zu samples, %d replays): effects added: %s; wrote %s\n", opt->runs.front().c_str(),
                 r.replay_before.t_s.size(), r.replays, added.empty() ? "none" : added.c_str(), out.c_str());
   });
 }

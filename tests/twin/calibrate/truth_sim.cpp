@@ -101,7 +101,19 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   std::FILE* f = std::fopen((out_dir / "trace.csv").c_str(), "w");
   const char* a = sp.axis.c_str();
   const auto every = static_cast<std::size_t>(std::max(1, sp.log_every));
-  if (sp.log_current_only)
+  const CascadeLaw& cl = sp.cascade;
+  double Iv = 0.0, Tf = 0.0;
+  const double lag_a = cl.tau_i > 0.0 ? std::exp(-Ts / cl.tau_i) : 0.0;
+  auto pos = [&](double x) {
+    if (sp.log_significant_figures <= 0 || x == 0.0) return x;
+    const double q = std::pow(10.0, std::floor(std::log10(std::abs(x))) - sp.log_significant_figures + 1);
+    return std::round(x / q) * q;
+  };
+  if (cl.on) {
+    std::fprintf(f, "t_s,%s_ref_mm,%s_mm", a, a);
+    if (cl.log_velocities) std::fprintf(f, ",%s_vcmd_mm_s,%s_v_mm_s", a, a);
+    std::fprintf(f, cl.raw_per_Nm > 0.0 ? ",%s_torque_raw\n" : ",%s_i_A\n", a);
+  } else if (sp.log_current_only)
     std::fprintf(f, "t_s,%s_ref_mm,%s_mm,%s_i_A\n", a, a, a);
   else
     std::fprintf(f, "t_s,%s_ref_mm,%s_mm,%s_u_V,%s_i_A\n", a, a, a, a);
@@ -121,6 +133,15 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     I += Ts * err;
     double u = p.Kp * err + p.Ki * I + p.Kd * (err - e_prev) / Ts + p.K1 * aref + p.K2 * vref;
     u = std::clamp(u, -p.u_max, p.u_max);
+    const double vcmd = cl.Kv * err + cl.kff * vref;
+    const double v_motor = s.w_m * p.rg;
+    if (cl.on) {
+      const double ev = (vcmd - v_motor) / p.rg;
+      Iv += Ts * ev;
+      const double Tcmd = cl.Kvp * (ev + (cl.Tn > 0.0 ? Iv / cl.Tn : 0.0));
+      Tf = lag_a * Tf + (1.0 - lag_a) * Tcmd;
+      u = Tf / (p.Ka * p.Kt);
+    }
     e_prev = err;
     vref_prev = vref;
     double u_app = u;
@@ -134,7 +155,11 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     const double Tm = p.Kt * i;
     const double i_logged = e.delay_after_current ? p.Ka * u : i;
     const double i_measured = i_logged + noise(rng);
-    if (k % every == 0) {
+    if (k % every == 0 && cl.on) {
+      std::fprintf(f, "%.4f,%.10g,%.10g", static_cast<double>(k) * Ts, pos(ref[k]), pos(x_meas));
+      if (cl.log_velocities) std::fprintf(f, ",%.6f,%.6f", vcmd, v_motor);
+      std::fprintf(f, ",%.6f\n", cl.raw_per_Nm > 0.0 ? cl.raw_per_Nm * (Tm + noise(rng)) : i_measured);
+    } else if (k % every == 0) {
       if (sp.log_current_only)
         std::fprintf(f, "%.4f,%.4f,%.3f,%.4f\n", static_cast<double>(k) * Ts, ref[k], x_meas, i_measured);
       else
@@ -212,7 +237,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   }
   std::fclose(f);
   std::ofstream meta(out_dir / "meta.json");
-  meta << "{\"machine\": \"fadal2216\", \"axes\": [\"" << sp.axis << "\"], \"controller_period_s\": " << Ts
+  meta << "{\"machine\": " << (cl.on ? "null" : "\"fadal2216\"") << ", \"axes\": [\"" << sp.axis << "\"], \"controller_period_s\": " << Ts
        << ", \"sample_period_s\": " << Ts * static_cast<double>(every)
        << ", \"encoder_resolution_mm\": " << sp.resolution_mm
        << ", \"description\": \"truth simulator of the calibration tests\"}\n";

@@ -70,8 +70,25 @@ struct Effects {
   double i_max_A{0.0};
 };
 
+/// The cascade law of spec/measured-data.md ("Position loops of real
+/// machines") in place of the FADAL law, written here apart from the twin's:
+/// vcmd = Kv e + kff v_ref; a PI velocity loop on the motor's speed; the
+/// current loop as a first-order lag. The run is then logged as a real CNC
+/// logs it: no machine named, the velocity command and the measured speed,
+/// the torque in the log's own unit (raw = raw_per_Nm Tm) or the current.
+struct CascadeLaw {
+  bool on{false};
+  double Kv{60.0}, kff{0.0}, Kvp{0.4}, Tn{0.01}, tau_i{0.0};
+  double raw_per_Nm{0.0};  ///< > 0: log <a>_torque_raw; 0: log <a>_i_A
+  bool log_velocities{true};
+};
+
 struct RunSpec {
   Plant plant;
+  CascadeLaw cascade;
+  /// > 0: logged positions rounded to this many significant figures (as some
+  /// CNCs export them); 0: to the encoder's resolution.
+  int log_significant_figures{0};
   Effects effects;
   double Ts_s{1e-4};
   double resolution_mm{0.001};

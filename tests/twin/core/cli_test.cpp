@@ -177,10 +177,12 @@ TEST(Cli, CalibrateRunOfAnUnnamedMachineWithAnAxisUnmeasured) {
   for (const char* f : {"report.json", "report.md", "machine.yaml", "trace.csv", "trace_before.csv"})
     EXPECT_TRUE(std::filesystem::exists(out / f)) << f;
   const std::string report = slurp(out / "report.md");
-  EXPECT_THAT(report, HasSubstr("names no machine: the fadal2216 definition is assumed"));
-  EXPECT_THAT(report, HasSubstr("axis y: no y_mm column"));
+  // A run naming no machine is calibrated from its data alone (no FADAL prior):
+  // x from its logged u, y (reference only) said and left out.
+  EXPECT_THAT(report, HasSubstr("name no machine"));
+  EXPECT_THAT(report, HasSubstr("axis y: no torque, current or command channel"));
   EXPECT_THAT(report, Not(HasSubstr("plots not drawn")));
-  EXPECT_TRUE(std::filesystem::exists(out / "residual_before.png") || report.find("gnuplot") != std::string::npos);
+  EXPECT_TRUE(std::filesystem::exists(out / "overlay.png") || report.find("gnuplot") != std::string::npos);
 }
 
 }  // namespace

@@ -1,0 +1,1119 @@
+#include "twin/analysis/machine_from_data.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <numeric>
+#include <sstream>
+
+#include <fmt/format.h>
+
+#include "twin/analysis/signal.hpp"
+#include "twin/core/error.hpp"
+
+namespace twin::analysis {
+namespace {
+
+std::string col(Axis a, const char* suffix) { return std::string(axis_name(a)) + suffix; }
+
+bool is_multiple(double x, double q) {
+  const double r = x / q;
+  return std::abs(r - std::round(r)) < 1e-6 * std::max(1.0, std::abs(r)) + 1e-9;
+}
+
+double round_significant(double x, int digits) {
+  if (x == 0.0 || !std::isfinite(x)) return x;
+  const int e = static_cast<int>(std::floor(std::log10(std::abs(x))));
+  const double q = std::pow(10.0, e - digits + 1);
+  return std::round(x / q) * q;
+}
+
+/// Sums of squares of a channel over rows, pooled over runs: NRMS = sqrt(res / meas).
+struct Pool {
+  double res2{0.0}, meas2{0.0};
+  std::size_t n{0};
+  void add(double meas, double model) {
+    res2 += (meas - model) * (meas - model);
+    meas2 += meas * meas;
+    ++n;
+  }
+  void add(const Pool& o) {
+    res2 += o.res2;
+    meas2 += o.meas2;
+    n += o.n;
+  }
+};
+using PoolSet = std::map<std::string, Pool>;
+
+void pools_to_errors(const PoolSet& pools, ChannelErrors& out) {
+  for (const auto& [key, p] : pools) {
+    if (p.n < 3) {
+      out.not_computed[key] = fmt::format("{} rows compared: too few", p.n);
+    } else if (!(p.meas2 > 0.0)) {
+      out.not_computed[key] = "the measured signal is zero on the rows compared";
+    } else {
+      const double v = std::sqrt(p.res2 / p.meas2);
+      // 4 significant digits, as the drive calibration reports them.
+      const double mag = std::pow(10.0, std::floor(std::log10(std::max(v, 1e-300))) - 3);
+      out.nrms[key] = std::round(v / mag) * mag;
+    }
+  }
+}
+
+/// Commanded kinematics of an axis at the samples, segment by segment (the
+/// monotone cubic the replay follows): speed and acceleration.
+struct Kinematics {
+  std::vector<double> v_mm_per_s, a_mm_per_s2;
+};
+Kinematics commanded_kinematics(const MeasuredRun& run, Axis a, const std::vector<Segment>& segs) {
+  const auto& ref = run.trace.at(col(a, "_ref_mm"));
+  const double dt = run.sample_period_s;
+  Kinematics k;
+  k.v_mm_per_s.assign(ref.size(), 0.0);
+  k.a_mm_per_s2.assign(ref.size(), 0.0);
+  for (const Segment& s : segs) {
+    if (s.end - s.begin < 2) continue;
+    const std::vector<double> r(ref.begin() + static_cast<std::ptrdiff_t>(s.begin),
+                                ref.begin() + static_cast<std::ptrdiff_t>(s.end));
+    const std::vector<double> sl = monotone_slopes(r);
+    for (std::size_t i = 0; i < r.size(); ++i) k.v_mm_per_s[s.begin + i] = sl[i] / dt;
+    for (std::size_t i = 0; i < r.size(); ++i) {
+      const std::size_t lo = i == 0 ? 0 : i - 1, hi = std::min(i + 1, r.size() - 1);
+      if (hi > lo) k.a_mm_per_s2[s.begin + i] = (sl[hi] - sl[lo]) / (static_cast<double>(hi - lo) * dt * dt);
+    }
+  }
+  return k;
+}
+
+/// Rows inside segments away from their ends (the cubic's end slopes are one-sided).
+std::vector<char> interior_rows(std::size_t n, const std::vector<Segment>& segs) {
+  std::vector<char> in(n, 0);
+  for (const Segment& s : segs) {
+    if (s.end - s.begin < 5) continue;
+    for (std::size_t r = s.begin + 2; r + 1 < s.end; ++r) in[r] = 1;
+  }
+  return in;
+}
+
+double percentile_abs(const std::vector<double>& v, double q) {
+  std::vector<double> a;
+  a.reserve(v.size());
+  for (double x : v) a.push_back(std::abs(x));
+  if (a.empty()) return 0.0;
+  const auto k = static_cast<std::size_t>(q * static_cast<double>(a.size() - 1));
+  std::nth_element(a.begin(), a.begin() + static_cast<std::ptrdiff_t>(k), a.end());
+  return a[k];
+}
+
+/// Everything derived from one run that the fits and the errors use.
+struct RunData {
+  const MeasuredRun* run{nullptr};
+  /// The run with its references rebuilt from the rounding staircase
+  /// (dequantize_reference): what the replay follows and the kinematics come from.
+  std::shared_ptr<MeasuredRun> smooth;
+  std::vector<Segment> segments;
+  std::vector<char> interior;
+  std::size_t n{0}, n_fit{0};
+  AxisArray<Kinematics> kin;
+  AxisArray<double> v_move{};
+};
+
+RunData prepare_run(const MeasuredRun& run, const std::vector<Axis>& axes, const PositionRounding& rounding,
+                    double fit_fraction, std::vector<std::string>& notes) {
+  RunData d;
+  d.run = &run;
+  d.n = run.trace.num_rows();
+  d.n_fit = static_cast<std::size_t>(fit_fraction * static_cast<double>(d.n));
+  std::string seg_note;
+  d.segments = find_segments(run, rounding.quantum_mm, std::nullopt, &seg_note);
+  if (!seg_note.empty()) notes.push_back(fmt::format("{}: {}", run.dir.string(), seg_note));
+  d.interior = interior_rows(d.n, d.segments);
+  d.smooth = std::make_shared<MeasuredRun>(run);
+  if (rounding.kind != PositionRounding::Kind::kNone && rounding.quantum_mm > 0.005) {
+    const auto& t = run.trace.at("t_s");
+    for (Axis a : axes) {
+      const std::string name = col(a, "_ref_mm");
+      auto it = std::find(d.smooth->trace.names.begin(), d.smooth->trace.names.end(), name);
+      auto& dst = d.smooth->trace.columns[static_cast<std::size_t>(it - d.smooth->trace.names.begin())];
+      for (const Segment& sg : d.segments) {
+        const std::vector<double> ts(t.begin() + static_cast<std::ptrdiff_t>(sg.begin),
+                                     t.begin() + static_cast<std::ptrdiff_t>(sg.end));
+        const std::vector<double> rs(dst.begin() + static_cast<std::ptrdiff_t>(sg.begin),
+                                     dst.begin() + static_cast<std::ptrdiff_t>(sg.end));
+        const std::vector<double> sm = dequantize_reference(ts, rs, rounding);
+        std::copy(sm.begin(), sm.end(), dst.begin() + static_cast<std::ptrdiff_t>(sg.begin));
+      }
+    }
+  }
+  for (Axis a : axes) {
+    d.kin[index(a)] = commanded_kinematics(*d.smooth, a, d.segments);
+    d.v_move[index(a)] = std::max(0.02 * percentile_abs(d.kin[index(a)].v_mm_per_s, 0.99), 1e-9);
+  }
+  return d;
+}
+
+int direction(double v, double v_move) { return v > v_move ? 1 : (v < -v_move ? -1 : 0); }
+
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// Data checks
+
+double PositionRounding::round(double x) const {
+  switch (kind) {
+    case Kind::kDecimals:
+      return std::round(x / quantum_mm) * quantum_mm;
+    case Kind::kSignificant:
+      return round_significant(x, digits);
+    case Kind::kNone:
+      break;
+  }
+  return x;
+}
+
+std::string PositionRounding::describe() const {
+  switch (kind) {
+    case Kind::kDecimals:
+      return fmt::format("positions logged to {} decimal(s) ({:g} mm)", digits, quantum_mm);
+    case Kind::kSignificant:
+      return fmt::format("positions logged to {} significant figures ({:g} mm at the run's largest position)", digits,
+                         quantum_mm);
+    case Kind::kNone:
+      break;
+  }
+  return "positions logged at full precision";
+}
+
+PositionRounding detect_rounding(const MeasuredRun& run) {
+  std::vector<const std::vector<double>*> cols;
+  for (Axis a : run.axes)
+    for (const char* s : {"_ref_mm", "_mm"})
+      if (const auto* c = run.trace.find(col(a, s))) cols.push_back(c);
+  PositionRounding r;
+  double max_abs = 0.0;
+  for (const auto* c : cols)
+    for (double x : *c) max_abs = std::max(max_abs, std::abs(x));
+  auto all = [&](auto pred) {
+    for (const auto* c : cols)
+      for (double x : *c)
+        if (!pred(x)) return false;
+    return true;
+  };
+  int decimals = -1;
+  for (int d = 0; d <= 6 && decimals < 0; ++d) {
+    const double q = std::pow(10.0, -d);
+    if (all([&](double x) { return is_multiple(x, q); })) decimals = d;
+  }
+  int sig = -1;
+  for (int s = 1; s <= 7 && sig < 0; ++s)
+    if (all([&](double x) { return std::abs(round_significant(x, s) - x) <= 1e-9 * std::max(1.0, std::abs(x)); }))
+      sig = s;
+  const double q_sig =
+      sig > 0 && max_abs > 0.0 ? std::pow(10.0, std::floor(std::log10(max_abs)) - sig + 1) : 0.0;
+  const double q_dec = decimals >= 0 ? std::pow(10.0, -decimals) : 0.0;
+  if (sig > 0 && sig <= 5 && q_sig > 1.5 * q_dec) {
+    r.kind = PositionRounding::Kind::kSignificant;
+    r.digits = sig;
+    r.quantum_mm = q_sig;
+  } else if (decimals >= 0) {
+    r.kind = PositionRounding::Kind::kDecimals;
+    r.digits = decimals;
+    r.quantum_mm = q_dec;
+  }
+  return r;
+}
+
+std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, std::optional<double> v_max_mm_per_s,
+                                   std::string* note) {
+  const std::size_t n = run.trace.num_rows();
+  // Per axis: its reference and position columns, and the limit of a step.
+  struct AxisCols {
+    std::vector<const std::vector<double>*> cols;
+    double limit{0.0};
+  };
+  std::vector<AxisCols> axes;
+  double limit_max = 0.0;
+  for (Axis a : run.axes) {
+    AxisCols ac;
+    for (const char* s : {"_ref_mm", "_mm"})
+      if (const auto* c = run.trace.find(col(a, s))) ac.cols.push_back(c);
+    // The largest step the axis holds over three consecutive samples: a speed
+    // the machine shows this axis moves at.
+    double held = 0.0;
+    for (const auto* c : ac.cols)
+      for (std::size_t k = 2; k + 1 < n; ++k)
+        held = std::max(held, std::min({std::abs((*c)[k - 1] - (*c)[k - 2]), std::abs((*c)[k] - (*c)[k - 1]),
+                                        std::abs((*c)[k + 1] - (*c)[k])}));
+    ac.limit = v_max_mm_per_s ? 1.2 * *v_max_mm_per_s * run.sample_period_s
+                              : std::max(3.0 * held, 5.0 * quantum_mm);
+    limit_max = std::max(limit_max, ac.limit);
+    axes.push_back(ac);
+  }
+  std::vector<Segment> segs;
+  std::size_t start = 0, jumps = 0;
+  double largest = 0.0;
+  for (std::size_t k = 1; k < n; ++k) {
+    double step = 0.0;
+    bool jump = false;
+    for (const auto& ac : axes)
+      for (const auto* c : ac.cols) {
+        const double d = std::abs((*c)[k] - (*c)[k - 1]);
+        if (ac.limit > 0.0 && d > ac.limit) {
+          jump = true;
+          step = std::max(step, d);
+        }
+      }
+    if (jump) {
+      segs.push_back({start, k});
+      start = k;
+      ++jumps;
+      largest = std::max(largest, step);
+    }
+  }
+  segs.push_back({start, n});
+  const double limit = limit_max;
+  if (note && jumps > 0) {
+    std::size_t short_rows = 0;
+    for (const auto& s : segs)
+      if (s.end - s.begin < 5) short_rows += s.end - s.begin;
+    *note = fmt::format(
+        "stitched from {} segments: {} jumps of up to {:.4g} mm between two rows, beyond the {:.4g} mm a sample "
+        "allows on the axis that jumps, at most ({}); each segment is replayed from its own start{}",
+        segs.size(), jumps, largest, limit,
+        v_max_mm_per_s ? "the machine's rapid" : "3 times the largest step the axis holds over 3 samples",
+        short_rows ? fmt::format(", {} rows in segments under 5 rows are not compared", short_rows) : "");
+  }
+  return segs;
+}
+
+std::vector<double> dequantize_reference(const std::vector<double>& t, const std::vector<double>& r,
+                                         const PositionRounding& rounding) {
+  const std::size_t n = r.size();
+  if (n < 3 || rounding.kind == PositionRounding::Kind::kNone) return r;
+  struct Run {
+    std::size_t s, e;
+    double v;
+  };
+  std::vector<Run> runs;
+  for (std::size_t k = 0; k < n; ++k) {
+    if (runs.empty() || r[k] != runs.back().v) runs.push_back({k, k, r[k]});
+    runs.back().e = k;
+  }
+  auto quantum_at = [&](double a, double b) {
+    if (rounding.kind == PositionRounding::Kind::kDecimals) return rounding.quantum_mm;
+    const double m = std::max(std::abs(a), std::abs(b));
+    return m > 0.0 ? std::pow(10.0, std::floor(std::log10(m)) - rounding.digits + 1) : rounding.quantum_mm;
+  };
+  auto one_quantum = [&](double a, double b) { return std::abs(b - a) <= 1.5 * quantum_at(a, b); };
+  std::vector<double> kt, kv;
+  auto knot = [&](double tk, double vk) {
+    if (kt.empty() || tk > kt.back()) {
+      kt.push_back(tk);
+      kv.push_back(vk);
+    }
+  };
+  for (std::size_t j = 0; j < runs.size(); ++j) {
+    const Run& u = runs[j];
+    const bool has_prev = j > 0, has_next = j + 1 < runs.size();
+    const bool through = has_prev && has_next && (u.v - runs[j - 1].v) * (runs[j + 1].v - u.v) > 0.0;
+    const bool small_in = has_prev && one_quantum(runs[j - 1].v, u.v);
+    const bool small_out = has_next && one_quantum(u.v, runs[j + 1].v);
+    if (!through) {
+      // Flat: where the values turn back, and at the segment's ends.
+      knot(t[u.s], u.v);
+      knot(t[u.e], u.v);
+    } else if (!(small_in && small_out)) {
+      // A step of several quanta on one side: the samples hold information.
+      if (!small_in) knot(t[u.s], u.v);
+      if (!small_out) knot(t[u.e], u.v);
+    }
+    if (has_next && small_out) knot(0.5 * (t[u.e] + t[runs[j + 1].s]), 0.5 * (u.v + runs[j + 1].v));
+  }
+  std::vector<double> out(n);
+  std::size_t j = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    if (t[k] <= kt.front()) {
+      out[k] = kv.front();
+    } else if (t[k] >= kt.back()) {
+      out[k] = kv.back();
+    } else {
+      while (kt[j + 1] < t[k]) ++j;
+      out[k] = kv[j] + (t[k] - kt[j]) / (kt[j + 1] - kt[j]) * (kv[j + 1] - kv[j]);
+    }
+  }
+  return out;
+}
+
+TorqueChannel torque_channel(const MeasuredRun& run, Axis a) {
+  for (const auto& [suffix, unit] : std::vector<std::pair<const char*, const char*>>{
+           {"_torque_Nm", "N m"}, {"_torque_raw", "raw"}, {"_i_A", "A"}, {"_u_V", "V"}})
+    if (run.trace.find(col(a, suffix))) return {col(a, suffix), unit};
+  return {};
+}
+
+nlohmann::json ChannelErrors::to_json() const {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& [k, v] : nrms) j[k] = v;
+  for (const auto& [k, why] : not_computed) j[k] = nullptr;
+  return j;
+}
+
+// ---------------------------------------------------------------------------
+// Replay
+
+ReplayResult replay_segments(const MeasuredRun& run, const sim::MachineDefinition& machine,
+                             const std::vector<Segment>& segments, const PositionRounding& rounding,
+                             std::vector<char>* compared) {
+  const std::size_t n = run.trace.num_rows();
+  ReplayResult out;
+  for (Axis a : run.axes)
+    if (machine.axes[index(a)].present) out.axes.push_back(a);
+  const auto& t = run.trace.at("t_s");
+  out.t_s = t;
+  for (Axis a : out.axes) {
+    const auto& ref = run.trace.at(col(a, "_ref_mm"));
+    out.x_ref_mm[index(a)] = ref;
+    out.x_mm[index(a)] = ref;
+    for (auto* v : {&out.u_V, &out.i_A, &out.Tm, &out.vcmd_mm_per_s}) (*v)[index(a)].assign(n, 0.0);
+  }
+  if (compared) compared->assign(n, 0);
+  for (const Segment& s : segments) {
+    if (s.end - s.begin < 5) continue;
+    MeasuredRun sub;
+    sub.dir = run.dir;
+    sub.meta = run.meta;
+    sub.axes = out.axes;
+    sub.sample_period_s = run.sample_period_s;
+    sub.trace.source = run.trace.source;
+    sub.trace.names.push_back("t_s");
+    sub.trace.columns.emplace_back(t.begin() + static_cast<std::ptrdiff_t>(s.begin),
+                                   t.begin() + static_cast<std::ptrdiff_t>(s.end));
+    for (Axis a : out.axes) {
+      const auto& ref = run.trace.at(col(a, "_ref_mm"));
+      sub.trace.names.push_back(col(a, "_ref_mm"));
+      sub.trace.columns.emplace_back(ref.begin() + static_cast<std::ptrdiff_t>(s.begin),
+                                     ref.begin() + static_cast<std::ptrdiff_t>(s.end));
+    }
+    const ReplayResult r = replay_run(sub, machine);
+    for (Axis a : out.axes) {
+      const std::size_t i = index(a);
+      for (std::size_t k = 0; k < r.t_s.size(); ++k) {
+        out.x_mm[i][s.begin + k] = rounding.round(r.x_mm[i][k]);
+        out.u_V[i][s.begin + k] = r.u_V[i][k];
+        out.i_A[i][s.begin + k] = r.i_A[i][k];
+        out.Tm[i][s.begin + k] = r.Tm[i][k];
+        out.vcmd_mm_per_s[i][s.begin + k] = r.vcmd_mm_per_s[i][k];
+      }
+    }
+    if (compared)
+      for (std::size_t k = s.begin; k < s.end; ++k) (*compared)[k] = 1;
+    if (out.notes.empty()) out.notes = r.notes;
+  }
+  return out;
+}
+
+namespace {
+
+/// The model's value of a channel: what the replay gives in the channel's unit.
+const std::vector<double>* model_channel(const ReplayResult& r, Axis a, const TorqueChannel& ch,
+                                         bool same_unit_machine) {
+  const std::size_t i = index(a);
+  if (ch.unit == "A") return &r.i_A[i];
+  if (ch.unit == "V") return &r.u_V[i];
+  if (ch.unit == "N m") return &r.Tm[i];
+  return same_unit_machine ? &r.Tm[i] : nullptr;  // raw: only a machine identified in the log's unit
+}
+
+/// Adds a model's errors on rows [from, to) where compared to `pools`.
+void add_errors(PoolSet& pools, const MeasuredRun& run, const ReplayResult& model, const std::vector<char>& compared,
+                const std::vector<Axis>& axes, std::size_t from, std::size_t to, bool same_unit_machine,
+                std::map<std::string, std::string>* not_comparable) {
+  for (Axis a : axes) {
+    const std::size_t i = index(a);
+    if (model.x_mm[i].empty()) continue;
+    const auto& ref = run.trace.at(col(a, "_ref_mm"));
+    if (const auto* x = run.trace.find(col(a, "_mm"))) {
+      Pool& p = pools[col(a, "_err_mm")];
+      for (std::size_t k = from; k < to; ++k)
+        if (compared[k]) p.add(ref[k] - (*x)[k], ref[k] - model.x_mm[i][k]);
+    }
+    const TorqueChannel ch = torque_channel(run, a);
+    if (!ch.present()) continue;
+    const std::string key = ch.column;
+    const auto* m = model_channel(model, a, ch, same_unit_machine);
+    if (m == nullptr) {
+      if (not_comparable) (*not_comparable)[key] = "the log's torque unit is not stated: the nominal machine's N m cannot be compared";
+      continue;
+    }
+    const auto& meas = run.trace.at(ch.column);
+    Pool& p = pools[key];
+    for (std::size_t k = from; k < to; ++k)
+      if (compared[k]) p.add(meas[k], (*m)[k]);
+  }
+}
+
+/// The rigid-body regression of one axis: T = m a + Fc sgn(v) + b v + c.
+struct Regression {
+  bool ok{false};
+  std::vector<double> theta;  // m, Fc, b, c
+  double lag_s{0.0};          // tracking baseline: e = lag v
+};
+
+ChannelErrors errors_from(const PoolSet& pools) {
+  ChannelErrors e;
+  pools_to_errors(pools, e);
+  return e;
+}
+
+struct Fitter {
+  const std::vector<Axis>& axes;
+  const std::vector<RunData>& runs;
+
+  /// Rows of the fitting part (interior rows of segments), per run.
+  template <typename F>
+  void for_fit_rows(F f) const {
+    for (std::size_t r = 0; r < runs.size(); ++r)
+      for (std::size_t k = 0; k < runs[r].n_fit; ++k)
+        if (runs[r].interior[k]) f(r, k);
+  }
+};
+
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// Calibration
+
+DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const std::vector<MeasuredRun>& validate,
+                                    const sim::MachineDefinition& nominal, const DataCalibrationOptions& options) {
+  if (fit.empty()) throw ConfigError("calibrate: no run to fit");
+  DataCalibration out;
+  out.fit_fraction = options.fit_fraction;
+  out.axes = fit.front().axes;
+  for (const auto& r : fit)
+    if (r.axes != out.axes)
+      throw ConfigError(fmt::format("{}: the runs calibrated together must log the same axes ({} logs others)",
+                                    fit.front().dir.string(), r.dir.string()));
+  for (const auto& r : fit)
+    for (const auto& n : r.notes) out.notes.push_back(n);
+
+  // Rounding: the coarsest all fitting runs agree with.
+  out.rounding = detect_rounding(fit.front());
+  for (std::size_t i = 1; i < fit.size(); ++i) {
+    const PositionRounding ri = detect_rounding(fit[i]);
+    if (ri.quantum_mm > out.rounding.quantum_mm) out.rounding = ri;
+  }
+  out.notes.push_back(out.rounding.describe() + (out.rounding.quantum_mm > 0.01
+                                                     ? ": a display rounding, not the servo's encoder; the twin's "
+                                                       "loop closes on a 1 um encoder and its logged positions are "
+                                                       "rounded as the log's"
+                                                     : ": used as the replay's encoder"));
+
+  // Controller period.
+  const MeasuredRun& r0 = fit.front();
+  double Ts = options.default_controller_period_s;
+  if (r0.meta.controller_period_s) {
+    Ts = *r0.meta.controller_period_s;
+    out.notes.push_back(fmt::format("controller period {} s from meta.json", Ts));
+  } else if (r0.sample_period_s <= 1e-3 + 1e-12) {
+    Ts = r0.sample_period_s;
+    out.notes.push_back(fmt::format("controller period not stated: the log's own period {} s is taken", Ts));
+  } else {
+    out.notes.push_back(fmt::format("controller period not stated and the log samples every {} s: the twin replays at "
+                                    "Ts = {} s, the reference between samples rebuilt by a monotone cubic",
+                                    r0.sample_period_s, Ts));
+  }
+
+  std::vector<RunData> runs;
+  for (const auto& r : fit) runs.push_back(prepare_run(r, out.axes, out.rounding, options.fit_fraction, out.notes));
+  const Fitter fitter{out.axes, runs};
+
+  // The machine: cascade, drives in the channel's unit.
+  sim::MachineDefinition m;
+  m.name = "identified";
+  m.source = "twin calibrate (from data)";
+  m.Ts_s = Ts;
+  m.encoder_resolution_mm = out.rounding.quantum_mm > 0.0 && out.rounding.quantum_mm <= 0.01 &&
+                                    out.rounding.kind == PositionRounding::Kind::kDecimals
+                                ? out.rounding.quantum_mm
+                                : 0.001;
+  sim::set_machine_loop_law(m, controller::LoopLaw::kCascade);
+
+  for (Axis a : out.axes) {
+    AxisFromData ax;
+    ax.axis = a;
+    ax.channel = torque_channel(r0, a);
+    const std::size_t i = index(a);
+    // The loop: vcmd regression where logged, else the lag of the position.
+    double num = 0.0, den = 0.0;
+    std::vector<double> e_col, v_col, vc_col;
+    bool have_vcmd = true, have_x = true;
+    for (const auto& rd : runs) {
+      have_vcmd = have_vcmd && rd.run->trace.find(col(a, "_vcmd_mm_s")) != nullptr;
+      have_x = have_x && rd.run->trace.find(col(a, "_mm")) != nullptr;
+    }
+    if (have_vcmd && have_x) {
+      std::vector<double> e, vr, vc;
+      std::vector<std::size_t> rows;
+      fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
+        const auto& t = runs[r].run->trace;
+        const auto& ref = t.at(col(a, "_ref_mm"));
+        e.push_back(ref[k] - t.at(col(a, "_mm"))[k]);
+        // The law's own speed: the backward difference of the reference.
+        vr.push_back((ref[k] - ref[k - 1]) / runs[r].run->sample_period_s);
+        vc.push_back(t.at(col(a, "_vcmd_mm_s"))[k]);
+        rows.push_back(rows.size());
+      });
+      const LsqResult ls = least_squares({&e, &vr}, vc, rows);
+      if (ls.ok && ls.theta[0] > 0.0) {
+        ax.gains.Kv_per_s = ls.theta[0];
+        ax.gains.kff = std::clamp(ls.theta[1], 0.0, 1.5);
+        ax.lag_s = (1.0 - ax.gains.kff) / ax.gains.Kv_per_s;
+        double vrms = 0.0;
+        for (double x : vc) vrms += x * x;
+        vrms = std::sqrt(vrms / static_cast<double>(std::max<std::size_t>(1, vc.size())));
+        ax.loop_source = fmt::format("the logged velocity command against the following error and the command's speed "
+                                     "(residual {:.3g} mm/s against an RMS of {:.3g} mm/s)",
+                                     ls.residual_rms, vrms);
+      }
+    }
+    if (ax.loop_source.empty() && have_x) {
+      fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
+        const double v = runs[r].kin[i].v_mm_per_s[k];
+        if (direction(v, runs[r].v_move[i]) == 0) return;
+        const auto& t = runs[r].run->trace;
+        num += (v > 0 ? 1.0 : -1.0) * (t.at(col(a, "_ref_mm"))[k] - t.at(col(a, "_mm"))[k]);
+        den += std::abs(v);
+      });
+      ax.lag_s = den > 0.0 ? num / den : 0.0;
+      if (ax.lag_s > 1e-4) {
+        ax.gains.Kv_per_s = 1.0 / ax.lag_s;
+        ax.gains.kff = 0.0;
+        ax.loop_source = fmt::format("the lag of the position behind the command ({:.4g} ms, the mean of the rounded "
+                                     "following error over the speed); a P loop without feedforward assumed",
+                                     1e3 * ax.lag_s);
+      }
+    }
+    if (ax.loop_source.empty()) {
+      ax.gains.Kv_per_s = 1.0 / std::max(10.0 * Ts, 0.01);
+      ax.loop_source = fmt::format("not seen in the data ({}); Kv = {:.4g} 1/s assumed",
+                                   have_x ? "the position does not lag the command measurably" : "no position logged",
+                                   ax.gains.Kv_per_s);
+    }
+
+    // The drive, in the channel's unit.
+    if (!ax.channel.present()) {
+      ax.note = fmt::format("axis {}: no torque, current or command channel: the drive is not identified and the axis is "
+                            "not replayed",
+                            axis_name(a));
+      out.notes.push_back(ax.note);
+      out.axis.push_back(ax);
+      continue;
+    }
+    std::vector<double> acc, vel, pos, neg, one, T;
+    std::vector<std::size_t> rows;
+    double a2 = 0.0, T2 = 0.0;
+    fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
+      const auto* ch = runs[r].run->trace.find(ax.channel.column);
+      if (ch == nullptr) return;
+      const double v = runs[r].kin[i].v_mm_per_s[k];
+      const int d = direction(v, runs[r].v_move[i]);
+      acc.push_back(runs[r].kin[i].a_mm_per_s2[k]);
+      vel.push_back(v);
+      pos.push_back(d > 0 ? 1.0 : 0.0);
+      neg.push_back(d < 0 ? -1.0 : 0.0);
+      one.push_back(1.0);
+      T.push_back((*ch)[k]);
+      a2 += acc.back() * acc.back();
+      T2 += T.back() * T.back();
+      rows.push_back(rows.size());
+    });
+    const bool moves_pos = std::any_of(pos.begin(), pos.end(), [](double x) { return x != 0.0; });
+    const bool moves_neg = std::any_of(neg.begin(), neg.end(), [](double x) { return x != 0.0; });
+    std::vector<const std::vector<double>*> X{&acc, &vel};
+    if (moves_pos) X.push_back(&pos);
+    if (moves_neg) X.push_back(&neg);
+    X.push_back(&one);
+    const LsqResult ls = least_squares(X, T, rows);
+    ax.fit_rows = rows.size();
+    if (!ls.ok || !(moves_pos || moves_neg)) {
+      ax.note = fmt::format("axis {}: the drive could not be identified ({} rows, {}); the axis is not replayed",
+                            axis_name(a), rows.size(), moves_pos || moves_neg ? "rank deficient" : "the axis does not move");
+      out.notes.push_back(ax.note);
+      out.axis.push_back(ax);
+      continue;
+    }
+    std::size_t j = 0;
+    ax.J = ls.theta[j];
+    ax.J_se = ls.stderr_theta[j++];
+    ax.B = ls.theta[j];
+    ax.B_se = ls.stderr_theta[j++];
+    if (moves_pos) {
+      ax.Tc_pos = ls.theta[j];
+      ax.Tc_pos_se = ls.stderr_theta[j++];
+    }
+    if (moves_neg) {
+      ax.Tc_neg = ls.theta[j];
+      ax.Tc_neg_se = ls.stderr_theta[j++];
+    }
+    ax.c = ls.theta[j];
+    ax.c_se = ls.stderr_theta[j];
+    if (!moves_pos) ax.Tc_pos = ax.Tc_neg;
+    if (!moves_neg) ax.Tc_neg = ax.Tc_pos;
+    std::vector<std::string> clamped;
+    // Physical floors: an inertia the fixed-step drive integrates (B Ts / J <= 0.5)
+    // and that 1 % of the torque RMS accelerates at most at the run's RMS acceleration.
+    const double a_rms = std::sqrt(a2 / static_cast<double>(rows.size()));
+    const double T_rms = std::sqrt(T2 / static_cast<double>(rows.size()));
+    const double J_floor = std::max({2.0 * std::max(ax.B, 0.0) * Ts, a_rms > 0.0 ? 0.01 * T_rms / a_rms : 0.0, 1e-9});
+    if (ax.J < J_floor) {
+      clamped.push_back(fmt::format("J {:.4g} raised to {:.4g} (the log's accelerations do not resolve it)", ax.J, J_floor));
+      ax.J = J_floor;
+    }
+    if (ax.B < 0.0) {
+      clamped.push_back(fmt::format("B {:.4g} set to 0", ax.B));
+      ax.B = 0.0;
+    }
+    for (double* tc : {&ax.Tc_pos, &ax.Tc_neg})
+      if (*tc < 0.0) {
+        clamped.push_back(fmt::format("a Coulomb level {:.4g} set to 0", *tc));
+        *tc = 0.0;
+      }
+    ax.identified = true;
+    ax.note = clamped.empty() ? "" : fmt::format("axis {}: {}", axis_name(a), fmt::join(clamped, "; "));
+    if (!ax.note.empty()) out.notes.push_back(ax.note);
+
+    // The velocity loop: from the logged torque against the speed error where
+    // both speeds are logged at the loop's rate, else well above the position loop.
+    const double wv = std::min(std::max(5.0 * ax.gains.Kv_per_s, 2.0 * M_PI * 20.0), 0.3 / Ts);
+    ax.gains.Kvp_torque_s_per_rad = ax.J * wv;
+    ax.gains.Tn_s = 4.0 / wv;
+    ax.gains.tau_i_s = 0.0;
+    ax.gains.T_max = 1e9;
+    bool vel_from_data = false;
+    if (have_vcmd && r0.sample_period_s <= 2e-3 + 1e-12) {
+      bool have_v = true;
+      for (const auto& rd : runs) have_v = have_v && rd.run->trace.find(col(a, "_v_mm_s")) != nullptr;
+      if (have_v) {
+        std::vector<double> ev, iev, c1, Tm;
+        std::vector<std::size_t> vrows;
+        for (const auto& rd : runs) {
+          const auto& t = rd.run->trace;
+          const auto& vc = t.at(col(a, "_vcmd_mm_s"));
+          const auto& v = t.at(col(a, "_v_mm_s"));
+          const auto& ch = t.at(ax.channel.column);
+          for (const Segment& s : rd.segments) {
+            double integral = 0.0;
+            for (std::size_t k = s.begin; k < std::min(s.end, rd.n_fit); ++k) {
+              const double e = vc[k] - v[k];
+              integral += e * rd.run->sample_period_s;
+              ev.push_back(e);
+              iev.push_back(integral);
+              c1.push_back(1.0);
+              Tm.push_back(ch[k]);
+              if (k >= s.begin + 2) vrows.push_back(ev.size() - 1);
+            }
+          }
+        }
+        const LsqResult vl = least_squares({&ev, &iev, &c1}, Tm, vrows);
+        double t2 = 0.0;
+        for (std::size_t k : vrows) t2 += Tm[k] * Tm[k];
+        const double trms = vrows.empty() ? 0.0 : std::sqrt(t2 / static_cast<double>(vrows.size()));
+        if (vl.ok && vl.theta[0] > 0.0 && vl.theta[1] >= 0.0 && vl.residual_rms < 0.3 * trms) {
+          ax.gains.Kvp_torque_s_per_rad = vl.theta[0];
+          ax.gains.Tn_s = vl.theta[1] > 0.0 ? vl.theta[0] / vl.theta[1] : 0.0;
+          vel_from_data = true;
+          ax.velocity_loop_from_data = true;
+          ax.loop_source += fmt::format("; velocity loop from the logged torque against the speed error (residual "
+                                        "{:.3g} of an RMS {:.3g})",
+                                        vl.residual_rms, trms);
+        }
+      }
+    }
+    if (!vel_from_data)
+      ax.loop_source += fmt::format("; the velocity loop is not seen directly in this log: its bandwidth starts at "
+                                    "{:.3g} rad/s ({:.3g} times Kv) with Tn = 4 / that",
+                                    wv, wv / ax.gains.Kv_per_s);
+
+    sim::AxisDefinition& def = m.axes[i];
+    def.present = true;
+    def.drive = feeddrive::DriveParams{};
+    def.drive.Ka_A_per_V = 1.0;
+    def.drive.Kt_Nm_per_A = 1.0;
+    def.drive.rg_mm_per_rad = 1.0;
+    def.drive.J_kg_m2 = ax.J;
+    def.drive.B_kg_m2_per_s = ax.B;
+    def.drive.Tc_pos_Nm = ax.Tc_pos;
+    def.drive.Tc_neg_Nm = ax.Tc_neg;
+    def.drive.effects.constant_load.enabled = ax.c != 0.0;
+    def.drive.effects.constant_load.torque_Nm = ax.c;
+    def.loop.law = controller::LoopLaw::kCascade;
+    def.loop.cascade = ax.gains;
+    def.loop.Ts_s = Ts;
+    def.following_error_limit_mm = 1e3;
+    out.axis.push_back(ax);
+  }
+  sim::set_machine_loop_law(m, controller::LoopLaw::kCascade);
+  for (Axis a : kAllAxes)
+    if (!m.axes[index(a)].present) m.axes[index(a)] = sim::AxisDefinition{};
+  if (m.present_axes().empty())
+    throw ConfigError(fmt::format("{}: no axis could be identified: {}", r0.dir.string(),
+                                  out.axis.empty() ? std::string("no axis") : out.axis.front().note));
+  sim::set_machine_loop_law(m, controller::LoopLaw::kCascade);
+  m.validate();
+  out.identified = m;
+  out.final_machine = m;
+
+  // What a log of this rate and resolution cannot show.
+  const double dt = r0.sample_period_s;
+  const double q = out.rounding.quantum_mm;
+  if (dt > 2e-3) {
+    out.skipped.emplace_back("delay", fmt::format("a delay of a few loop periods is far below the {:g} s sample "
+                                                  "period: it cannot be told from the loop's lag",
+                                                  dt));
+    out.skipped.emplace_back("compliance", fmt::format("a resonance above the Nyquist frequency {:.3g} Hz of the log "
+                                                       "cannot be seen",
+                                                       0.5 / dt));
+    out.skipped.emplace_back("cogging", fmt::format("a ripple periodic in motor angle needs several samples per "
+                                                    "period; at {:g} s per sample it aliases",
+                                                    dt));
+  }
+  if (q > 0.005) {
+    out.skipped.emplace_back("screw_pitch_error", fmt::format("a lead error of microns is below the log's position "
+                                                              "quantum {:g} mm",
+                                                              q));
+    out.skipped.emplace_back("backlash", fmt::format("lost motion at reversals below the log's position quantum "
+                                                     "{:g} mm is not seen in the position",
+                                                     q));
+  }
+
+  // Replays and errors.
+  auto errors_on = [&](const sim::MachineDefinition& machine, const RunData& rd, std::size_t from, std::size_t to,
+                       bool same_unit, ReplayResult* keep, ChannelErrors& dst, PoolSet* pooled) {
+    PoolSet pools;
+    std::vector<char> cmp;
+    try {
+      ReplayResult rr = replay_segments(*rd.smooth, machine, rd.segments, out.rounding, &cmp);
+      ++out.replays;
+      for (std::size_t k = 0; k < cmp.size(); ++k) cmp[k] = static_cast<char>(cmp[k] && rd.interior[k]);
+      std::map<std::string, std::string> nc;
+      add_errors(pools, *rd.run, rr, cmp, out.axes, from, to, same_unit, &nc);
+      dst = errors_from(pools);
+      for (auto& [k, why] : nc) dst.not_computed[k] = why;
+      if (keep) *keep = std::move(rr);
+      if (pooled)
+        for (const auto& [k, p] : pools) (*pooled)[k].add(p);
+    } catch (const Error& e) {
+      for (Axis a : out.axes) {
+        dst.not_computed[col(a, "_err_mm")] = fmt::format("the replay failed: {}", e.what());
+        const TorqueChannel ch = torque_channel(*rd.run, a);
+        if (ch.present()) dst.not_computed[ch.column] = fmt::format("the replay failed: {}", e.what());
+      }
+    }
+  };
+
+  // The velocity loop where the log cannot show it: its bandwidth and
+  // integral time still shape what the current does where the axis stops
+  // (the torque the integral holds against friction), which the fitting rows
+  // show. A small grid around the default, chosen per axis on the fitting
+  // rows of the fitting runs; the held-out rows judge it like everything else.
+  {
+    struct Choice {
+      double score{1e300};
+      double Kvp{0.0}, Tn{0.0};
+    };
+    AxisArray<Choice> best{};
+    bool any = false;
+    for (const AxisFromData& ax : out.axis) any = any || (ax.identified && !ax.velocity_loop_from_data);
+    const std::vector<double> wv_factors{0.25, 0.5, 1.0, 2.0};
+    const std::vector<double> tn_factors{0.0, 2.0, 4.0, 16.0};
+    for (double fw : any ? wv_factors : std::vector<double>{}) {
+      for (double ft : tn_factors) {
+        sim::MachineDefinition trial = out.identified;
+        for (const AxisFromData& ax : out.axis) {
+          if (!ax.identified || ax.velocity_loop_from_data) continue;
+          auto& g = trial.axes[index(ax.axis)].loop.cascade;
+          const double wv = fw * ax.gains.Kvp_torque_s_per_rad / ax.J;
+          g.Kvp_torque_s_per_rad = ax.J * wv;
+          g.Tn_s = ft > 0.0 ? ft / wv : 0.0;
+        }
+        PoolSet pools;
+        for (const RunData& rd : runs) {
+          ChannelErrors ignored;
+          errors_on(trial, rd, 0, rd.n_fit, true, nullptr, ignored, &pools);
+        }
+        const ChannelErrors e = errors_from(pools);
+        for (const AxisFromData& ax : out.axis) {
+          if (!ax.identified || ax.velocity_loop_from_data) continue;
+          const auto it = e.nrms.find(ax.channel.column);
+          if (it == e.nrms.end() || !(it->second < best[index(ax.axis)].score)) continue;
+          const auto& g = trial.axes[index(ax.axis)].loop.cascade;
+          best[index(ax.axis)] = {it->second, g.Kvp_torque_s_per_rad, g.Tn_s};
+        }
+      }
+    }
+    for (AxisFromData& ax : out.axis) {
+      const Choice& c = best[index(ax.axis)];
+      if (!ax.identified || ax.velocity_loop_from_data || c.score >= 1e300) continue;
+      ax.gains.Kvp_torque_s_per_rad = c.Kvp;
+      ax.gains.Tn_s = c.Tn;
+      out.identified.axes[index(ax.axis)].loop.cascade = ax.gains;
+      ax.loop_source += fmt::format("; chosen on the fitting rows among 16 velocity loops: Kvp {:.4g}, Tn {:.4g} s "
+                                    "(fitting-row NRMS {:.4g})",
+                                    c.Kvp, c.Tn, c.score);
+    }
+    out.final_machine = out.identified;
+  }
+
+  // Baselines fitted on the fitting rows: the rigid-body regression per axis.
+  AxisArray<Regression> reg{};
+  for (const AxisFromData& ax : out.axis) {
+    const std::size_t i = index(ax.axis);
+    std::vector<double> acc, sg, vel, one, T;
+    std::vector<std::size_t> rows;
+    double num = 0.0, den = 0.0;
+    fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
+      const double v = runs[r].kin[i].v_mm_per_s[k];
+      const auto& t = runs[r].run->trace;
+      if (const auto* x = t.find(col(ax.axis, "_mm"))) {
+        num += v * (t.at(col(ax.axis, "_ref_mm"))[k] - (*x)[k]);
+        den += v * v;
+      }
+      const auto* ch = ax.channel.present() ? t.find(ax.channel.column) : nullptr;
+      if (ch == nullptr) return;
+      acc.push_back(runs[r].kin[i].a_mm_per_s2[k]);
+      sg.push_back(direction(v, runs[r].v_move[i]));
+      vel.push_back(v);
+      one.push_back(1.0);
+      T.push_back((*ch)[k]);
+      rows.push_back(rows.size());
+    });
+    reg[i].lag_s = den > 0.0 ? num / den : 0.0;
+    const LsqResult ls = least_squares({&acc, &sg, &vel, &one}, T, rows);
+    reg[i].ok = ls.ok;
+    reg[i].theta = ls.theta;
+  }
+  auto baselines = [&](const RunData& rd, std::size_t from, std::size_t to, ChannelErrors& zero, ChannelErrors& regr,
+                       PoolSet* pz, PoolSet* pr) {
+    PoolSet z, g;
+    for (const AxisFromData& ax : out.axis) {
+      const std::size_t i = index(ax.axis);
+      const auto& t = rd.run->trace;
+      const auto& ref = t.at(col(ax.axis, "_ref_mm"));
+      const auto& kin = rd.kin[i];
+      if (const auto* x = t.find(col(ax.axis, "_mm"))) {
+        Pool& pz1 = z[col(ax.axis, "_err_mm")];
+        Pool& pg1 = g[col(ax.axis, "_err_mm")];
+        for (std::size_t k = from; k < to; ++k) {
+          if (!rd.interior[k]) continue;
+          const double e = ref[k] - (*x)[k];
+          pz1.add(e, 0.0);
+          const double ref_smooth = rd.smooth->trace.at(col(ax.axis, "_ref_mm"))[k];
+          pg1.add(e, ref[k] - out.rounding.round(ref_smooth - reg[i].lag_s * kin.v_mm_per_s[k]));
+        }
+      }
+      const TorqueChannel ch = torque_channel(*rd.run, ax.axis);
+      if (!ch.present()) continue;
+      const auto& meas = t.at(ch.column);
+      Pool& pz2 = z[ch.column];
+      Pool& pg2 = g[ch.column];
+      for (std::size_t k = from; k < to; ++k) {
+        if (!rd.interior[k]) continue;
+        pz2.add(meas[k], 0.0);
+        if (!reg[i].ok) continue;
+        const double v = kin.v_mm_per_s[k];
+        const double pred = reg[i].theta[0] * kin.a_mm_per_s2[k] + reg[i].theta[1] * direction(v, rd.v_move[i]) +
+                            reg[i].theta[2] * v + reg[i].theta[3];
+        pg2.add(meas[k], pred);
+      }
+    }
+    zero = errors_from(z);
+    regr = errors_from(g);
+    if (pz)
+      for (const auto& [k, p] : z) (*pz)[k].add(p);
+    if (pr)
+      for (const auto& [k, p] : g) (*pr)[k].add(p);
+  };
+
+  // The model and the baselines are compared on the same rows: the interior
+  // rows of the replayed segments.
+  PoolSet pool_nom, pool_id, pool_zero, pool_reg;
+  for (std::size_t r = 0; r < runs.size(); ++r) {
+    RunErrors re;
+    re.run = runs[r].run->dir.string();
+    re.rows = runs[r].n;
+    const std::size_t from = runs[r].n_fit, to = runs[r].n;
+    for (std::size_t k = from; k < to; ++k) re.rows_compared += runs[r].interior[k] ? 1 : 0;
+    errors_on(out.identified, runs[r], from, to, true, r == 0 ? &out.replay_before : nullptr, re.identified, &pool_id);
+    errors_on(nominal, runs[r], from, to, false, nullptr, re.nominal, &pool_nom);
+    baselines(runs[r], from, to, re.zero, re.regression, &pool_zero, &pool_reg);
+    re.calibrated = re.identified;
+    out.fit_runs.push_back(std::move(re));
+  }
+  out.replay_after = out.replay_before;
+
+  for (const MeasuredRun& v : validate) {
+    std::vector<std::string> vnotes;
+    RunData rd = prepare_run(v, out.axes, out.rounding, 0.0, vnotes);
+    for (auto& n : vnotes) out.notes.push_back(n);
+    RunErrors re;
+    re.run = v.dir.string();
+    re.rows = rd.n;
+    for (std::size_t k = 0; k < rd.n; ++k) re.rows_compared += rd.interior[k] ? 1 : 0;
+    errors_on(out.final_machine, rd, 0, rd.n, true, nullptr, re.calibrated, nullptr);
+    re.identified = re.calibrated;
+    errors_on(nominal, rd, 0, rd.n, false, nullptr, re.nominal, nullptr);
+    baselines(rd, 0, rd.n, re.zero, re.regression, nullptr, nullptr);
+    out.validation_runs.push_back(std::move(re));
+  }
+  return out;
+}
+
+// ---------------------------------------------------------------------------
+// Reports
+
+namespace {
+
+nlohmann::json run_errors_json(const RunErrors& e) {
+  nlohmann::json j;
+  j["run"] = e.run;
+  j["rows"] = e.rows;
+  j["rows_compared"] = e.rows_compared;
+  j["error_nominal"] = e.nominal.to_json();
+  j["error_calibrated"] = e.calibrated.to_json();
+  j["baseline"] = {{"zero", e.zero.to_json()}, {"rigid_body_regression", e.regression.to_json()}};
+  nlohmann::json why = nlohmann::json::object();
+  for (const auto* ce : {&e.nominal, &e.calibrated, &e.regression})
+    for (const auto& [k, w] : ce->not_computed) why[k] = w;
+  if (!why.empty()) j["not_computed"] = why;
+  return j;
+}
+
+/// Pooled over the fitting runs' held-out rows, from the per-run figures and
+/// their compared rows (an approximation only where runs differ in level; the
+/// per-run figures are exact and listed too).
+ChannelErrors pooled(const std::vector<RunErrors>& runs, const ChannelErrors RunErrors::*which) {
+  if (runs.size() == 1) return runs.front().*which;
+  ChannelErrors out;
+  std::map<std::string, std::pair<double, double>> acc;
+  for (const auto& r : runs)
+    for (const auto& [k, v] : (r.*which).nrms) {
+      acc[k].first += v * v * static_cast<double>(r.rows_compared);
+      acc[k].second += static_cast<double>(r.rows_compared);
+    }
+  for (const auto& [k, p] : acc) out.nrms[k] = p.second > 0 ? std::sqrt(p.first / p.second) : 0.0;
+  return out;
+}
+
+}  // namespace
+
+nlohmann::json data_calibration_report_json(const DataCalibration& r) {
+  nlohmann::json j;
+  nlohmann::json params = nlohmann::json::object();
+  for (const AxisFromData& ax : r.axis) {
+    nlohmann::json p;
+    p["controller"] = "cascade";
+    p["torque_channel"] = ax.channel.present() ? nlohmann::json(ax.channel.column) : nlohmann::json(nullptr);
+    p["torque_unit"] = ax.channel.present() ? nlohmann::json(ax.channel.unit) : nlohmann::json(nullptr);
+    p["lag_s"] = ax.lag_s;
+    p["Kv"] = ax.gains.Kv_per_s;
+    p["kff"] = ax.gains.kff;
+    p["loop_source"] = ax.loop_source;
+    if (ax.identified) {
+      p["Kvp"] = ax.gains.Kvp_torque_s_per_rad;
+      p["Tn"] = ax.gains.Tn_s;
+      p["J"] = ax.J;
+      p["B"] = ax.B;
+      p["Tc_pos"] = ax.Tc_pos;
+      p["Tc_neg"] = ax.Tc_neg;
+      p["constant_load"] = ax.c;
+      p["stderr"] = {{"J", ax.J_se}, {"B", ax.B_se}, {"Tc_pos", ax.Tc_pos_se}, {"Tc_neg", ax.Tc_neg_se},
+                     {"constant_load", ax.c_se}};
+      p["units"] = fmt::format("J {0} s^2/mm, B {0} s/mm, Tc and constant_load {0} (rg = 1 mm/rad, Kt = Ka = 1)",
+                               ax.channel.unit);
+      p["fit_rows"] = ax.fit_rows;
+    } else {
+      p["not_identified"] = ax.note;
+    }
+    params[std::string(axis_name(ax.axis))] = p;
+  }
+  j["parameters_identified"] = params;
+  j["effects_added"] = nlohmann::json::array();
+  for (const auto& e : r.effects)
+    if (e.kept)
+      j["effects_added"].push_back(
+          {{"effect", e.effect}, {"axis", axis_name(e.axis)}, {"params", e.params}, {"evidence", e.evidence}});
+  j["error_before"] = pooled(r.fit_runs, &RunErrors::identified).to_json();
+  j["error_after"] = pooled(r.fit_runs, &RunErrors::calibrated).to_json();
+  j["validation"] = fmt::format(
+      "normalised RMS on the last {:.0f} % of the rows of each fitting run (not used for fitting), interior rows of "
+      "each stitched segment only; currents and torques unfiltered in their own unit (the log's rate is below 400 Hz "
+      "or the channel is not u), positions of the twin rounded as the log's",
+      100.0 * (1.0 - r.fit_fraction));
+  j["baseline"] = {{"zero", pooled(r.fit_runs, &RunErrors::zero).to_json()},
+                   {"rigid_body_regression", pooled(r.fit_runs, &RunErrors::regression).to_json()}};
+  j["fit_runs"] = nlohmann::json::array();
+  for (const auto& e : r.fit_runs) j["fit_runs"].push_back(run_errors_json(e));
+  j["validation_runs"] = nlohmann::json::array();
+  for (const auto& e : r.validation_runs) j["validation_runs"].push_back(run_errors_json(e));
+  j["effects_skipped"] = nlohmann::json::object();
+  for (const auto& [e, why] : r.skipped) j["effects_skipped"][e] = why;
+  j["effects_tried"] = nlohmann::json::array();
+  for (const auto& e : r.effects)
+    j["effects_tried"].push_back({{"effect", e.effect}, {"axis", axis_name(e.axis)}, {"params", e.params},
+                                  {"before", e.before}, {"after", e.after}, {"kept", e.kept}});
+  j["notes"] = r.notes;
+  j["replays"] = r.replays;
+  return j;
+}
+
+std::string data_calibration_report_markdown(const DataCalibration& r, const std::string& runs) {
+  std::ostringstream o;
+  o << "# Calibration of " << runs << "\n\n";
+  o << "The runs name no machine the twin ships, so nothing was assumed of the machine: the loop, the drives and "
+       "their units were found from the data alone.\n\n";
+  o << "## What the data holds\n\n";
+  for (const auto& n : r.notes) o << "- " << n << "\n";
+  o << "\n## The machine found\n\n";
+  for (const AxisFromData& ax : r.axis) {
+    o << "### Axis " << axis_name(ax.axis) << "\n\n";
+    o << fmt::format("- Position loop: Kv {:.4g} 1/s, velocity feedforward {:.3g}: the axis lags its command by "
+                     "{:.3g} ms. Found from {}.\n",
+                     ax.gains.Kv_per_s, ax.gains.kff, 1e3 * ax.lag_s, ax.loop_source);
+    if (!ax.identified) {
+      o << "- Drive: " << ax.note << "\n\n";
+      continue;
+    }
+    const std::string u = ax.channel.unit == "raw" ? "(the log's unit)" : ax.channel.unit;
+    o << fmt::format("- Drive, in the unit of {} {}: it takes {:.3g} +- {:.2g} {} to keep moving in +, {:.3g} +- "
+                     "{:.2g} in -, and {:.3g} +- {:.2g} at rest (a constant load); {:.3g} {} per mm/s of speed and "
+                     "{:.3g} {} per mm/s^2 of acceleration.\n\n",
+                     ax.channel.column, u, ax.Tc_pos + ax.c, std::hypot(ax.Tc_pos_se, ax.c_se), u,
+                     -(ax.Tc_neg - ax.c), std::hypot(ax.Tc_neg_se, ax.c_se), ax.c, ax.c_se, ax.B, u, ax.J, u);
+  }
+  auto table = [&](const char* title, const std::vector<RunErrors>& list) {
+    if (list.empty()) return;
+    o << "\n## " << title << "\n\n| run | channel | zero model | rigid-body regression | nominal machine | twin |\n"
+      << "|---|---|---|---|---|---|\n";
+    for (const auto& e : list) {
+      std::vector<std::string> keys;
+      for (const auto& [k, v] : e.zero.nrms) keys.push_back(k);
+      for (const auto& k : keys) {
+        auto get = [&](const ChannelErrors& ce) {
+          const auto it = ce.nrms.find(k);
+          return it == ce.nrms.end() ? std::string("not computed") : fmt::format("{:.4g}", it->second);
+        };
+        o << "| " << e.run << " | " << k << " | " << get(e.zero) << " | " << get(e.regression) << " | "
+          << get(e.nominal) << " | " << get(e.calibrated) << " |\n";
+      }
+    }
+  };
+  table("Held-out errors (normalised RMS, lower is better)", r.fit_runs);
+  table("Other runs (not used for fitting)", r.validation_runs);
+  if (!r.skipped.empty()) {
+    o << "\n## Effects this log cannot show\n\n";
+    for (const auto& [e, why] : r.skipped) o << "- " << e << ": " << why << "\n";
+  }
+  return o.str();
+}
+
+}  // namespace twin::analysis
