@@ -968,6 +968,61 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
   return out;
 }
 
+RunErrors evaluate_machine_on_run(const MeasuredRun& run, const sim::MachineDefinition& machine, ReplayResult* replay,
+                                  std::vector<std::string>* notes) {
+  std::vector<std::string> local;
+  std::vector<std::string>& nt = notes ? *notes : local;
+  std::vector<Axis> axes;
+  for (Axis a : run.axes)
+    if (machine.axes[index(a)].present) axes.push_back(a);
+  if (axes.empty()) throw ConfigError(fmt::format("{}: machine {} defines none of the run's axes", run.dir.string(), machine.name));
+  const PositionRounding rounding = detect_rounding(run);
+  nt.push_back(rounding.describe());
+  const RunData rd = prepare_run(run, axes, rounding, 0.0, nt);
+  RunErrors re;
+  re.run = run.dir.string();
+  re.rows = rd.n;
+  std::vector<char> cmp;
+  ReplayResult rr = replay_segments(*rd.smooth, machine, rd.segments, rounding, &cmp);
+  for (std::size_t k = 0; k < cmp.size(); ++k) cmp[k] = static_cast<char>(cmp[k] && rd.interior[k]);
+  for (std::size_t k = 0; k < rd.n; ++k) re.rows_compared += rd.interior[k] ? 1 : 0;
+  PoolSet pools, zero;
+  add_errors(pools, run, rr, cmp, axes, 0, rd.n, true, nullptr);
+  add_errors(zero, run, rr, cmp, axes, 0, rd.n, true, nullptr);
+  for (auto& [k, p] : zero) p.res2 = p.meas2;
+  re.calibrated = errors_from(pools);
+  re.identified = re.calibrated;
+  re.zero = errors_from(zero);
+  if (replay) *replay = std::move(rr);
+  return re;
+}
+
+void write_data_trace(const std::filesystem::path& path, const MeasuredRun& run, const ReplayResult& rr) {
+  std::vector<std::string> names{"t_s"};
+  std::vector<const std::vector<double>*> cols{&rr.t_s};
+  for (Axis a : rr.axes) {
+    const std::size_t i = index(a);
+    if (rr.x_mm[i].empty()) continue;
+    const std::string n(axis_name(a));
+    names.insert(names.end(), {n + "_ref_mm", n + "_mm"});
+    cols.insert(cols.end(), {&rr.x_ref_mm[i], &rr.x_mm[i]});
+    const TorqueChannel ch = torque_channel(run, a);
+    if (ch.present()) {
+      names.push_back(ch.column);
+      cols.push_back(ch.unit == "A" ? &rr.i_A[i] : (ch.unit == "V" ? &rr.u_V[i] : &rr.Tm[i]));
+    }
+    names.push_back(n + "_vcmd_mm_s");
+    cols.push_back(&rr.vcmd_mm_per_s[i]);
+  }
+  io::TraceWriter w(path, names);
+  std::vector<double> row(cols.size());
+  for (std::size_t k = 0; k < rr.t_s.size(); ++k) {
+    for (std::size_t c = 0; c < cols.size(); ++c) row[c] = (*cols[c])[k];
+    w.write_row(row);
+  }
+  w.commit();
+}
+
 // ---------------------------------------------------------------------------
 // Reports
 

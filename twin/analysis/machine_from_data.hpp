@@ -160,6 +160,18 @@ ReplayResult replay_segments(const MeasuredRun& run, const sim::MachineDefinitio
                              const std::vector<Segment>& segments, const PositionRounding& rounding,
                              std::vector<char>* compared);
 
+/// The errors of `machine` (identified by calibrate_from_data, in the log's
+/// torque unit) on the whole of `run`, computed as calibrate's validation
+/// computes them: segments, rounding and reference rebuilt from the run, the
+/// replay kept in `replay`. Only `calibrated` and `zero` are filled.
+RunErrors evaluate_machine_on_run(const MeasuredRun& run, const sim::MachineDefinition& machine, ReplayResult* replay,
+                                  std::vector<std::string>* notes);
+
+/// trace.csv of a replay on a machine identified from data: per axis the
+/// reference, the twin's position (rounded as the log's), its torque in the
+/// run's channel and unit, and the velocity command.
+void write_data_trace(const std::filesystem::path& path, const MeasuredRun& run, const ReplayResult& replay);
+
 nlohmann::json data_calibration_report_json(const DataCalibration& r);
 std::string data_calibration_report_markdown(const DataCalibration& r, const std::string& runs);
 

@@ -146,7 +146,12 @@ sim::MachineDefinition machine_for_run(const MeasuredRun& run, const std::string
   }
   if (run.meta.encoder_resolution_mm) m.encoder_resolution_mm = *run.meta.encoder_resolution_mm;
   for (Axis a : run.axes)
-    if (!m.axes[index(a)].present)
+    if (!m.axes[index(a)].present && sim::machine_loop_law(m) == controller::LoopLaw::kCascade) {
+      // A machine identified from data leaves out the axes it could not identify.
+      if (notes)
+        notes->push_back(fmt::format("axis {}: machine {} does not define it (it was not identified); not replayed",
+                                     axis_name(a), m.name));
+    } else if (!m.axes[index(a)].present)
       throw ConfigError(fmt::format("{}: the run has axis {} but machine {} does not define it", run.dir.string(),
                                     axis_name(a), m.name));
   return m;

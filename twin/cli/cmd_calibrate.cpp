@@ -153,35 +153,6 @@ bool names_known_machine(const analysis::MeasuredRun& run) {
          std::filesystem::exists(io::resolve_machine_path(*run.meta.machine));
 }
 
-// trace.csv of the data path: the twin's positions (rounded as the log's) and
-// its torque in the log's channel and unit, with the velocity command.
-void write_data_trace(const std::filesystem::path& path, const analysis::MeasuredRun& run,
-                      const analysis::DataCalibration& r, const analysis::ReplayResult& rr) {
-  std::vector<std::string> names{"t_s"};
-  std::vector<const std::vector<double>*> cols{&rr.t_s};
-  for (const auto& ax : r.axis) {
-    const std::size_t i = index(ax.axis);
-    if (rr.x_mm[i].empty()) continue;
-    const std::string n(axis_name(ax.axis));
-    names.insert(names.end(), {n + "_ref_mm", n + "_mm"});
-    cols.insert(cols.end(), {&rr.x_ref_mm[i], &rr.x_mm[i]});
-    if (ax.channel.present()) {
-      names.push_back(ax.channel.column);
-      cols.push_back(ax.channel.unit == "A" ? &rr.i_A[i] : (ax.channel.unit == "V" ? &rr.u_V[i] : &rr.Tm[i]));
-    }
-    names.push_back(n + "_vcmd_mm_s");
-    cols.push_back(&rr.vcmd_mm_per_s[i]);
-  }
-  static_cast<void>(run);
-  io::TraceWriter w(path, names);
-  std::vector<double> row(cols.size());
-  for (std::size_t k = 0; k < rr.t_s.size(); ++k) {
-    for (std::size_t c = 0; c < cols.size(); ++c) row[c] = (*cols[c])[k];
-    w.write_row(row);
-  }
-  w.commit();
-}
-
 // Measured against model per axis (torque channel and following error), the
 // fitted and held-out parts marked; and the evidence of the friction model:
 // the channel against the commanded speed, measured and model.
@@ -305,8 +276,8 @@ void register_calibrate(CLI::App& app) {
                      "shipped " + std::string(io::kDefaultMachineName) + " standing in");
       const std::filesystem::path out(opt->out);
       io::ensure_directory(out);
-      write_data_trace(out / "trace_before.csv", fit_runs.front(), r, r.replay_before);
-      write_data_trace(out / "trace.csv", fit_runs.front(), r, r.replay_after);
+      analysis::write_data_trace(out / "trace_before.csv", fit_runs.front(), r.replay_before);
+      analysis::write_data_trace(out / "trace.csv", fit_runs.front(), r.replay_after);
       std::string runs_text;
       for (const auto& s : opt->runs) runs_text += (runs_text.empty() ? "" : " ") + s;
       io::write_file_atomic(out / "machine.yaml",

@@ -4,7 +4,10 @@
 #include <vector>
 
 #include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
 
+#include "twin/analysis/machine_from_data.hpp"
 #include "twin/analysis/replay.hpp"
 #include "twin/cli/commands.hpp"
 #include "twin/cli/common.hpp"
@@ -31,6 +34,28 @@ void register_replay(CLI::App& app) {
     std::vector<std::string> notes = run.notes;
     sim::MachineDefinition machine = analysis::machine_for_run(run, opt->machine, &notes);
     apply_sets(machine, opt->sets);
+    if (sim::machine_loop_law(machine) == controller::LoopLaw::kCascade) {
+      // A machine identified from data (twin calibrate's machine.yaml): replayed
+      // as calibrate validates it, segment by segment with the log's rounding,
+      // and its errors written beside the trace.
+      analysis::ReplayResult rr;
+      const analysis::RunErrors e = analysis::evaluate_machine_on_run(run, machine, &rr, &notes);
+      io::ensure_directory(opt->out);
+      const auto path = std::filesystem::path(opt->out) / "trace.csv";
+      analysis::write_data_trace(path, run, rr);
+      nlohmann::json j;
+      j["run"] = e.run;
+      j["rows_compared"] = e.rows_compared;
+      j["error"] = e.calibrated.to_json();
+      j["baseline"] = {{"zero", e.zero.to_json()}};
+      io::write_file_atomic(std::filesystem::path(opt->out) / "errors.json", j.dump(2) + "\n");
+      for (const auto& n : notes) std::fprintf(stderr, "twin replay: note: %s\n", n.c_str());
+      std::string figs;
+      for (const auto& [k, v] : e.calibrated.nrms) figs += fmt::format("{}{} {:.4g}", figs.empty() ? "" : ", ", k, v);
+      std::printf("replayed %zu samples of %s on machine %s (NRMS: %s); wrote %s\n", rr.t_s.size(), opt->run.c_str(),
+                  machine.name.c_str(), figs.c_str(), path.c_str());
+      return;
+    }
     analysis::ReplayResult r = analysis::replay_run(run, machine);
     io::ensure_directory(opt->out);
     const auto path = std::filesystem::path(opt->out) / "trace.csv";

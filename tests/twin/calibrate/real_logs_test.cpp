@@ -16,6 +16,7 @@
 
 #include "truth_sim.hpp"
 #include "twin/analysis/machine_from_data.hpp"
+#include "twin/io/atomic_file.hpp"
 #include "twin/io/machine_file.hpp"
 
 namespace twin::analysis {
@@ -183,6 +184,16 @@ TEST(RealLogs, CascadeAtOneKilohertzWithRawTorque) {
   // And its torque better than the rigid-body regression fitted on the same rows.
   ASSERT_TRUE(e.count("x_torque_raw"));
   EXPECT_LT(e.at("x_torque_raw"), r.validation_runs[0].regression.nrms.at("x_torque_raw"));
+  // The machine as written to machine.yaml and read back (what `twin replay
+  // OTHER --machine OUT/machine.yaml` loads) gives the same numbers.
+  const auto yaml_dir = work("cascade_yaml");
+  io::write_file_atomic(yaml_dir / "machine.yaml", io::machine_to_yaml(r.final_machine, "test"));
+  const sim::MachineDefinition back = io::load_machine(yaml_dir / "machine.yaml");
+  const RunErrors again = evaluate_machine_on_run(val, back, nullptr, nullptr);
+  for (const auto& [k, v] : e) {
+    ASSERT_TRUE(again.calibrated.nrms.count(k)) << k;
+    EXPECT_DOUBLE_EQ(again.calibrated.nrms.at(k), v) << k;
+  }
 }
 
 // 100 ms, positions to 3 significant figures, current only, stitched from
