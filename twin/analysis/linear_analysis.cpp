@@ -57,6 +57,10 @@ DiscreteLoopModel::DiscreteLoopModel(const LinearPlant& plant, const controller:
     : plant_(plant), gains_(gains), Ts_s_(gains.Ts_s) {
   plant_.validate(where);
   gains_.validate(where);
+  if (gains_.law != controller::LoopLaw::kFadal)
+    throw ConfigError(fmt::format("{}: the linear analysis and tuning cover the FADAL law; this machine closes the {} "
+                                  "law (run, replay and calibrate simulate it)",
+                                  where, controller::loop_law_name(gains_.law)));
   const double KaKt = plant.Ka_A_per_V * plant.Kt_Nm_per_A;
   Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
   M(0, 0) = -plant.B_kg_m2_per_s / plant.J_kg_m2;

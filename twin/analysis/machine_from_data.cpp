@@ -230,6 +230,10 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
   struct AxisCols {
     std::vector<const std::vector<double>*> cols;
     double limit{0.0};
+    /// A step this large that stands alone (4 times both neighbouring
+    /// steps) or turns the motion back at twice its speed is a stitch too:
+    /// the axis would have to start and stop, or reverse, within one sample.
+    double isolated{0.0};
   };
   std::vector<AxisCols> axes;
   double limit_max = 0.0;
@@ -246,6 +250,7 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
                                         std::abs((*c)[k + 1] - (*c)[k])}));
     ac.limit = v_max_mm_per_s ? 1.2 * *v_max_mm_per_s * run.sample_period_s
                               : std::max(3.0 * held, 5.0 * quantum_mm);
+    ac.isolated = v_max_mm_per_s ? ac.limit : std::max(1.5 * held, 5.0 * quantum_mm);
     limit_max = std::max(limit_max, ac.limit);
     axes.push_back(ac);
   }
@@ -258,7 +263,14 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
     for (const auto& ac : axes)
       for (const auto* c : ac.cols) {
         const double d = std::abs((*c)[k] - (*c)[k - 1]);
-        if (ac.limit > 0.0 && d > ac.limit) {
+        const double before = k >= 2 ? std::abs((*c)[k - 1] - (*c)[k - 2]) : 0.0;
+        const double after = k + 1 < n ? std::abs((*c)[k + 1] - (*c)[k]) : 0.0;
+        // Or turning back at once, faster than it came: the axis cannot
+        // reverse a motion and run at twice its speed the other way within one sample.
+        const double prev_step = k >= 2 ? (*c)[k - 1] - (*c)[k - 2] : 0.0;
+        const bool turns = prev_step * ((*c)[k] - (*c)[k - 1]) < 0.0 && d > 2.0 * before;
+        const bool alone = ac.isolated > 0.0 && d > ac.isolated && (d > 4.0 * std::max(before, after) || turns);
+        if ((ac.limit > 0.0 && d > ac.limit) || alone) {
           jump = true;
           step = std::max(step, d);
         }
@@ -278,7 +290,7 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
       if (s.end - s.begin < 5) short_rows += s.end - s.begin;
     *note = fmt::format(
         "stitched from {} segments: {} jumps of up to {:.4g} mm between two rows, beyond the {:.4g} mm a sample "
-        "allows on the axis that jumps, at most ({}); each segment is replayed from its own start{}",
+        "allows on the axis that jumps, at most ({}; or a step of over 1.5 times that held step standing alone (4 times its neighbours) or turning back at twice the speed it came); each segment is replayed from its own start{}",
         segs.size(), jumps, largest, limit,
         v_max_mm_per_s ? "the machine's rapid" : "3 times the largest step the axis holds over 3 samples",
         short_rows ? fmt::format(", {} rows in segments under 5 rows are not compared", short_rows) : "");

@@ -135,6 +135,22 @@ TEST(Cli, RunWritesTraceSummaryAndPlots) {
 // (twin run) stands in for the measurement. calibrate must finish, write its
 // report, model, trace and residual plots (for x, the axis it can compare),
 // and say in report.md what it assumed and what it could not do.
+// The cascade law from the command line: the shipped example machine runs the
+// default scenario (its P loop lags by v (1 - kff) / Kv: a contour error of
+// tens of microns where the FADAL PID keeps about two); tune, whose linear
+// analysis covers the FADAL law, says so in one line instead of tuning it.
+TEST(Cli, CascadeMachineRunsAndTuneSaysWhatItCovers) {
+  const auto out = work() / "out_cascade";
+  std::filesystem::remove_all(out);
+  const Result r = twin_cmd("run --machine fadal2216_cascade --no-plots -o " + out.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(std::filesystem::exists(out / "summary.json"));
+  const Result t = twin_cmd("tune --machine fadal2216_cascade -o " + (work() / "out_tune").string());
+  EXPECT_NE(t.exit_code, 0);
+  EXPECT_EQ(lines(t.err), 1) << t.err;
+  EXPECT_THAT(t.err, HasSubstr("cascade"));
+}
+
 TEST(Cli, CalibrateRunOfAnUnnamedMachineWithAnAxisUnmeasured) {
   const auto prog = file("partial/program.nc", "G21 G90 G64 P0.01\nG1 X10 Y5 F3000\nX0 Y0\nX10\nX0\nM30\n");
   static_cast<void>(prog);
