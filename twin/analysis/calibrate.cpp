@@ -140,13 +140,21 @@ AxisErrors axis_errors(const MeasuredRun& run, const ReplayResult& model, Axis a
   const auto& ref = run.trace.at(n + "_ref_mm");
   const auto* x = run.trace.find(n + "_mm");
   const std::size_t rows = std::min({ref.size(), model.x_mm[index(a)].size(), to});
-  if (x) {
+  const std::size_t held = rows > from ? rows - from : 0;
+  if (held < 3) {
+    e.err_not_computed = e.u_not_computed = fmt::format("{} held-out rows: too few to compare", held);
+  } else if (!x) {
+    e.err_not_computed = fmt::format("no {}_mm column: the tracking error is not measured", n);
+  }
+  if (x && held >= 3) {
     std::vector<double> em(rows), es(rows);
     for (std::size_t k = 0; k < rows; ++k) {
       em[k] = ref[k] - (*x)[k];
       es[k] = model.x_ref_mm[index(a)][k] - model.x_mm[index(a)][k];
     }
     e.err_mm = nrms(em, es, from, rows);
+    if (!(rms(em, from, rows) > 0.0))
+      e.err_not_computed = "the measured tracking error is zero on the held-out rows (the axis does not move there)";
     const auto window = std::max<std::size_t>(8, static_cast<std::size_t>(std::lround(0.02 / run.sample_period_s)));
     e.hunt = nrms(window_spread(em, from, rows, window), window_spread(es, from, rows, window), 0,
                   static_cast<std::size_t>(-1));
@@ -160,9 +168,13 @@ AxisErrors axis_errors(const MeasuredRun& run, const ReplayResult& model, Axis a
   if (meas) {
     e.has_u = u != nullptr;
     e.has_current = u == nullptr;
+  }
+  if (meas && held >= 3) {
     const auto lm = lowpass(std::span<const double>(meas->data(), rows), fc, fs);
     const auto ls = lowpass(std::span<const double>(mod.data(), rows), fc, fs);
     e.u = nrms(lm, ls, from, rows);
+    if (!(rms(lm, from, rows) > 0.0))
+      e.u_not_computed = fmt::format("the measured {} is zero on the held-out rows", u ? n + "_u_V" : n + "_i_A");
   }
   e.err_mm = reported_digits(e.err_mm);
   e.u = reported_digits(e.u);
@@ -401,18 +413,26 @@ nlohmann::json calibration_report_json(const CalibrationResult& r) {
                                   {"params", p},
                                   {"evidence", ad.candidate.evidence}});
   }
+  // An error that could not be computed is null, and the reason is said.
+  nlohmann::json why = nlohmann::json::object();
   auto errs = [&](const AxisArray<AxisErrors>& e) {
     nlohmann::json o = nlohmann::json::object();
+    auto put = [&](const std::string& key, double v, const std::string& reason) {
+      o[key] = reason.empty() ? nlohmann::json(v) : nlohmann::json(nullptr);
+      if (!reason.empty()) why[key] = reason;
+    };
     for (Axis a : r.axes) {
       const std::string n(axis_name(a));
-      o[n + "_err_mm"] = e[index(a)].err_mm;
-      if (e[index(a)].has_u) o[n + "_u_V"] = e[index(a)].u;
-      if (e[index(a)].has_current) o[n + "_i_A"] = e[index(a)].u;
+      const AxisErrors& ae = e[index(a)];
+      put(n + "_err_mm", ae.err_mm, ae.err_not_computed);
+      if (ae.has_u) put(n + "_u_V", ae.u, ae.u_not_computed);
+      if (ae.has_current) put(n + "_i_A", ae.u, ae.u_not_computed);
     }
     return o;
   };
   j["error_before"] = errs(r.error_before);
   j["error_after"] = errs(r.error_after);
+  if (!why.empty()) j["not_computed"] = why;
   j["validation"] = fmt::format(
       "held-out rows {} to {} (t = {:.3f} to {:.3f} s), the last {:.0f} % of the run; J, B, Tc and effect parameters "
       "were fitted on the rows before; u compared after a zero-phase 4th-order Butterworth low-pass at 200 Hz",

@@ -47,6 +47,9 @@ struct CalibrateOptions {
 struct AxisErrors {
   double err_mm{0.0};
   double u{0.0};
+  /// Why an error could not be computed (empty: it was): too few held-out
+  /// rows, no measured position, a measured signal that is zero throughout.
+  std::string err_not_computed, u_not_computed;
   /// Hunting statistic, blind to phase: NRMS of the spread of the tracking
   /// error in consecutive 20 ms windows (model against run).
   double hunt{0.0};

@@ -298,10 +298,17 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
   return segs;
 }
 
-std::vector<double> dequantize_reference(const std::vector<double>& t, const std::vector<double>& r,
+std::vector<double> dequantize_reference(const std::vector<double>& t, const std::vector<double>& r0,
                                          const PositionRounding& rounding) {
-  const std::size_t n = r.size();
-  if (n < 3 || rounding.kind == PositionRounding::Kind::kNone) return r;
+  const std::size_t n0 = r0.size();
+  if (n0 < 3 || rounding.kind == PositionRounding::Kind::kNone) return r0;
+  // A single row off by more than one quantum between two equal neighbours is
+  // a logging glitch, not a motion (the axis would move out and back within
+  // two samples): it takes its neighbours' value.
+  std::vector<double> r = r0;
+  for (std::size_t k = 1; k + 1 < n0; ++k)
+    if (r0[k - 1] == r0[k + 1] && std::abs(r0[k] - r0[k - 1]) > 1.5 * rounding.quantum_mm) r[k] = r0[k - 1];
+  const std::size_t n = n0;
   struct Run {
     std::size_t s, e;
     double v;

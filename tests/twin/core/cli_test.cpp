@@ -135,6 +135,29 @@ TEST(Cli, RunWritesTraceSummaryAndPlots) {
 // (twin run) stands in for the measurement. calibrate must finish, write its
 // report, model, trace and residual plots (for x, the axis it can compare),
 // and say in report.md what it assumed and what it could not do.
+// An axis that stands still over the held-out rows has a tracking error and
+// a u of zero there: their NRMS cannot be computed, and report.json says so
+// (null and the reason) instead of reporting a perfect 0.
+TEST(Cli, CalibrateSaysWhichErrorsItCouldNotCompute) {
+  const auto run = work() / "still_run";
+  std::filesystem::create_directories(run);
+  std::ofstream(run / "meta.json") << R"({"machine": "fadal2216", "axes": ["x"], "controller_period_s": 0.0001, )"
+                                      R"("sample_period_s": 0.0001, "encoder_resolution_mm": 0.001})";
+  {
+    std::ofstream t(run / "trace.csv");
+    t << "t_s,x_ref_mm,x_mm,x_u_V\n";
+    for (int k = 0; k < 400; ++k) t << k * 1e-4 << ",10,10,0\n";
+  }
+  const auto out = work() / "out_still";
+  std::filesystem::remove_all(out);
+  const Result r = twin_cmd("calibrate " + run.string() + " -o " + out.string() + " --no-plots");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string report = slurp(out / "report.json");
+  EXPECT_THAT(report, HasSubstr("\"x_err_mm\": null"));
+  EXPECT_THAT(report, HasSubstr("\"x_u_V\": null"));
+  EXPECT_THAT(report, HasSubstr("the axis does not move there"));
+}
+
 // The cascade law from the command line: the shipped example machine runs the
 // default scenario (its P loop lags by v (1 - kff) / Kv: a contour error of
 // tens of microns where the FADAL PID keeps about two); tune, whose linear
