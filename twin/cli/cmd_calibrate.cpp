@@ -319,7 +319,38 @@ void register_calibrate(CLI::App& app) {
                           io::machine_to_yaml(r.final_machine, fmt::format("calibrated by twin calibrate from {}: "
                                                                            "identified J, B, Tc and added effects",
                                                                            opt->runs.front())));
-    io::write_file_atomic(out / "report.json", analysis::calibration_report_json(r).dump(2) + "\n");
+    nlohmann::json report = analysis::calibration_report_json(r);
+    // Runs of another program on the same machine, never fitted: their errors
+    // with the machine the run names (nominal) and with the calibrated one.
+    report["validation_runs"] = nlohmann::json::array();
+    for (const auto& v : validate_runs) {
+      std::vector<std::string> vnotes;
+      const sim::MachineDefinition nominal = analysis::machine_for_run(v, opt->machine, &vnotes);
+      nlohmann::json entry;
+      entry["run"] = v.dir.string();
+      for (const auto& [key, m] : {std::pair<const char*, const sim::MachineDefinition*>{"error_nominal", &nominal},
+                                   {"error_calibrated", &r.final_machine}}) {
+        nlohmann::json e = nlohmann::json::object();
+        try {
+          const analysis::ReplayResult rr = analysis::replay_run(v, *m);
+          for (Axis a : v.axes) {
+            if (!m->axes[index(a)].present) continue;
+            const analysis::AxisErrors ae = analysis::axis_errors(v, rr, a, 0);
+            const std::string n(axis_name(a));
+            e[n + "_err_mm"] = ae.err_not_computed.empty() ? nlohmann::json(ae.err_mm) : nlohmann::json(nullptr);
+            if (ae.has_u || ae.has_current)
+              e[n + (ae.has_u ? "_u_V" : "_i_A")] =
+                  ae.u_not_computed.empty() ? nlohmann::json(ae.u) : nlohmann::json(nullptr);
+          }
+        } catch (const Error& err) {
+          e["not_computed"] = fmt::format("the replay failed: {}", err.what());
+        }
+        entry[key] = e;
+      }
+      report["validation_runs"].push_back(entry);
+    }
+    if (validate_runs.empty()) report.erase("validation_runs");
+    io::write_file_atomic(out / "report.json", report.dump(2) + "\n");
     if (!opt->no_plots) {
       try {
         make_plots(out, run, r);
