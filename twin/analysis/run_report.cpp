@@ -28,6 +28,8 @@ std::vector<std::string> run_trace_columns(const std::vector<Axis>& axes) {
   c.insert(c.end(), {"feed_programmed_mm_per_min", "feed_ref_mm_per_min", "feed_mm_per_min", "contour_error_mm",
                      "engagement_deg", "chip_mm", "spindle_torque_Nm", "cutting_power_W", "fx_avg_N", "fy_avg_N",
                      "fz_avg_N", "block"});
+  // The cascade law's velocity command (spec/measured-data.md); 0 under the FADAL law.
+  for (Axis a : axes) c.push_back(std::string(axis_name(a)) + "_vcmd_mm_s");
   return c;
 }
 
@@ -46,6 +48,7 @@ void fill_run_trace_row(const sim::Snapshot& s, const std::vector<Axis>& axes, s
   row.insert(row.end(), {s.feed_programmed_mm_per_min, s.feed_ref_mm_per_min, s.feed_real_mm_per_min,
                          s.contour_error_mm, s.engagement_deg, s.chip_mm, s.spindle_torque_Nm, s.cutting_power_W,
                          s.F_avg_N[0], s.F_avg_N[1], s.F_avg_N[2], static_cast<double>(s.block)});
+  for (Axis a : axes) row.push_back(s.axes[index(a)].vcmd_mm_per_s);
 }
 
 std::vector<CornerWindow> corner_windows(const controller::Trajectory& traj, const controller::Program& program) {
