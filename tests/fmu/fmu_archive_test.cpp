@@ -5,6 +5,7 @@
 // rules re-stated here, and tools that are not part of the project.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <filesystem>
@@ -149,6 +150,20 @@ TEST_P(FmuArchive, IndependentCheckerPasses) {
                          " --robustness --require-xsd --stop 0.02 --out " + csv,
                      out);
   EXPECT_EQ(rc, 0) << out;
+}
+
+TEST_P(FmuArchive, BinaryLoadsOnGlibc235) {
+  // objdump -T lists the glibc symbol versions the binary needs; the highest
+  // must be at most 2.35 (Ubuntu 22.04 LTS) and arc4random (2.36) is absent.
+  std::string out;
+  ASSERT_EQ(run("objdump -T " + fmu_->so_path(), out), 0) << out;
+  EXPECT_EQ(out.find("arc4random"), std::string::npos);
+  const std::regex ver(R"(GLIBC_2\.([0-9]+))");
+  int highest = 0;
+  for (auto it = std::sregex_iterator(out.begin(), out.end(), ver); it != std::sregex_iterator(); ++it)
+    highest = std::max(highest, std::stoi((*it)[1]));
+  EXPECT_GT(highest, 0);
+  EXPECT_LE(highest, 35) << "the binary needs GLIBC_2." << highest;
 }
 
 std::string archive_name(const ::testing::TestParamInfo<const char*>& p) {
