@@ -132,7 +132,9 @@ sim::Snapshot FmuInstance::current_row() const {
     sim::AxisSnapshot& x = s.axes[index(a)];
     x.x_true_mm = model_.start_mm[index(a)];
     x.x_mm = encoder.measure_mm(x.x_true_mm);
-    x.x_ref_mm = reference_mode_ == kModeExternal ? inputs_.x_ref_mm[index(a)] : model_.start_mm[index(a)];
+    // No loop has run: the reference is where the axis rests, in both modes
+    // (so no output depends on an input at the same communication point).
+    x.x_ref_mm = model_.start_mm[index(a)];
     x.e_mm = x.x_ref_mm - x.x_mm;
   }
   return s;
