@@ -109,7 +109,8 @@ std::string xml_template(const FmuModel& model) {
       "  generationTool=\"twin export-fmu\" variableNamingConvention=\"flat\" numberOfEventIndicators=\"0\">\n",
       xml_escape("MachineTwin " + model.scenario_name), kGuidPlaceholder,
       xml_escape(fmt::format("Digital twin of the {} milling machine (feed drives, position loops, interpolator, "
-                             "cutting process), scenario {}. Communication steps are whole multiples of Ts = {} s.",
+                             "cutting process), scenario {}. The controller samples its inputs every Ts = {} s; communication steps "
+                             "may end between its ticks.",
                              model.machine.name, model.scenario_name, Ts)));
   x += fmt::format(
       "  <CoSimulation modelIdentifier=\"{}\" needsExecutionTool=\"false\" "
@@ -132,8 +133,12 @@ std::string xml_template(const FmuModel& model) {
   x += "  </UnitDefinitions>\n";
   x += "  <LogCategories>\n"
        "    <Category name=\"logStatusError\" description=\"errors: the failing call, the value and the reason\"/>\n"
-       "    <Category name=\"logStatusWarning\" description=\"warnings\"/>\n"
-       "    <Category name=\"logCalls\" description=\"every fmi2 call that changes the state\"/>\n"
+       "    <Category name=\"logStatusFatal\" description=\"fatal errors: the model failed inside\"/>\n"
+       "    <Category name=\"logStatusDiscard\" description=\"calls refused without a change (too long a step, "
+       "a status not provided)\"/>\n"
+       "    <Category name=\"logStatusWarning\" description=\"warnings (inputs the mode ignores)\"/>\n"
+       "    <Category name=\"logCalls\" description=\"every fmi2 call that changes the state, with its "
+       "arguments\"/>\n"
        "  </LogCategories>\n";
   x += fmt::format("  <DefaultExperiment startTime=\"0\" stopTime=\"{}\" stepSize=\"{}\"/>\n",
                    on_tick_grid(stop_ticks, Ts), on_tick_grid(10, Ts));
