@@ -1,6 +1,9 @@
 // The exported FMI 2.0 Co-Simulation entry points. Each goes through
 // guarded(): no exception crosses the C boundary; a failed call logs one line
-// and moves the instance to the error state.
+// (category logStatusError, always) and moves the instance to the error
+// state; a refused call (fmi2Discard, category logStatusDiscard) changes
+// nothing; warnings go to logStatusWarning and calls that change the state to
+// logCalls, each when enabled (loggingOn, fmi2SetDebugLogging).
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -8,6 +11,8 @@
 #include <new>
 #include <sstream>
 #include <string>
+
+#include <fmt/format.h>
 
 #include "fmu/fmi2_api.h"
 #include "fmu/instance.hpp"
@@ -20,10 +25,35 @@ using twin::fmu::FmuInstance;
 using twin::fmu::FmuMode;
 using twin::fmu::SavedState;
 
+/// The log categories of modelDescription.xml, as bits.
+enum LogCategory : unsigned {
+  kLogCalls = 1u,
+  kLogStatusWarning = 2u,
+  kLogStatusDiscard = 4u,
+  kLogStatusError = 8u,
+  kLogStatusFatal = 16u,
+};
+struct CategoryName {
+  const char* name;
+  unsigned bit;
+};
+constexpr CategoryName kCategories[] = {{"logCalls", kLogCalls},
+                                        {"logStatusWarning", kLogStatusWarning},
+                                        {"logStatusDiscard", kLogStatusDiscard},
+                                        {"logStatusError", kLogStatusError},
+                                        {"logStatusFatal", kLogStatusFatal}};
+constexpr unsigned kAllCategories = kLogCalls | kLogStatusWarning | kLogStatusDiscard | kLogStatusError | kLogStatusFatal;
+
+const char* category_name(unsigned bit) {
+  for (const auto& c : kCategories)
+    if (c.bit == bit) return c.name;
+  return "logStatusError";
+}
+
 struct Component {
   std::string name;
   fmi2CallbackFunctions callbacks{};
-  bool logging{false};
+  unsigned categories{0};  ///< enabled log categories (loggingOn and fmi2SetDebugLogging)
   std::unique_ptr<FmuInstance> fmu;
 };
 
@@ -33,8 +63,28 @@ void log_message(const fmi2CallbackFunctions* cb, const char* instance, fmi2Stat
   cb->logger(cb->componentEnvironment, instance, status, category, "%s", message.c_str());
 }
 
-void log_error(Component& c, fmi2Status status, const char* function, const char* what) {
-  log_message(&c.callbacks, c.name.c_str(), status, "logStatusError", std::string(function) + ": " + what);
+/// Errors and fatal errors are always logged (a failed call without its
+/// reason helps nobody); the other categories only when enabled.
+void emit(const Component& c, fmi2Status status, unsigned category, const std::string& message) {
+  const bool always = category == kLogStatusError || category == kLogStatusFatal;
+  if (!always && (c.categories & category) == 0) return;
+  log_message(&c.callbacks, c.name.c_str(), status, category_name(category), message);
+}
+
+/// "function: what", without repeating a "function: " that `what` already starts with.
+std::string with_function(const char* function, const std::string& what) {
+  const std::string prefix = std::string(function) + ": ";
+  return what.rfind(prefix, 0) == 0 ? what : prefix + what;
+}
+
+void log_error(const Component& c, fmi2Status status, const char* function, const std::string& what) {
+  emit(c, status, status == fmi2Fatal ? kLogStatusFatal : kLogStatusError, with_function(function, what));
+}
+
+/// A call that changed the state, for category logCalls.
+void log_call(const Component& c, const char* function, const std::string& what) {
+  if ((c.categories & kLogCalls) == 0) return;
+  emit(c, fmi2OK, kLogCalls, with_function(function, what));
 }
 
 template <class F>
@@ -42,7 +92,16 @@ fmi2Status guarded(fmi2Component handle, const char* function, F&& f) noexcept {
   auto* c = static_cast<Component*>(handle);
   if (c == nullptr) return fmi2Error;
   try {
-    return f(*c);
+    fmi2Status status = f(*c);
+    for (const std::string& w : c->fmu->take_warnings()) {
+      emit(*c, fmi2Warning, kLogStatusWarning, with_function(function, w));
+      if (status == fmi2OK) status = fmi2Warning;
+    }
+    return status;
+  } catch (const twin::fmu::Discard& e) {
+    c->fmu->take_warnings();
+    emit(*c, fmi2Discard, kLogStatusDiscard, with_function(function, e.what()));
+    return fmi2Discard;
   } catch (const twin::InternalError& e) {
     c->fmu->fail();
     log_error(*c, fmi2Fatal, function, e.what());
@@ -91,20 +150,29 @@ template <class T, class Get>
 fmi2Status get_values(fmi2Component c, const char* function, const fmi2ValueReference vr[], size_t nvr, T value[],
                       Get get) {
   return guarded(c, function, [&](Component& comp) {
-    comp.fmu->require(function, {FmuMode::kInitialization, FmuMode::kStepMode, FmuMode::kTerminated, FmuMode::kError});
-    if (nvr > 0 && (vr == nullptr || value == nullptr)) throw twin::ConfigError(std::string(function) + ": null array");
+    comp.fmu->require({FmuMode::kInitialization, FmuMode::kStepMode, FmuMode::kTerminated, FmuMode::kError});
+    if (nvr > 0 && (vr == nullptr || value == nullptr)) throw twin::ConfigError("null array");
     for (size_t i = 0; i < nvr; ++i) value[i] = get(*comp.fmu, vr[i]);
     return fmi2OK;
   });
 }
 
+std::string value_text(double v) { return fmt::format("{}", v); }
+std::string value_text(int v) { return std::to_string(v); }
+
 template <class T, class Set>
 fmi2Status set_values(fmi2Component c, const char* function, const fmi2ValueReference vr[], size_t nvr, const T value[],
                       Set set) {
   return guarded(c, function, [&](Component& comp) {
-    comp.fmu->require(function, {FmuMode::kInstantiated, FmuMode::kInitialization, FmuMode::kStepMode});
-    if (nvr > 0 && (vr == nullptr || value == nullptr)) throw twin::ConfigError(std::string(function) + ": null array");
+    comp.fmu->require({FmuMode::kInstantiated, FmuMode::kInitialization, FmuMode::kStepMode});
+    if (nvr > 0 && (vr == nullptr || value == nullptr)) throw twin::ConfigError("null array");
     for (size_t i = 0; i < nvr; ++i) set(*comp.fmu, vr[i], value[i]);
+    if ((comp.categories & kLogCalls) != 0 && nvr > 0) {
+      std::string what;
+      for (size_t i = 0; i < nvr; ++i)
+        what += fmt::format("{}{} = {}", i > 0 ? ", " : "", comp.fmu->variables()[vr[i]].name, value_text(value[i]));
+      log_call(comp, function, what);
+    }
     return fmi2OK;
   });
 }
@@ -113,16 +181,36 @@ fmi2Status set_values(fmi2Component c, const char* function, const fmi2ValueRefe
 /// the instance stays usable.
 fmi2Status unsupported(fmi2Component c, const char* function, const char* why) noexcept {
   auto* comp = static_cast<Component*>(c);
-  if (comp != nullptr) log_error(*comp, fmi2Error, function, (std::string("not supported: ") + why).c_str());
+  if (comp != nullptr) log_error(*comp, fmi2Error, function, std::string("not supported: ") + why);
   return fmi2Error;
 }
 
-std::size_t num_parameters(const FmuInstance& f) {
-  std::size_t n = 0;
-  for (const auto& v : f.variables())
-    if (v.kind == twin::fmu::VarKind::kMachineParam || v.kind == twin::fmu::VarKind::kAxisParam) ++n;
-  return n;
+const char* status_kind_name(fmi2StatusKind s) {
+  switch (s) {
+    case fmi2DoStepStatus: return "fmi2DoStepStatus";
+    case fmi2PendingStatus: return "fmi2PendingStatus";
+    case fmi2LastSuccessfulTime: return "fmi2LastSuccessfulTime";
+    case fmi2Terminated: return "fmi2Terminated";
+  }
+  return "an unknown status kind";
 }
+
+/// fmi2Get*Status for a kind the FMU does not provide: fmi2Discard (FMI
+/// 2.0.2, section 4.2.3), logged in logStatusDiscard; nothing changes.
+fmi2Status status_not_provided(fmi2Component c, const char* function, fmi2StatusKind s, const char* provided) {
+  return guarded(c, function, [&](Component&) -> fmi2Status {
+    throw twin::fmu::Discard(fmt::format("{} is not provided ({})", status_kind_name(s), provided));
+  });
+}
+
+const SavedState& saved_state(fmi2FMUstate state) {
+  if (state == nullptr) throw twin::ConfigError("FMUstate is null");
+  const auto* s = static_cast<const SavedState*>(state);
+  if (s->magic != twin::fmu::kStateMagic) throw twin::ConfigError("FMUstate was not made by this FMU");
+  return *s;
+}
+
+std::string time_text(double t) { return fmt::format("{:.17g}", t); }
 
 }  // namespace
 
@@ -131,9 +219,30 @@ extern "C" {
 const char* fmi2GetTypesPlatform(void) { return "default"; }
 const char* fmi2GetVersion(void) { return "2.0"; }
 
-fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t, const fmi2String[]) {
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                               const fmi2String categories[]) {
   return guarded(c, "fmi2SetDebugLogging", [&](Component& comp) {
-    comp.logging = loggingOn != fmi2False;
+    const bool on = loggingOn != fmi2False;
+    unsigned bits = 0;
+    if (nCategories == 0) {
+      bits = kAllCategories;
+    } else {
+      if (categories == nullptr) throw twin::ConfigError(fmt::format("nCategories = {} with a null array", nCategories));
+      for (size_t i = 0; i < nCategories; ++i) {
+        const char* name = categories[i];
+        unsigned bit = 0;
+        for (const auto& cat : kCategories)
+          if (name != nullptr && std::strcmp(name, cat.name) == 0) bit = cat.bit;
+        if (bit == 0)
+          throw twin::ConfigError(fmt::format(
+              "category '{}' is not one of the FMU's (logCalls, logStatusWarning, logStatusDiscard, logStatusError, "
+              "logStatusFatal)",
+              name != nullptr ? name : "(null)"));
+        bits |= bit;
+      }
+    }
+    comp.categories = on ? (comp.categories | bits) : (comp.categories & ~bits);
+    log_call(comp, "fmi2SetDebugLogging", fmt::format("loggingOn = {}, {} categories", on, nCategories));
     return fmi2OK;
   });
 }
@@ -143,27 +252,29 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                               fmi2Boolean loggingOn) {
   const char* name = instanceName != nullptr ? instanceName : "";
   try {
-    if (instanceName == nullptr || instanceName[0] == '\0')
-      throw twin::ConfigError("fmi2Instantiate: instanceName is empty");
+    if (instanceName == nullptr || instanceName[0] == '\0') throw twin::ConfigError("instanceName is empty");
     if (fmuType != fmi2CoSimulation)
-      throw twin::ConfigError("fmi2Instantiate: fmuType " + std::to_string(static_cast<int>(fmuType)) +
+      throw twin::ConfigError("fmuType " + std::to_string(static_cast<int>(fmuType)) +
                               " is not fmi2CoSimulation (the FMU is Co-Simulation only)");
-    if (fmuGUID == nullptr) throw twin::ConfigError("fmi2Instantiate: fmuGUID is null");
-    if (fmuResourceLocation == nullptr) throw twin::ConfigError("fmi2Instantiate: fmuResourceLocation is null");
+    if (fmuGUID == nullptr) throw twin::ConfigError("fmuGUID is null");
+    if (fmuResourceLocation == nullptr) throw twin::ConfigError("fmuResourceLocation is null");
     const std::string model_path = path_from_uri(fmuResourceLocation) + "/model.json";
     twin::fmu::FmuModel model = twin::fmu::model_from_json(read_text(model_path), model_path);
-    const std::string guid = twin::fmu::model_guid(model);
+    std::string guid = twin::fmu::model_guid(model);
     if (guid != fmuGUID)
-      throw twin::ConfigError("fmi2Instantiate: GUID " + std::string(fmuGUID) + " does not match this FMU's " + guid +
+      throw twin::ConfigError("GUID " + std::string(fmuGUID) + " does not match this FMU's " + guid +
                               " (modelDescription.xml and binary or resources/model.json differ)");
     auto comp = std::make_unique<Component>();
     comp->name = name;
     if (functions != nullptr) comp->callbacks = *functions;
-    comp->logging = loggingOn != fmi2False;
-    comp->fmu = std::make_unique<FmuInstance>(name, std::move(model));
+    comp->categories = loggingOn != fmi2False ? kAllCategories : 0u;
+    comp->fmu = std::make_unique<FmuInstance>(name, std::move(model), std::move(guid));
+    log_call(*comp, "fmi2Instantiate",
+             fmt::format("scenario {}, GUID {}, resources {}", comp->fmu->model().scenario_name, comp->fmu->guid(),
+                         fmuResourceLocation));
     return comp.release();
   } catch (const std::exception& e) {
-    log_message(functions, name, fmi2Error, "logStatusError", e.what());
+    log_message(functions, name, fmi2Error, "logStatusError", with_function("fmi2Instantiate", e.what()));
   } catch (...) {
     log_message(functions, name, fmi2Error, "logStatusError", "fmi2Instantiate: unknown exception");
   }
@@ -172,9 +283,13 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
 
 void fmi2FreeInstance(fmi2Component c) { delete static_cast<Component*>(c); }
 
-fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean, fmi2Real, fmi2Real startTime, fmi2Boolean, fmi2Real) {
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean, fmi2Real, fmi2Real startTime, fmi2Boolean stopTimeDefined,
+                               fmi2Real stopTime) {
   return guarded(c, "fmi2SetupExperiment", [&](Component& comp) {
-    comp.fmu->setup_experiment(startTime);
+    comp.fmu->setup_experiment(startTime, stopTimeDefined != fmi2False, stopTime);
+    log_call(comp, "fmi2SetupExperiment",
+             fmt::format("startTime = {} s, {}", time_text(startTime),
+                         stopTimeDefined != fmi2False ? "stopTime = " + time_text(stopTime) + " s" : "no stop time"));
     return fmi2OK;
   });
 }
@@ -182,6 +297,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean, fmi2Real, fmi2Real 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
   return guarded(c, "fmi2EnterInitializationMode", [&](Component& comp) {
     comp.fmu->enter_initialization();
+    log_call(comp, "fmi2EnterInitializationMode", "initialization mode");
     return fmi2OK;
   });
 }
@@ -189,6 +305,7 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
   return guarded(c, "fmi2ExitInitializationMode", [&](Component& comp) {
     comp.fmu->exit_initialization();
+    log_call(comp, "fmi2ExitInitializationMode", "step mode");
     return fmi2OK;
   });
 }
@@ -196,6 +313,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
 fmi2Status fmi2Terminate(fmi2Component c) {
   return guarded(c, "fmi2Terminate", [&](Component& comp) {
     comp.fmu->terminate();
+    log_call(comp, "fmi2Terminate", fmt::format("terminated at t = {} s", time_text(comp.fmu->time_s())));
     return fmi2OK;
   });
 }
@@ -203,6 +321,7 @@ fmi2Status fmi2Terminate(fmi2Component c) {
 fmi2Status fmi2Reset(fmi2Component c) {
   return guarded(c, "fmi2Reset", [&](Component& comp) {
     comp.fmu->reset();
+    log_call(comp, "fmi2Reset", "instantiated");
     return fmi2OK;
   });
 }
@@ -221,7 +340,7 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 }
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
   return get_values(c, "fmi2GetString", vr, nvr, value, [](FmuInstance& f, fmi2ValueReference r) -> fmi2String {
-    throw twin::ConfigError("fmi2GetString: unknown valueReference " + std::to_string(r) + " (the FMU has no String variables; " +
+    throw twin::ConfigError("unknown valueReference " + std::to_string(r) + " (the FMU has no String variables; " +
                             std::to_string(f.variables().size()) + " variables)");
   });
 }
@@ -239,17 +358,24 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
                     [](FmuInstance& f, fmi2ValueReference r, fmi2Boolean v) { f.set_boolean(r, v != fmi2False); });
 }
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
-  return set_values(c, "fmi2SetString", vr, nvr, value, [](FmuInstance& f, fmi2ValueReference r, fmi2String) {
-    throw twin::ConfigError("fmi2SetString: unknown valueReference " + std::to_string(r) + " (the FMU has no String variables; " +
-                            std::to_string(f.variables().size()) + " variables)");
+  return guarded(c, "fmi2SetString", [&](Component& comp) -> fmi2Status {
+    comp.fmu->require({FmuMode::kInstantiated, FmuMode::kInitialization, FmuMode::kStepMode});
+    if (nvr > 0 && (vr == nullptr || value == nullptr)) throw twin::ConfigError("null array");
+    if (nvr == 0) return fmi2OK;
+    throw twin::ConfigError("unknown valueReference " + std::to_string(vr[0]) +
+                            " (the FMU has no String variables; " + std::to_string(comp.fmu->variables().size()) +
+                            " variables)");
   });
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) {
   return guarded(c, "fmi2GetFMUstate", [&](Component& comp) {
-    if (state == nullptr) throw twin::ConfigError("fmi2GetFMUstate: FMUstate pointer is null");
+    if (state == nullptr) throw twin::ConfigError("FMUstate pointer is null");
     auto saved = std::make_unique<SavedState>(comp.fmu->save());
-    if (*state != nullptr) delete static_cast<SavedState*>(*state);
+    if (*state != nullptr) {
+      saved_state(*state);  // refuse to overwrite what is not ours
+      delete static_cast<SavedState*>(*state);
+    }
     *state = saved.release();
     return fmi2OK;
   });
@@ -257,15 +383,16 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) {
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
   return guarded(c, "fmi2SetFMUstate", [&](Component& comp) {
-    if (state == nullptr) throw twin::ConfigError("fmi2SetFMUstate: FMUstate is null");
-    comp.fmu->restore(*static_cast<const SavedState*>(state));
+    comp.fmu->restore(saved_state(state));
+    log_call(comp, "fmi2SetFMUstate", fmt::format("restored t = {} s", time_text(comp.fmu->time_s())));
     return fmi2OK;
   });
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state) {
   return guarded(c, "fmi2FreeFMUstate", [&](Component&) {
-    if (state != nullptr) {
+    if (state != nullptr && *state != nullptr) {
+      saved_state(*state);
       delete static_cast<SavedState*>(*state);
       *state = nullptr;
     }
@@ -275,19 +402,18 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state) {
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t* size) {
   return guarded(c, "fmi2SerializedFMUstateSize", [&](Component&) {
-    if (state == nullptr || size == nullptr) throw twin::ConfigError("fmi2SerializedFMUstateSize: null argument");
-    *size = twin::fmu::serialize_state(*static_cast<const SavedState*>(state)).size();
+    if (size == nullptr) throw twin::ConfigError("size pointer is null");
+    *size = twin::fmu::serialize_state(saved_state(state)).size();
     return fmi2OK;
   });
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
   return guarded(c, "fmi2SerializeFMUstate", [&](Component&) {
-    if (state == nullptr || bytes == nullptr) throw twin::ConfigError("fmi2SerializeFMUstate: null argument");
-    const std::vector<char> b = twin::fmu::serialize_state(*static_cast<const SavedState*>(state));
+    if (bytes == nullptr) throw twin::ConfigError("byte array is null");
+    const std::vector<char> b = twin::fmu::serialize_state(saved_state(state));
     if (b.size() != size)
-      throw twin::ConfigError("fmi2SerializeFMUstate: buffer of " + std::to_string(size) + " bytes, the state has " +
-                              std::to_string(b.size()));
+      throw twin::ConfigError("buffer of " + std::to_string(size) + " bytes, the state has " + std::to_string(b.size()));
     std::memcpy(bytes, b.data(), b.size());
     return fmi2OK;
   });
@@ -295,12 +421,13 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte b
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate* state) {
   return guarded(c, "fmi2DeSerializeFMUstate", [&](Component& comp) {
-    if (bytes == nullptr || state == nullptr) throw twin::ConfigError("fmi2DeSerializeFMUstate: null argument");
+    if (bytes == nullptr || state == nullptr) throw twin::ConfigError("null argument");
     auto s = std::make_unique<SavedState>(twin::fmu::deserialize_state(bytes, size));
-    if (s->parameters.size() != num_parameters(*comp.fmu))
-      throw twin::ConfigError("fmi2DeSerializeFMUstate: the state has " + std::to_string(s->parameters.size()) +
-                              " parameters, this FMU " + std::to_string(num_parameters(*comp.fmu)));
-    if (*state != nullptr) delete static_cast<SavedState*>(*state);
+    comp.fmu->check_state(*s);
+    if (*state != nullptr) {
+      saved_state(*state);
+      delete static_cast<SavedState*>(*state);
+    }
     *state = s.release();
     return fmi2OK;
   });
@@ -324,7 +451,10 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean) {
   return guarded(c, "fmi2DoStep", [&](Component& comp) {
-    comp.fmu->do_step(currentCommunicationPoint, communicationStepSize);
+    const std::int64_t n = comp.fmu->do_step(currentCommunicationPoint, communicationStepSize);
+    log_call(comp, "fmi2DoStep",
+             fmt::format("t = {} s, h = {} s: {} ticks run, {} in all", time_text(currentCommunicationPoint),
+                         time_text(communicationStepSize), n, comp.fmu->ticks()));
     return fmi2OK;
   });
 }
@@ -333,34 +463,34 @@ fmi2Status fmi2CancelStep(fmi2Component c) {
   return unsupported(c, "fmi2CancelStep", "fmi2DoStep never returns fmi2Pending");
 }
 
-fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind, fmi2Status*) {
-  return unsupported(c, "fmi2GetStatus", "fmi2DoStep is synchronous and never returns fmi2Pending");
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status*) {
+  return status_not_provided(c, "fmi2GetStatus", s, "fmi2DoStep is synchronous and never returns fmi2Pending");
 }
 
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real* value) {
+  if (s != fmi2LastSuccessfulTime) return status_not_provided(c, "fmi2GetRealStatus", s, "only fmi2LastSuccessfulTime is");
   return guarded(c, "fmi2GetRealStatus", [&](Component& comp) {
-    if (s != fmi2LastSuccessfulTime || value == nullptr)
-      throw twin::ConfigError("fmi2GetRealStatus: only fmi2LastSuccessfulTime is available");
+    if (value == nullptr) throw twin::ConfigError("value pointer is null");
     *value = comp.fmu->time_s();
     return fmi2OK;
   });
 }
 
-fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind, fmi2Integer*) {
-  return unsupported(c, "fmi2GetIntegerStatus", "the FMU has no integer status");
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer*) {
+  return status_not_provided(c, "fmi2GetIntegerStatus", s, "the FMU has no integer status");
 }
 
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean* value) {
+  if (s != fmi2Terminated) return status_not_provided(c, "fmi2GetBooleanStatus", s, "only fmi2Terminated is");
   return guarded(c, "fmi2GetBooleanStatus", [&](Component&) {
-    if (s != fmi2Terminated || value == nullptr)
-      throw twin::ConfigError("fmi2GetBooleanStatus: only fmi2Terminated is available");
+    if (value == nullptr) throw twin::ConfigError("value pointer is null");
     *value = fmi2False;
     return fmi2OK;
   });
 }
 
-fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind, fmi2String*) {
-  return unsupported(c, "fmi2GetStringStatus", "the FMU has no string status");
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String*) {
+  return status_not_provided(c, "fmi2GetStringStatus", s, "the FMU has no string status");
 }
 
 }  // extern "C"

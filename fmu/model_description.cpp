@@ -1,12 +1,16 @@
 #include "fmu/model_description.hpp"
 
+#include <cmath>
 #include <cstdint>
 #include <set>
+#include <string>
+#include <utility>
 #include <string_view>
 
 #include <fmt/format.h>
 
 #include "fmu/variables.hpp"
+#include "twin/core/error.hpp"
 
 namespace twin::fmu {
 namespace {
@@ -56,6 +60,25 @@ const char* variability_name(Variability v) {
 
 std::string real(double v) { return fmt::format("{}", v); }
 
+/// n Ts as text that reads back as n whole ticks: the shortest of 12
+/// significant digits ("8.802" for 88020 x 1e-4) and the exact double.
+std::string on_tick_grid(std::int64_t n, double Ts) {
+  const double t = static_cast<double>(n) * Ts;
+  const std::string short_text = fmt::format("{:.12g}", t);
+  const double back = std::stod(short_text);
+  return std::abs(back / Ts - static_cast<double>(n)) < 1e-6 ? short_text : real(t);
+}
+
+/// The text of a BaseUnit element for `u` (SI exponents and factor).
+std::string base_unit(const UnitDefinition& u) {
+  std::string a;
+  const std::pair<const char*, int> exps[] = {{"kg", u.kg}, {"m", u.m}, {"s", u.s}, {"A", u.A}, {"rad", u.rad}};
+  for (const auto& [name, e] : exps)
+    if (e != 0) a += fmt::format(" {}=\"{}\"", name, e);
+  if (u.factor != 1.0) a += fmt::format(" factor=\"{}\"", u.factor);
+  return "<BaseUnit" + a + "/>";
+}
+
 std::string start_attribute(const Variable& v, const FmuModel& model) {
   switch (v.kind) {
     case VarKind::kMode: return fmt::format(" start=\"{}\"", model.has_program() ? kModeProgram : kModeExternal);
@@ -73,7 +96,11 @@ std::string start_attribute(const Variable& v, const FmuModel& model) {
 std::string xml_template(const FmuModel& model) {
   const std::vector<Variable> vars = make_variables(model.machine);
   const double Ts = model.machine.Ts_s;
-  const double stop = model.has_program() ? model.program_duration_s() : 1.0;
+  // The stop time on the tick grid: the end of the program plus settle_s,
+  // rounded up to a whole tick, so that steps of any whole number of ticks
+  // reach it exactly.
+  const double stop_s = model.has_program() ? model.program_duration_s() : 1.0;
+  const auto stop_ticks = static_cast<std::int64_t>(std::ceil(stop_s / Ts - 1e-9));
   std::string x;
   x += "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n";
   x += fmt::format(
@@ -82,7 +109,8 @@ std::string xml_template(const FmuModel& model) {
       "  generationTool=\"twin export-fmu\" variableNamingConvention=\"flat\" numberOfEventIndicators=\"0\">\n",
       xml_escape("MachineTwin " + model.scenario_name), kGuidPlaceholder,
       xml_escape(fmt::format("Digital twin of the {} milling machine (feed drives, position loops, interpolator, "
-                             "cutting process), scenario {}. Communication steps are whole multiples of Ts = {} s.",
+                             "cutting process), scenario {}. The controller samples its inputs every Ts = {} s; communication steps "
+                             "may end between its ticks.",
                              model.machine.name, model.scenario_name, Ts)));
   x += fmt::format(
       "  <CoSimulation modelIdentifier=\"{}\" needsExecutionTool=\"false\" "
@@ -95,15 +123,25 @@ std::string xml_template(const FmuModel& model) {
   for (const auto& v : vars)
     if (!v.unit.empty()) units.insert(v.unit);
   x += "  <UnitDefinitions>\n";
-  for (const auto& u : units) x += fmt::format("    <Unit name=\"{}\"/>\n", xml_escape(u));
+  for (const auto& u : units) {
+    const UnitDefinition* def = nullptr;
+    for (const auto& d : unit_definitions())
+      if (d.name == u) def = &d;
+    if (def == nullptr) throw InternalError(fmt::format("fmu: unit '{}' has no definition", u));
+    x += fmt::format("    <Unit name=\"{}\">{}</Unit>\n", xml_escape(u), base_unit(*def));
+  }
   x += "  </UnitDefinitions>\n";
   x += "  <LogCategories>\n"
        "    <Category name=\"logStatusError\" description=\"errors: the failing call, the value and the reason\"/>\n"
-       "    <Category name=\"logStatusWarning\" description=\"warnings\"/>\n"
-       "    <Category name=\"logCalls\" description=\"every fmi2 call that changes the state\"/>\n"
+       "    <Category name=\"logStatusFatal\" description=\"fatal errors: the model failed inside\"/>\n"
+       "    <Category name=\"logStatusDiscard\" description=\"calls refused without a change (too long a step, "
+       "a status not provided)\"/>\n"
+       "    <Category name=\"logStatusWarning\" description=\"warnings (inputs the mode ignores)\"/>\n"
+       "    <Category name=\"logCalls\" description=\"every fmi2 call that changes the state, with its "
+       "arguments\"/>\n"
        "  </LogCategories>\n";
-  x += fmt::format("  <DefaultExperiment startTime=\"0\" stopTime=\"{}\" stepSize=\"{}\"/>\n", real(stop),
-                   real(10.0 * Ts));
+  x += fmt::format("  <DefaultExperiment startTime=\"0\" stopTime=\"{}\" stepSize=\"{}\"/>\n",
+                   on_tick_grid(stop_ticks, Ts), on_tick_grid(10, Ts));
   x += "  <ModelVariables>\n";
   std::vector<std::size_t> outputs;
   for (std::size_t i = 0; i < vars.size(); ++i) {
@@ -129,10 +167,24 @@ std::string xml_template(const FmuModel& model) {
                      element);
   }
   x += "  </ModelVariables>\n";
+  // Dependencies. After a step the outputs are the row of a tick computed in
+  // that step, from the inputs set before it: no output depends on an input
+  // set at the same communication point (no direct feedthrough), so each
+  // lists none. Before the first step (initialization) the outputs are the
+  // axes at rest at start_mm: the measured position and the tracking error
+  // depend on the encoder resolution, the others on nothing.
+  std::size_t encoder_index = 0;
+  for (std::size_t i = 0; i < vars.size(); ++i)
+    if (vars[i].kind == VarKind::kMachineParam && vars[i].name == "encoder_resolution") encoder_index = i + 1;
+  if (encoder_index == 0) throw InternalError("fmu: no encoder_resolution parameter");
+  auto initial_dependencies = [&](const Variable& v) {
+    return v.measured ? std::to_string(encoder_index) : std::string();
+  };
   x += "  <ModelStructure>\n    <Outputs>\n";
-  for (std::size_t idx : outputs) x += fmt::format("      <Unknown index=\"{}\"/>\n", idx);
+  for (std::size_t idx : outputs) x += fmt::format("      <Unknown index=\"{}\" dependencies=\"\"/>\n", idx);
   x += "    </Outputs>\n    <InitialUnknowns>\n";
-  for (std::size_t idx : outputs) x += fmt::format("      <Unknown index=\"{}\"/>\n", idx);
+  for (std::size_t idx : outputs)
+    x += fmt::format("      <Unknown index=\"{}\" dependencies=\"{}\"/>\n", idx, initial_dependencies(vars[idx - 1]));
   x += "    </InitialUnknowns>\n  </ModelStructure>\n";
   x += "</fmiModelDescription>\n";
   return x;

@@ -3,6 +3,11 @@
 #include <array>
 #include <string_view>
 
+#include <fmt/format.h>
+
+#include "twin/core/error.hpp"
+#include "twin/core/units.hpp"
+
 namespace twin::fmu {
 namespace {
 
@@ -11,6 +16,7 @@ struct AxisOutputSpec {
   const char* unit;
   const char* doc;
   double (*get)(const sim::AxisSnapshot&);
+  bool measured{false};  ///< computed from the encoder reading
 };
 struct OutputSpec {
   const char* name;
@@ -20,11 +26,11 @@ struct OutputSpec {
 };
 
 const std::array<AxisOutputSpec, 10> kAxisOutputs{{
-    {"_mm", "mm", "measured (encoder) position", [](const sim::AxisSnapshot& s) { return s.x_mm; }},
+    {"_mm", "mm", "measured (encoder) position", [](const sim::AxisSnapshot& s) { return s.x_mm; }, true},
     {"_ref_out_mm", "mm", "reference the position loop followed", [](const sim::AxisSnapshot& s) { return s.x_ref_mm; }},
     {"_u_V", "V", "amplifier command", [](const sim::AxisSnapshot& s) { return s.u_V; }},
     {"_i_A", "A", "motor current", [](const sim::AxisSnapshot& s) { return s.i_A; }},
-    {"_err_mm", "mm", "tracking error reference - measured", [](const sim::AxisSnapshot& s) { return s.e_mm; }},
+    {"_err_mm", "mm", "tracking error reference - measured", [](const sim::AxisSnapshot& s) { return s.e_mm; }, true},
     {"_true_mm", "mm", "true tool position on the axis", [](const sim::AxisSnapshot& s) { return s.x_true_mm; }},
     {"_v_mm_per_s", "mm/s", "true axis speed", [](const sim::AxisSnapshot& s) { return s.v_mm_per_s; }},
     {"_Tm_Nm", "N m", "motor torque", [](const sim::AxisSnapshot& s) { return s.Tm_Nm; }},
@@ -50,7 +56,63 @@ const std::array<OutputSpec, 15> kOutputs{{
     {"cutting_power_W", "W", "cutting power", [](const sim::Snapshot& s) { return s.cutting_power_W; }},
 }};
 
+/// Twin unit text -> FMI unit name.
+struct UnitAlias {
+  std::string_view twin;
+  std::string_view fmi;
+};
+constexpr std::array<UnitAlias, 27> kUnitAliases{{
+    {"A/V", "A/V"},          {"N m/A", "N.m/A"},         {"kg m^2", "kg.m2"},   {"kg m^2/s", "kg.m2/s"},
+    {"mm/rad", "mm/rad"},    {"V/mm", "V/mm"},           {"V/(s mm)", "V/(s.mm)"}, {"V s/mm", "V.s/mm"},
+    {"V s^2/mm", "V.s2/mm"}, {"N m", "N.m"},             {"V", "V"},            {"mm/s", "mm/s"},
+    {"mm/s^2", "mm/s2"},     {"mm/s^3", "mm/s3"},        {"mm", "mm"},          {"rad/s", "rad/s"},
+    {"1", "1"},              {"rad", "rad"},             {"s", "s"},            {"N m/rad", "N.m/rad"},
+    {"N m s/rad", "N.m.s/rad"}, {"A", "A"},              {"mm/min", "mm/min"},  {"rpm", "rev/min"},
+    {"deg", "deg"},          {"N", "N"},                 {"W", "W"},
+}};
+
 }  // namespace
+
+const std::vector<UnitDefinition>& unit_definitions() {
+  // Volt = kg m^2 s^-3 A^-1; newton = kg m s^-2.
+  static const std::vector<UnitDefinition> kUnits{
+      {"A/V", -1, -2, 3, 2, 0, 1.0},
+      {"N.m/A", 1, 2, -2, -1, 0, 1.0},
+      {"kg.m2", 1, 2, 0, 0, 0, 1.0},
+      {"kg.m2/s", 1, 2, -1, 0, 0, 1.0},
+      {"mm/rad", 0, 1, 0, 0, -1, 1e-3},
+      {"V/mm", 1, 1, -3, -1, 0, 1e3},
+      {"V/(s.mm)", 1, 1, -4, -1, 0, 1e3},
+      {"V.s/mm", 1, 1, -2, -1, 0, 1e3},
+      {"V.s2/mm", 1, 1, -1, -1, 0, 1e3},
+      {"N.m", 1, 2, -2, 0, 0, 1.0},
+      {"V", 1, 2, -3, -1, 0, 1.0},
+      {"mm/s", 0, 1, -1, 0, 0, 1e-3},
+      {"mm/s2", 0, 1, -2, 0, 0, 1e-3},
+      {"mm/s3", 0, 1, -3, 0, 0, 1e-3},
+      {"mm", 0, 1, 0, 0, 0, 1e-3},
+      {"rad/s", 0, 0, -1, 0, 1, 1.0},
+      {"1", 0, 0, 0, 0, 0, 1.0},
+      {"rad", 0, 0, 0, 0, 1, 1.0},
+      {"s", 0, 0, 1, 0, 0, 1.0},
+      {"N.m/rad", 1, 2, -2, 0, -1, 1.0},
+      {"N.m.s/rad", 1, 2, -1, 0, -1, 1.0},
+      {"A", 0, 0, 0, 1, 0, 1.0},
+      {"mm/min", 0, 1, -1, 0, 0, 1e-3 / 60.0},
+      {"rev/min", 0, 0, -1, 0, 1, 2.0 * kPi / 60.0},
+      {"deg", 0, 0, 0, 0, 1, kPi / 180.0},
+      {"N", 1, 1, -2, 0, 0, 1.0},
+      {"W", 1, 2, -3, 0, 0, 1.0},
+  };
+  return kUnits;
+}
+
+std::string fmi_unit(std::string_view twin_unit) {
+  if (twin_unit.empty()) return {};
+  for (const auto& a : kUnitAliases)
+    if (a.twin == twin_unit) return std::string(a.fmi);
+  throw InternalError(fmt::format("fmu: no FMI unit for '{}' (add it to kUnitAliases and unit_definitions)", twin_unit));
+}
 
 double get_parameter(const Variable& v, const sim::MachineDefinition& machine) {
   if (v.kind == VarKind::kMachineParam) return v.machine_param->ref(const_cast<sim::MachineDefinition&>(machine));
@@ -80,7 +142,7 @@ std::vector<Variable> make_variables(const sim::MachineDefinition& machine) {
     p.name = std::string(spec.name);
     p.causality = Causality::kParameter;
     p.variability = Variability::kFixed;
-    p.unit = std::string(spec.unit);
+    p.unit = fmi_unit(spec.unit);
     p.description = std::string(spec.doc);
     p.kind = VarKind::kMachineParam;
     p.machine_param = &spec;
@@ -92,7 +154,7 @@ std::vector<Variable> make_variables(const sim::MachineDefinition& machine) {
       p.name = std::string(axis_name(a)) + "." + std::string(spec.name);
       p.causality = Causality::kParameter;
       p.variability = is_tunable_axis_param(spec) ? Variability::kTunable : Variability::kFixed;
-      p.unit = std::string(spec.unit);
+      p.unit = fmi_unit(spec.unit);
       p.description = std::string(spec.doc);
       p.kind = VarKind::kAxisParam;
       p.axis = index(a);
@@ -122,7 +184,7 @@ std::vector<Variable> make_variables(const sim::MachineDefinition& machine) {
     in = Variable{};
     in.name = "spindle_rpm";
     in.causality = Causality::kInput;
-    in.unit = "rpm";
+    in.unit = fmi_unit("rpm");
     in.description = "spindle speed used when spindle_override is true (> 0 clockwise)";
     in.kind = VarKind::kSpindleInput;
     v.push_back(in);
@@ -141,18 +203,19 @@ std::vector<Variable> make_variables(const sim::MachineDefinition& machine) {
     for (const auto& o : kAxisOutputs) {
       Variable out;
       out.name = std::string(axis_name(a)) + o.suffix;
-      out.unit = o.unit;
+      out.unit = fmi_unit(o.unit);
       out.description = o.doc;
       out.kind = VarKind::kAxisOutput;
       out.axis = index(a);
       out.axis_output = o.get;
+      out.measured = o.measured;
       v.push_back(out);
     }
   }
   for (const auto& o : kOutputs) {
     Variable out;
     out.name = o.name;
-    out.unit = o.unit;
+    out.unit = fmi_unit(o.unit);
     out.description = o.doc;
     out.kind = VarKind::kOutput;
     out.output = o.get;

@@ -16,6 +16,7 @@
 ///               followed is `x_ref_out_mm`, the spindle speed `spindle_speed_rpm`.
 #include <cstddef>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "twin/core/axis.hpp"
@@ -48,7 +49,7 @@ struct Variable {
   VarType type{VarType::kReal};
   Causality causality{Causality::kOutput};
   Variability variability{Variability::kContinuous};
-  std::string unit;          ///< empty: none
+  std::string unit;          ///< a unit of unit_definitions() (Modelica syntax, "N.m"); empty: none
   std::string description;
   VarKind kind{VarKind::kOutput};
   std::size_t axis{0};
@@ -56,11 +57,28 @@ struct Variable {
   const sim::MachineParamSpec* machine_param{nullptr};
   double (*axis_output)(const sim::AxisSnapshot&){nullptr};
   double (*output)(const sim::Snapshot&){nullptr};
+  bool measured{false};      ///< axis output computed from the encoder reading (x_mm, x_err_mm)
 };
 
 /// Mode values of the `mode` parameter.
 inline constexpr int kModeExternal = 1;
 inline constexpr int kModeProgram = 2;
+
+/// A unit of modelDescription.xml: its name in the syntax Modelica tools
+/// check ("N.m", "kg.m2", "V.s2/mm", "rev/min") and its SI base units:
+/// value_SI = factor * value, with the exponents of kg, m, s, A and rad.
+struct UnitDefinition {
+  std::string_view name;
+  int kg{0}, m{0}, s{0}, A{0}, rad{0};
+  double factor{1.0};
+};
+
+/// Every unit the variables use.
+const std::vector<UnitDefinition>& unit_definitions();
+/// The FMI unit of a unit as the twin's tables write it ("N m" -> "N.m",
+/// "kg m^2" -> "kg.m2", "rpm" -> "rev/min"). Throws InternalError for one not
+/// in the table (a new parameter needs its unit added there).
+std::string fmi_unit(std::string_view twin_unit);
 
 /// The table for a machine (only its present axes get rows).
 std::vector<Variable> make_variables(const sim::MachineDefinition& machine);

@@ -5,13 +5,19 @@
 // rules re-stated here, and tools that are not part of the project.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <map>
+#include <numbers>
 #include <regex>
 #include <set>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 
 #include "fmu_importer.hpp"
@@ -149,6 +155,181 @@ TEST_P(FmuArchive, IndependentCheckerPasses) {
                          " --robustness --require-xsd --stop 0.02 --out " + csv,
                      out);
   EXPECT_EQ(rc, 0) << out;
+}
+
+// ---- units --------------------------------------------------------------------
+
+/// SI dimension: exponents of kg, m, s, A, rad and the factor to SI.
+struct Dim {
+  std::array<int, 5> e{};  // kg m s A rad
+  double factor{1.0};
+  Dim times(const Dim& o, int sign) const {
+    Dim r = *this;
+    for (std::size_t i = 0; i < e.size(); ++i) r.e[i] += sign * o.e[i];
+    r.factor = sign > 0 ? factor * o.factor : factor / o.factor;
+    return r;
+  }
+  Dim pow(int n) const {
+    Dim r;
+    for (std::size_t i = 0; i < e.size(); ++i) r.e[i] = e[i] * n;
+    r.factor = std::pow(factor, n);
+    return r;
+  }
+};
+
+/// The unit symbols the FMU may use, defined here from the SI brochure
+/// (N = kg m s^-2, V = W/A = kg m^2 s^-3 A^-1) and Modelica's non-SI units
+/// (deg, rev, min), with the prefix m (milli).
+Dim symbol(const std::string& s) {
+  const double pi = std::numbers::pi;
+  static const std::map<std::string, Dim> table{
+      {"kg", {{1, 0, 0, 0, 0}, 1.0}},      {"m", {{0, 1, 0, 0, 0}, 1.0}},
+      {"s", {{0, 0, 1, 0, 0}, 1.0}},       {"A", {{0, 0, 0, 1, 0}, 1.0}},
+      {"rad", {{0, 0, 0, 0, 1}, 1.0}},     {"N", {{1, 1, -2, 0, 0}, 1.0}},
+      {"V", {{1, 2, -3, -1, 0}, 1.0}},     {"W", {{1, 2, -3, 0, 0}, 1.0}},
+      {"deg", {{0, 0, 0, 0, 1}, pi / 180}}, {"rev", {{0, 0, 0, 0, 1}, 2 * pi}},
+      {"min", {{0, 0, 1, 0, 0}, 60.0}},
+  };
+  if (auto it = table.find(s); it != table.end()) return it->second;
+  if (s.size() > 1 && s[0] == 'm')
+    if (auto it = table.find(s.substr(1)); it != table.end()) return Dim{}.times(it->second, 1).times(Dim{{}, 1e3}, -1);
+  throw std::runtime_error("unknown unit symbol '" + s + "'");
+}
+
+/// Parses a unit in the Modelica syntax (Modelica Language Specification,
+/// section 19.1): factors joined by '.', integer exponents written after the
+/// symbol, one '/' with a single factor or a parenthesised expression after it.
+Dim parse_unit(const std::string& u);
+
+Dim parse_factor(const std::string& f) {
+  static const std::regex re(R"(([A-Za-z]+)([+-]?[0-9]+)?)");
+  std::smatch m;
+  if (!std::regex_match(f, m, re)) throw std::runtime_error("'" + f + "' is not a unit factor");
+  const Dim d = symbol(m[1]);
+  return m[2].matched ? d.pow(std::stoi(m[2])) : d;
+}
+
+Dim parse_product(const std::string& p) {
+  if (p == "1") return Dim{};
+  if (p.size() > 2 && p.front() == '(' && p.back() == ')') return parse_unit(p.substr(1, p.size() - 2));
+  Dim d;
+  std::size_t start = 0;
+  while (true) {
+    const std::size_t dot = p.find('.', start);
+    d = d.times(parse_factor(p.substr(start, dot - start)), 1);
+    if (dot == std::string::npos) break;
+    start = dot + 1;
+  }
+  return d;
+}
+
+Dim parse_unit(const std::string& u) {
+  // The top-level '/' (outside parentheses).
+  int depth = 0;
+  std::size_t slash = std::string::npos;
+  for (std::size_t i = 0; i < u.size(); ++i) {
+    if (u[i] == '(') ++depth;
+    if (u[i] == ')') --depth;
+    if (u[i] == '/' && depth == 0) {
+      if (slash != std::string::npos) throw std::runtime_error("'" + u + "' has two '/'");
+      slash = i;
+    }
+  }
+  if (slash == std::string::npos) return parse_product(u);
+  const std::string den = u.substr(slash + 1);
+  if (den.find('.') != std::string::npos && den.front() != '(')
+    throw std::runtime_error("'" + u + "': a product after '/' needs parentheses");
+  return parse_product(u.substr(0, slash)).times(parse_product(den), -1);
+}
+
+TEST_P(FmuArchive, UnitsAreModelicaUnitsWithTheirSiBaseUnits) {
+  // Every unit a variable uses is defined in UnitDefinitions with a BaseUnit
+  // whose exponents and factor equal the unit name parsed by the Modelica
+  // unit grammar (independent of the FMU's own table).
+  const std::string& x = fmu_->xml();
+  const std::regex unit_re(R"re(<Unit name="([^"]*)">\s*<BaseUnit([^>]*)/>)re");
+  const std::regex any_unit("<Unit ");
+  std::map<std::string, std::string> defined;
+  for (auto it = std::sregex_iterator(x.begin(), x.end(), unit_re); it != std::sregex_iterator(); ++it)
+    defined[(*it)[1]] = (*it)[2];
+  ASSERT_FALSE(defined.empty()) << "no <Unit> with a <BaseUnit>";
+  EXPECT_EQ(defined.size(), static_cast<std::size_t>(std::distance(
+                                std::sregex_iterator(x.begin(), x.end(), any_unit), std::sregex_iterator())))
+      << "a <Unit> without a <BaseUnit>";
+  auto attr_num = [](const std::string& attrs, const char* name, double fallback) {
+    const std::regex re(std::string("\\s") + name + "=\"([^\"]*)\"");
+    std::smatch m;
+    return std::regex_search(attrs, m, re) ? std::stod(m[1]) : fallback;
+  };
+  for (const auto& [name, attrs] : defined) {
+    Dim want;
+    try {
+      want = parse_unit(name);
+    } catch (const std::exception& e) {
+      ADD_FAILURE() << "unit '" << name << "': " << e.what();
+      continue;
+    }
+    const char* keys[] = {"kg", "m", "s", "A", "rad"};
+    for (std::size_t i = 0; i < 5; ++i)
+      EXPECT_EQ(attr_num(attrs, keys[i], 0.0), want.e[i]) << name << ": exponent of " << keys[i];
+    for (const char* none : {"K", "mol", "cd", "offset"}) EXPECT_EQ(attr_num(attrs, none, 0.0), 0.0) << name << " " << none;
+    EXPECT_NEAR(attr_num(attrs, "factor", 1.0), want.factor, 1e-12 * want.factor) << name;
+  }
+  for (const auto& v : fmu_->variables())
+    if (!v.unit.empty()) {
+      EXPECT_TRUE(defined.count(v.unit)) << v.name << ": unit '" << v.unit << "' not defined";
+    }
+  // The issue's examples, spelled as Modelica tools check them.
+  for (const char* u : {"N.m", "kg.m2", "V.s2/mm", "mm", "rev/min"}) EXPECT_TRUE(defined.count(u)) << u;
+}
+
+TEST_P(FmuArchive, OutputsDeclareTheirDependencies) {
+  // FMI 2.0 section 2.2.8: without `dependencies` a tool must assume every
+  // output depends on every input. After a step the outputs are the row of a
+  // tick computed from inputs set before the step: no direct feedthrough,
+  // dependencies="" (fmu_cosim_test checks the behaviour). At initialization
+  // an output may depend only on inputs and exact parameters.
+  const std::string& x = fmu_->xml();
+  auto unknowns = [&](const char* section) {
+    const std::regex sec(std::string("<") + section + ">([\\s\\S]*?)</" + section + ">");
+    std::smatch m;
+    std::vector<std::string> out;
+    if (!std::regex_search(x, m, sec)) return out;
+    const std::string body = m[1];
+    const std::regex u("<Unknown[^>]*>");
+    for (auto it = std::sregex_iterator(body.begin(), body.end(), u); it != std::sregex_iterator(); ++it)
+      out.push_back((*it)[0]);
+    return out;
+  };
+  const auto outputs = unknowns("Outputs");
+  ASSERT_FALSE(outputs.empty());
+  for (const auto& u : outputs) EXPECT_NE(u.find("dependencies=\"\""), std::string::npos) << u;
+  const std::regex deps("dependencies=\"([^\"]*)\"");
+  for (const auto& u : unknowns("InitialUnknowns")) {
+    std::smatch m;
+    ASSERT_TRUE(std::regex_search(u, m, deps)) << u << ": no dependencies";
+    std::istringstream list(m[1].str());
+    for (std::size_t idx = 0; list >> idx;) {
+      ASSERT_GE(idx, 1u);
+      ASSERT_LE(idx, fmu_->variables().size());
+      const VarInfo& v = fmu_->variables()[idx - 1];
+      EXPECT_TRUE(v.causality == "input" || v.initial == "exact") << u << " depends on " << v.name;
+    }
+  }
+}
+
+TEST_P(FmuArchive, BinaryLoadsOnGlibc235) {
+  // objdump -T lists the glibc symbol versions the binary needs; the highest
+  // must be at most 2.35 (Ubuntu 22.04 LTS) and arc4random (2.36) is absent.
+  std::string out;
+  ASSERT_EQ(run("objdump -T " + fmu_->so_path(), out), 0) << out;
+  EXPECT_EQ(out.find("arc4random"), std::string::npos);
+  const std::regex ver(R"(GLIBC_2\.([0-9]+))");
+  int highest = 0;
+  for (auto it = std::sregex_iterator(out.begin(), out.end(), ver); it != std::sregex_iterator(); ++it)
+    highest = std::max(highest, std::stoi((*it)[1]));
+  EXPECT_GT(highest, 0);
+  EXPECT_LE(highest, 35) << "the binary needs GLIBC_2." << highest;
 }
 
 std::string archive_name(const ::testing::TestParamInfo<const char*>& p) {

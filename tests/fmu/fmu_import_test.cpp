@@ -142,7 +142,7 @@ Outputs fmu_run(LoadedFmu& fmu, int mode, const std::vector<std::string>& names,
   std::int64_t k = 0;
   for (int n : kStepTicks) {
     const double t = static_cast<double>(k) * Ts_s;
-    for (std::size_t i = 0; i < 3; ++i) {
+    for (std::size_t i = 0; i < 3 && mode == 1; ++i) {  // mode 2 ignores them (and warns)
       const std::string in = std::string(axis_name(i)) + "_ref_mm";
       if (!fmu.has(in)) continue;
       const fmi2ValueReference vr = fmu.var(in).vr;
@@ -393,13 +393,14 @@ TEST_F(FmuCalls, DoStepBeforeInitialisationIsAnError) {
 }
 
 TEST_F(FmuCalls, BadStepSizesAreErrorsWithTheNumbers) {
+  // h <= 0 or not a number is an error; h need not be whole ticks
+  // (fmu_cosim_test covers steps that end between ticks).
   const auto& f = fmu_->fn();
   EXPECT_EQ(f.fmi2DoStep(initialised(), 0.0, -10 * Ts_s_, fmi2False), fmi2Error);
-  EXPECT_EQ(f.fmi2DoStep(initialised(), 0.0, 0.0, fmi2False), fmi2Error);
-  EXPECT_EQ(f.fmi2DoStep(initialised(), 0.0, 1.5 * Ts_s_, fmi2False), fmi2Error);
   ASSERT_FALSE(fmu_->log().empty());
-  EXPECT_NE(fmu_->log().back().find("1.5 ticks"), std::string::npos) << fmu_->log().back();
-  EXPECT_EQ(f.fmi2DoStep(initialised(), 0.0, 0.4 * Ts_s_, fmi2False), fmi2Error);
+  EXPECT_NE(fmu_->log().back().find("communicationStepSize = -0.001 s must be > 0"), std::string::npos)
+      << fmu_->log().back();
+  EXPECT_EQ(f.fmi2DoStep(initialised(), 0.0, 0.0, fmi2False), fmi2Error);
   EXPECT_EQ(f.fmi2DoStep(initialised(), 0.0, std::nan(""), fmi2False), fmi2Error);
   // Wrong communication point: the FMU is at t = 0, the master says 1 ms.
   EXPECT_EQ(f.fmi2DoStep(initialised(), 1e-3, 10 * Ts_s_, fmi2False), fmi2Error);
@@ -441,15 +442,10 @@ TEST_F(FmuCalls, CallsAfterAnErrorAreRefusedUntilReset) {
 }
 
 TEST_F(FmuCalls, UnsupportedFunctionsReturnErrorAndLog) {
+  // (Status calls for kinds not provided return fmi2Discard: fmu_cosim_test.)
   const auto& f = fmu_->fn();
   fmi2Component c = initialised();
-  fmi2Status st = fmi2OK;
-  fmi2Integer i = 0;
-  fmi2String s = nullptr;
   EXPECT_EQ(f.fmi2CancelStep(c), fmi2Error);
-  EXPECT_EQ(f.fmi2GetStatus(c, fmi2DoStepStatus, &st), fmi2Error);
-  EXPECT_EQ(f.fmi2GetIntegerStatus(c, fmi2DoStepStatus, &i), fmi2Error);
-  EXPECT_EQ(f.fmi2GetStringStatus(c, fmi2PendingStatus, &s), fmi2Error);
   EXPECT_EQ(f.fmi2GetDirectionalDerivative(c, nullptr, 0, nullptr, 0, nullptr, nullptr), fmi2Error);
   EXPECT_EQ(f.fmi2SetRealInputDerivatives(c, nullptr, 0, nullptr, nullptr), fmi2Error);
   EXPECT_EQ(f.fmi2GetRealOutputDerivatives(c, nullptr, 0, nullptr, nullptr), fmi2Error);

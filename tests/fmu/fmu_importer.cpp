@@ -123,10 +123,17 @@ const VarInfo& LoadedFmu::var(const std::string& name) const {
   return vars_[it->second];
 }
 
-fmi2Component LoadedFmu::instantiate(const std::string& name, const char* guid) {
+std::string LoadedFmu::default_experiment(const std::string& attribute) const {
+  const std::regex de("<DefaultExperiment[^>]*>");
+  std::smatch m;
+  if (!std::regex_search(xml_, m, de)) return {};
+  return attr(m[0], attribute);
+}
+
+fmi2Component LoadedFmu::instantiate(const std::string& name, const char* guid, bool logging_on) {
   const std::string uri = resource_uri();
   return fn_.fmi2Instantiate(name.c_str(), fmi2CoSimulation, guid ? guid : guid_.c_str(), uri.c_str(), &callbacks_,
-                             fmi2False, fmi2False);
+                             fmi2False, logging_on ? fmi2True : fmi2False);
 }
 
 }  // namespace twin::fmu_test

@@ -61,9 +61,13 @@ class LoadedFmu {
   const VarInfo& var(const std::string& name) const;
   bool has(const std::string& name) const { return by_name_.count(name) != 0; }
 
+  /// DefaultExperiment attribute (stopTime, stepSize, ...) as text; empty when absent.
+  std::string default_experiment(const std::string& attribute) const;
+
   /// Instantiates with the file's GUID (or `guid`); messages go to log().
-  fmi2Component instantiate(const std::string& name, const char* guid = nullptr);
+  fmi2Component instantiate(const std::string& name, const char* guid = nullptr, bool logging_on = false);
   const std::vector<std::string>& log() const { return log_; }
+  void clear_log() { log_.clear(); }
 
  private:
   std::string dir_;
