@@ -1,8 +1,10 @@
 #include "controller/gcode.hpp"
 
+#include <algorithm>
 #include <array>
 #include <cctype>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -18,6 +20,38 @@ namespace {
 /// or by this fraction of the radius, whichever is larger.
 constexpr double kArcRadiusTolerance_mm = 0.002;
 constexpr double kArcRadiusTolerance_rel = 1e-3;
+/// G and M codes are small integers (G0..G99.9, M0..M999): anything beyond
+/// is refused before it is rounded to an int.
+constexpr double kMaxCode = 1000.0;
+/// N (line numbers) and T (tool numbers) are non-negative integers below these.
+constexpr double kMaxLineNumber = 1e9;
+constexpr double kMaxToolNumber = 1e6;
+/// The fastest spindles on milling machines turn about 10^5 rpm; S beyond
+/// this is a typing error (or an attack), not a speed.
+constexpr double kMaxSpindle_rpm = 200000.0;
+/// Error messages quote at most this many characters of the offending text.
+constexpr std::size_t kExcerptChars = 40;
+
+/// A short printable excerpt: control and non-ASCII bytes as \xNN, cut to
+/// kExcerptChars with "..." so that a 1 MB line gives a one-line message.
+std::string excerpt(std::string_view text) {
+  std::string out;
+  std::size_t shown = 0;
+  for (char ch : text) {
+    if (shown == kExcerptChars) {
+      out += "...";
+      break;
+    }
+    const auto c = static_cast<unsigned char>(ch);
+    if (c >= 0x20 && c < 0x7f && c != '\\') {
+      out.push_back(ch);
+    } else {
+      out += fmt::format("\\x{:02x}", c);
+    }
+    ++shown;
+  }
+  return out;
+}
 
 struct Word {
   char letter{};
@@ -55,13 +89,21 @@ class Parser {
       if (end == text.size()) break;
       begin = end + 1;
     }
+    if (program.blocks.empty()) {
+      // The last line read: where M2/M30 ended the program, else the text's last line.
+      const auto newlines = static_cast<int>(std::count(text.begin(), text.end(), '\n'));
+      const int last = ended_ ? line_ : std::max(1, newlines + (!text.empty() && text.back() != '\n' ? 1 : 0));
+      throw ConfigError(fmt::format("{}:{}: the program holds no move and no dwell (empty, or only comments, % and "
+                                    "settings)",
+                                    name_, last));
+    }
     program.spindle_rpm_at_end = spindle_rpm();
     return program;
   }
 
  private:
   [[noreturn]] void fail(const std::string& what, std::string_view word) const {
-    throw ConfigError(fmt::format("{}:{}: {} ({})", name_, line_, what, word));
+    throw ConfigError(fmt::format("{}:{}: {} ({})", name_, line_, what, excerpt(word)));
   }
 
   /// Removes comments and blanks; returns the upper-cased word text.
@@ -157,8 +199,9 @@ class Parser {
     bool dwell = false;
     bool set_g64 = false;
     for (double g : w.g) {
-      const double gr = std::round(g * 10.0) / 10.0;
       const std::string word = fmt::format("G{}", g);
+      if (!(std::abs(g) < kMaxCode)) fail("unknown G code", word);
+      const double gr = std::round(g * 10.0) / 10.0;
       if (std::abs(g - gr) > 1e-9) fail("unknown G code", word);
       const int code10 = static_cast<int>(std::lround(gr * 10.0));
       auto set_motion = [&](MotionKind k) {
@@ -198,7 +241,7 @@ class Parser {
     bool program_end = false;
     for (double m : w.m) {
       const std::string word = fmt::format("M{}", m);
-      if (m != std::round(m)) fail("unknown M code", word);
+      if (!(std::abs(m) < kMaxCode) || m != std::round(m)) fail("unknown M code", word);
       switch (static_cast<int>(m)) {
         case 3: spindle_dir_ = 1.0; break;
         case 4: spindle_dir_ = -1.0; break;
@@ -216,9 +259,18 @@ class Parser {
       if (!(f > 0.0)) fail("feed must be > 0", w.text_by_letter['F' - 'A']);
       feed_mm_per_min_ = f * mm_per_unit_;
     }
+    for (const auto& [letter, max] : {std::pair{'N', kMaxLineNumber}, std::pair{'T', kMaxToolNumber}}) {
+      if (!w.has(letter)) continue;
+      const double v = w.get(letter);
+      if (!(v >= 0.0 && v < max) || v != std::round(v))
+        fail(fmt::format("{} must be a whole number in [0, {:.0f})", letter, max),
+             w.text_by_letter[static_cast<std::size_t>(letter - 'A')]);
+    }
     if (w.has('S')) {
       const double sp = w.get('S');
       if (sp < 0.0) fail("spindle speed must be >= 0", w.text_by_letter['S' - 'A']);
+      if (sp > kMaxSpindle_rpm)
+        fail(fmt::format("spindle speed beyond {:.0f} rpm", kMaxSpindle_rpm), w.text_by_letter['S' - 'A']);
       spindle_speed_rpm_ = sp;
     }
     if (w.has('P')) {
@@ -354,6 +406,13 @@ Program parse_gcode(std::string_view text, std::string_view source_name,
 
 Program load_gcode(const std::string& path, const AxisArray<double>& start_mm,
                    double rapid_mm_per_min) {
+  std::error_code ec;
+  const auto st = std::filesystem::status(path, ec);
+  if (std::filesystem::is_directory(st)) throw IoError(fmt::format("{}: is a directory, not a G-code file", path));
+  if (std::filesystem::exists(st) && !std::filesystem::is_regular_file(st))
+    throw IoError(fmt::format("{}: not a regular file (a FIFO, device or socket)", path));
+  if (std::filesystem::is_regular_file(st) && std::filesystem::file_size(path, ec) > kMaxProgramBytes)
+    throw IoError(fmt::format("{}: larger than {} MB, the limit for a G-code file", path, kMaxProgramBytes >> 20));
   std::ifstream in(path, std::ios::binary);
   if (!in) throw IoError(fmt::format("{}: cannot open G-code file", path));
   std::ostringstream ss;

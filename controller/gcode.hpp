@@ -2,10 +2,14 @@
 /// The part-program subset a 3-axis pocket program uses: G0 G1 G2 G3 (I J K
 /// and R), G4 (dwell, P seconds), G17, G20 G21, G90 G91, G61 and G64 (with P),
 /// F, S, M3 M4 M5 M30 (and M2), comments ( ... ) and ;, N numbers, % lines.
-/// Every unknown word or malformed line is a ConfigError "file:line: ...".
+/// Every unknown word or malformed line is a ConfigError "file:line: ..."
+/// quoting at most a short escaped excerpt of the line. G and M codes beyond
+/// 1000, N and T that are not whole numbers in range, S beyond 200000 rpm and
+/// a program without a single move or dwell are errors.
 /// Accepted without effect: T (tool select; the twin's tool comes from the
 /// scenario), M8 M9 (coolant), G40 G49 G80 G94 G54 (cancel/identity states).
 /// Units: G20 scales X Y Z I J K R F and G64 P by 25.4; G4 P is seconds.
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -41,7 +45,10 @@ struct Program {
 /// `rapid_mm_per_min` is the feed recorded for G0 blocks.
 Program parse_gcode(std::string_view text, std::string_view source_name,
                     const AxisArray<double>& start_mm, double rapid_mm_per_min);
-/// Reads and parses a file; IoError if it cannot be read.
+/// Largest G-code file load_gcode reads.
+inline constexpr std::uintmax_t kMaxProgramBytes = std::uintmax_t{256} << 20;
+/// Reads and parses a regular file of at most kMaxProgramBytes; IoError if
+/// it cannot be read (a directory, FIFO or device, too large).
 Program load_gcode(const std::string& path, const AxisArray<double>& start_mm,
                    double rapid_mm_per_min);
 

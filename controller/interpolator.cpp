@@ -28,6 +28,9 @@ constexpr double kArcJerkShare = 1.0 / 3.0;
 constexpr double kArcRadiusTolerance_mm = 0.002;
 constexpr double kArcRadiusTolerance_rel = 1e-3;
 constexpr double kMinLength_mm = 1e-9;
+/// The tick counter of a run is an int64 read back as a double: a plan must
+/// fit in 2^53 ticks so that every tick time k Ts is exact in k.
+constexpr double kMaxTicks = 9007199254740992.0;
 
 /// Times of a jerk-limited speed change by dv with zero acceleration at both
 /// ends: jerk phases Tj and a constant-acceleration phase Ta.
@@ -198,7 +201,11 @@ void MotionLimits::validate() const {
 double Trajectory::duration_s() const noexcept { return duration_s_; }
 
 std::int64_t Trajectory::num_ticks() const noexcept {
-  auto k = static_cast<std::int64_t>(std::ceil(duration_s_ / Ts_s_));
+  // plan_trajectory keeps duration / Ts below kMaxTicks; the guard keeps the
+  // cast defined for any state a Trajectory can be in.
+  const double q = std::ceil(duration_s_ / Ts_s_);
+  if (!(q < kMaxTicks)) return static_cast<std::int64_t>(kMaxTicks);
+  auto k = static_cast<std::int64_t>(q);
   while (k > 0 && static_cast<double>(k - 1) * Ts_s_ >= duration_s_) --k;
   while (static_cast<double>(k) * Ts_s_ < duration_s_) ++k;
   return k;
@@ -287,6 +294,52 @@ ReferenceSample Trajectory::at_time(double t_s) const {
   return out;
 }
 
+void check_travel(const Program& program, const AxisArray<double>& travel_min_mm,
+                  const AxisArray<double>& travel_max_mm) {
+  // Points exactly one travel apart fit; the slack covers decimal
+  // coordinates scaled by 25.4 (G20).
+  constexpr double kSlack_mm = 1e-6;
+  if (program.blocks.empty()) return;
+  AxisArray<double> lo = program.blocks.front().start_mm, hi = lo;
+  for (const Block& b : program.blocks) {
+    AxisArray<double> reached_lo = b.end_mm, reached_hi = b.end_mm;
+    if (b.kind == MotionKind::kArcCw || b.kind == MotionKind::kArcCcw) {
+      // The extreme points of the circle in X and Y that the sweep passes.
+      const double cx = b.center_mm[0], cy = b.center_mm[1];
+      const double r0 = std::hypot(b.start_mm[0] - cx, b.start_mm[1] - cy);
+      const double r1 = std::hypot(b.end_mm[0] - cx, b.end_mm[1] - cy);
+      const double phi0 = std::atan2(b.start_mm[1] - cy, b.start_mm[0] - cx);
+      double sweep = std::atan2(b.end_mm[1] - cy, b.end_mm[0] - cx) - phi0;
+      const bool ccw = b.kind == MotionKind::kArcCcw;
+      if (!ccw) sweep = -sweep;
+      while (sweep <= 1e-9) sweep += 2.0 * kPi;
+      for (int q = 0; q < 4; ++q) {
+        const double theta = q * 0.5 * kPi;
+        double delta = std::fmod(ccw ? theta - phi0 : phi0 - theta, 2.0 * kPi);
+        if (delta < 0.0) delta += 2.0 * kPi;
+        if (!(delta <= sweep)) continue;
+        const double r = r0 + (r1 - r0) * delta / sweep;
+        const AxisArray<double> p{cx + r * std::cos(theta), cy + r * std::sin(theta), 0.0};
+        for (std::size_t a = 0; a < 2; ++a) {
+          reached_lo[a] = std::min(reached_lo[a], p[a]);
+          reached_hi[a] = std::max(reached_hi[a], p[a]);
+        }
+      }
+    }
+    for (std::size_t a = 0; a < kNumAxes; ++a) {
+      lo[a] = std::min(lo[a], reached_lo[a]);
+      hi[a] = std::max(hi[a], reached_hi[a]);
+      const double span = travel_max_mm[a] - travel_min_mm[a];
+      if (hi[a] - lo[a] <= span + kSlack_mm) continue;
+      const double bad = reached_hi[a] >= hi[a] ? reached_hi[a] : reached_lo[a];
+      throw ConfigError(fmt::format("{}:{}: the move takes {} to {:.6g} mm: the program then spans [{:.6g}, {:.6g}] mm "
+                                    "in {}, more than the machine's travel of {:g} mm ([{:g}, {:g}])",
+                                    program.source_name, b.line, axis_name(a), bad, lo[a], hi[a], axis_name(a),
+                                    span, travel_min_mm[a], travel_max_mm[a]));
+    }
+  }
+}
+
 Trajectory plan_trajectory(const Program& program, const MotionLimits& limits, double Ts_s) {
   limits.validate();
   if (!(Ts_s > 0.0) || !std::isfinite(Ts_s))
@@ -338,6 +391,7 @@ Trajectory plan_trajectory(const Program& program, const MotionLimits& limits, d
       AxisArray<double> d{};
       for (std::size_t a = 0; a < kNumAxes; ++a) d[a] = b.end_mm[a] - b.start_mm[a];
       s.length_mm = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+      if (!std::isfinite(s.length_mm)) throw where("move length is not finite", fmt::format("{:g} mm", s.length_mm));
       if (s.length_mm < kMinLength_mm) continue;
       s.kind = SegmentKind::kLine;
       s.u = normalized(d);
@@ -368,6 +422,7 @@ Trajectory plan_trajectory(const Program& program, const MotionLimits& limits, d
       const double R = 0.5 * (s.r0_mm + s.r1_mm);
       const double dz = b.end_mm[2] - b.start_mm[2];
       s.length_mm = std::hypot(R * std::abs(d), dz);
+      if (!std::isfinite(s.length_mm)) throw where("arc length is not finite", radii);
       // Helix: pitch per radian h, curvature k = R/(R^2+h^2), torsion tau = h/(R^2+h^2).
       const double h = dz / std::abs(d);
       const double ell2 = R * R + h * h;
@@ -494,6 +549,14 @@ Trajectory plan_trajectory(const Program& program, const MotionLimits& limits, d
     s.t_start_s = std::max(0.0, t_s - T_in);
     s.t_switch_s = s.t_start_s + 0.5 * T_in;
     s.t_end_s = s.t_start_s + own_duration[i];
+    const int line = blocks[static_cast<std::size_t>(s.block)].line;
+    if (!std::isfinite(own_duration[i]))
+      throw ConfigError(fmt::format("{}:{}: the planned duration of this move is not finite ({} s)",
+                                    program.source_name, line, own_duration[i]));
+    if (!(s.t_end_s / Ts_s < kMaxTicks))
+      throw ConfigError(fmt::format("{}:{}: the program's planned duration reaches {:.6g} s here, {:.3g} ticks of "
+                                    "{} s: more than a run can count",
+                                    program.source_name, line, s.t_end_s, s.t_end_s / Ts_s, Ts_s));
     s.num_pieces = traj.pieces_.size() - s.first_piece;
     if (i + 1 < n) s.num_pieces = segs[i + 1].first_piece - s.first_piece;
     for (std::size_t p = s.first_piece; p < s.first_piece + s.num_pieces; ++p) traj.pieces_[p].t0_s += s.t_start_s;

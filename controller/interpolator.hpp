@@ -125,6 +125,17 @@ class Trajectory {
   std::vector<LawPiece> pieces_;
 };
 
+/// Refuses a program that cannot fit in the machine's travel. The twin has no
+/// work offset (G54 is the identity), so program coordinates are work
+/// coordinates: the program fits when, on every axis, the span of the
+/// positions it reaches (its start, every end point, and the X and Y extremes
+/// of its arcs) is at most travel_max - travel_min. ConfigError "file:line:
+/// the move takes x to 700 mm: the program then spans [0, 700] mm in x, more
+/// than the machine's travel of 559 mm ([0, 559])" at the first move that
+/// breaks it.
+void check_travel(const Program& program, const AxisArray<double>& travel_min_mm,
+                  const AxisArray<double>& travel_max_mm);
+
 /// Plans the program.
 ///  - line path limits: v <= min(F, min_a v_max,a/|u_a|), a_p = min_a a_max,a/|u_a|,
 ///    j_p likewise; arcs: v^2 k <= a/2, v^3 k (k + tau) <= j/3 (k curvature, tau torsion);
@@ -133,7 +144,8 @@ class Trajectory {
 ///  - G64 corners between lines: stop and start ramps overlap by T_b with
 ///    2 sin(theta/2) d(T_b/2) <= P; corner speed 2 w cos(theta/2) (docs/interpolator.md).
 /// @throws ConfigError for limits or geometry that cannot be followed (an arc
-///   whose end is not on its circle, a feed <= 0), naming file:line.
+///   whose end is not on its circle, a feed <= 0), a move whose length or
+///   duration is not finite, or a plan longer than 2^53 ticks, naming file:line.
 Trajectory plan_trajectory(const Program& program, const MotionLimits& limits, double Ts_s);
 
 }  // namespace twin::controller

@@ -193,9 +193,16 @@ OdeSolver::Stop OdeSolver::advance(double t_stop_s, std::span<double> y, double&
     h.pending = nullptr;
     std::rethrow_exception(e);
   }
-  if (flag < 0)
-    throw SolverError(fmt::format("feeddrive: {} failed with flag {} at t = {} s (target {} s)",
-                                  h.is_cvode ? "CVode" : "ERKStepEvolve", flag, t_ret, t_stop_s));
+  if (flag < 0) {
+    // Flags -1..-4 mean the same in CVODE and ARKODE.
+    const char* why = flag == -1   ? "too many steps: a time constant of a drive is far shorter than the tick"
+                      : flag == -2 ? "the tolerances cannot be met"
+                      : flag == -3 ? "error test failed repeatedly: the state moves faster than the step can follow"
+                      : flag == -4 ? "convergence failed repeatedly"
+                                   : "see the SUNDIALS return flags";
+    throw SolverError(fmt::format("feeddrive: {} failed with flag {} ({}) at t = {} s (target {} s)",
+                                  h.is_cvode ? "CVode" : "ERKStepEvolve", flag, why, t_ret, t_stop_s));
+  }
   const double* yv = N_VGetArrayPointer(h.y);
   for (std::size_t j = 0; j < size_; ++j) y[j] = yv[j];
   t_reached_s = t_ret;

@@ -9,6 +9,12 @@
 #include "twin/core/units.hpp"
 
 namespace twin::process {
+namespace {
+/// At the default 1.5 deg step this is 4.2 revolutions per tick: 250000 rpm
+/// at Ts = 1e-4 s, beyond the G-code reader's 200000 rpm and twenty times the
+/// shipped scenarios' fastest spindle (12000 rpm).
+constexpr int kMaxForceSamplesPerTick = 1000;
+}  // namespace
 
 std::string ProcessSetup::summary() const {
   return fmt::format("{} ({} D{} mm, {} flutes, helix {} deg, r {} mm), {}, lead {} deg, tilt {} deg",
@@ -68,8 +74,15 @@ ProcessOutput MillingProcess::step(const ProcessInput& in) {
     const double n_rev_per_s = in.spindle_rpm / kSPerMin;
     const std::array<double, 2> f_mm{v[0] / (tool.flutes * n_rev_per_s), v[1] / (tool.flutes * n_rev_per_s)};
     const double dphi_tick = omega_rad_per_s * in.Ts_s;
-    const int n_sub =
-        std::max(1, static_cast<int>(std::ceil(dphi_tick / (model_.options().angle_step_deg * kRadPerDeg) - 1e-9)));
+    const double angle_step_rad = model_.options().angle_step_deg * kRadPerDeg;
+    const double n_sub_wanted = std::ceil(dphi_tick / angle_step_rad - 1e-9);
+    if (!(n_sub_wanted <= kMaxForceSamplesPerTick))
+      throw ModelError(fmt::format(
+          "process: spindle {} rpm turns {:.4g} deg per tick of {} s: {:.4g} force samples of {} deg, more than the {} a "
+          "tick may take (lower S, or raise process.model.angle_step_deg)",
+          in.spindle_rpm, dphi_tick / kRadPerDeg, in.Ts_s, n_sub_wanted, model_.options().angle_step_deg,
+          kMaxForceSamplesPerTick));
+    const int n_sub = std::max(1, static_cast<int>(n_sub_wanted));
     const double dt = in.Ts_s / n_sub;
     std::array<double, 3> F_sum{};
     double T_sum = 0.0;

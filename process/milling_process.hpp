@@ -16,7 +16,9 @@
 ///     moved down), so the height map lags the tool by < two cells. The lag
 ///     leaves material behind the tool, never ahead of it, and the chip
 ///     condition ignores what lies behind.
-/// A counter-clockwise spindle (M4) is a ModelError; a stopped spindle with
+/// More than 1000 force samples in one tick (a spindle speed or an
+/// angle_step_deg far outside milling practice) is a ModelError;
+/// a counter-clockwise spindle (M4) is a ModelError; a stopped spindle with
 /// the tool feeding into material is a ModelError; non-finite inputs are ModelErrors.
 #include <array>
 #include <memory>

@@ -195,5 +195,66 @@ TEST(GcodeParser, LoadMissingFileIsIoError) {
   EXPECT_THROW(load_gcode("/nonexistent/dir/x.nc", {0, 0, 0}, kRapid_mm_per_min), IoError);
 }
 
+// Hostile words (issue 19). Oracle: the word as written; before these
+// checks G100000000000000000000 ran as G0 (lround overflow) and M6e16 was
+// undefined behaviour.
+TEST(GcodeParser, IntegerWordsRangeChecked) {
+  expect_error_at("G21\nG100000000000000000000 X2\n", 2, "unknown G code");
+  expect_error_at("G1 X1 F100\nM60000000000000000\n", 2, "unknown M code");
+  expect_error_at("G1 X1 F100\nM-60000000000000000\n", 2, "unknown M code");
+  expect_error_at("G1 X1 F100\nG-1\n", 2, "unknown G code");
+  expect_error_at("N1.5 G1 X1 F100\n", 1, "N must be a whole number");
+  expect_error_at("N10000000000 G1 X1 F100\n", 1, "N must be a whole number");
+  expect_error_at("T-1\nG1 X1 F100\n", 1, "T must be a whole number");
+  expect_error_at("T2.5\nG1 X1 F100\n", 1, "T must be a whole number");
+  expect_error_at("S100000000000000000000 M3\nG1 X1 F100\n", 1, "spindle speed beyond 200000 rpm");
+  expect_error_at("S200001 M3\nG1 X1 F100\n", 1, "spindle speed beyond 200000 rpm");
+  // The edges themselves are accepted.
+  const Program p = parse("N999999999 T999999 S200000 M3\nG1 X1 F100\n");
+  EXPECT_EQ(p.blocks.front().spindle_rpm, 200000.0);
+}
+
+TEST(GcodeParser, ProgramWithoutMotionRefused) {
+  expect_error_at("", 1, "holds no move");
+  expect_error_at("%\n%\n", 2, "holds no move");
+  expect_error_at("%\nG21 G90 (settings only)\nM3 S1000\nM30\n%\n", 4, "holds no move");
+  // A dwell alone is a program.
+  EXPECT_EQ(parse("G4 P0.5\n").blocks.size(), 1u);
+}
+
+TEST(GcodeParser, ErrorQuotesAShortEscapedExcerpt) {
+  // A 1 MB comment that is never closed, with control bytes and a NUL.
+  std::string text = "G1 X1 F100 (";
+  text += std::string("\x01\x1b[31m", 6);
+  text += std::string(1 << 20, 'A');
+  text.push_back('\0');
+  text += "tail\n";
+  try {
+    parse(text);
+    ADD_FAILURE() << "no error";
+  } catch (const ConfigError& e) {
+    const std::string msg = e.what();
+    EXPECT_LT(msg.size(), 200u) << msg.size();
+    EXPECT_NE(msg.find("prog.nc:1: comment not closed (G1 X1 F100 (\\x01\\x1b[31mAAAA"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("...)"), std::string::npos) << msg;
+    for (char c : msg) EXPECT_TRUE(c >= 0x20 && c < 0x7f) << static_cast<int>(static_cast<unsigned char>(c));
+  }
+}
+
+TEST(GcodeParser, LoadRefusesDirectoriesAndSpecialFiles) {
+  try {
+    load_gcode("/tmp", {0, 0, 0}, kRapid_mm_per_min);
+    ADD_FAILURE() << "no error";
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("is a directory"), std::string::npos) << e.what();
+  }
+  try {
+    load_gcode("/dev/zero", {0, 0, 0}, kRapid_mm_per_min);
+    ADD_FAILURE() << "no error";
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("not a regular file"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace twin::controller

@@ -372,5 +372,59 @@ TEST(InterpolatorErrors, BadArcAndLimits) {
   }
 }
 
+// Durations no run can count (issue 19). Oracle: the program's length over
+// the feed is beyond 2^53 ticks (1e300 mm at any speed), or not finite.
+// Before: num_ticks() cast inf to int64 (undefined) and the run never ended.
+TEST(InterpolatorErrors, AstronomicalDurationsRefusedWithTheLine) {
+  auto expect_refused = [](const std::string& text, const std::string& where) {
+    try {
+      const Trajectory t = plan(text);
+      ADD_FAILURE() << "planned " << t.duration_s() << " s for " << text.substr(0, 40);
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find(where), std::string::npos) << e.what();
+    }
+  };
+  expect_refused("G21 G90\nG1 X1" + std::string(300, '0') + " F1000\n", "test.nc:2:");
+  const std::string big = "1" + std::string(307, '0');
+  expect_refused("G91\nG1 X" + big + " F1000\nX" + big + "\n", "test.nc:2:");
+  expect_refused("G1 X1 F1000\nG4 P" + std::string(20, '9') + "\n", "test.nc:2:");
+  // A plan that fits keeps its exact tick count: 1e5 s of dwell at 1e-4 s.
+  const Trajectory t = plan("G4 P100000\n");
+  EXPECT_EQ(t.num_ticks(), 1000000000);
+}
+
+// Travel (issue 19). Oracle: plane geometry of the programmed moves. The
+// twin has no work offset, so a program fits when its span fits the travel.
+TEST(InterpolatorTravel, SpanOfMovesAndArcExtremesChecked) {
+  const AxisArray<double> lo{0.0, 0.0, -508.0}, hi{559.0, 406.0, 0.0};
+  auto check = [&](const std::string& text, AxisArray<double> start = {0, 0, 0}) {
+    check_travel(parse_gcode(text, "t.nc", start, kRapid_mm_per_min), lo, hi);
+  };
+  auto expect_refused = [&](const std::string& text, const std::string& what, AxisArray<double> start = {0, 0, 0}) {
+    try {
+      check(text, start);
+      ADD_FAILURE() << "accepted: " << text;
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+    }
+  };
+  // Exactly the travel, in any place (negative work coordinates included).
+  EXPECT_NO_THROW(check("G0 X559 Y406 Z-508\n"));
+  EXPECT_NO_THROW(check("G0 X-300\nX259\n"));
+  expect_refused("G0 X1\nX700 Y-100 Z-300\n", "t.nc:2: the move takes x to 700 mm");
+  expect_refused("G0 X-300\nX259.01\n", "t.nc:2:");
+  expect_refused("G0 Y-10\nG91 Y200\nY200\nY20\n", "t.nc:4:");
+  // Arcs are checked at their extremes, not only at their ends: both ends of
+  // this one are at x = 0, 20 mm apart in y, but counter-clockwise the long
+  // way round the centre (300, 10) it reaches x = 300 + 300.17 mm.
+  expect_refused("G3 X0 Y20 I300 J10 F100\n", "the move takes x to 600.167 mm");
+  // Full circles: radius 200 spans 400 mm in x and y (fits 559 and 406),
+  // radius 300 spans 600 mm in x.
+  EXPECT_NO_THROW(check("G3 X100 Y0 I200 J0 F100\n", {100, 0, 0}));
+  expect_refused("G3 X0 Y0 I300 J0 F100\n", "in x");
+  // A quarter circle of radius 280 (span 280 in x and y) fits.
+  EXPECT_NO_THROW(check("G2 X-280 Y0 I0 J280 F100\n", {0, -280, 0}));
+}
+
 }  // namespace
 }  // namespace twin::controller

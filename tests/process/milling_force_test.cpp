@@ -178,6 +178,42 @@ TEST(MillingForce, InvalidInputsThrow) {
   EXPECT_THROW(MillingProcess{setup}, ConfigError);
 }
 
+// Spindle speeds that ask for absurd force sub-step counts (issue 19): S1e20
+// overflowed the int sub-step count (undefined) and reported 7e-15 N, S1e7
+// took 4000 force samples per tick. Oracle: the count n = ceil(Omega Ts /
+// angle_step) from the input (at Ts = 1e-4 s and 1.5 deg: 1e7 rpm -> 4000,
+// 250000 rpm -> 100). The limit is 1000 samples per tick.
+TEST(MillingProcess, ForceSubStepCountBounded) {
+  ProcessSetup setup;
+  setup.tool = flat_tool(10.0, 4, 0.0);
+  setup.coefficients = design_coefficients();
+  setup.stock.outline_mm = StockSpec::rectangle(-20, -10, 40, 10);
+  ProcessInput in;
+  in.p_mm = {0, 0, -1};
+  in.v_mm_per_s = {5, 0, 0};
+  in.Ts_s = 1e-4;
+  for (double rpm : {1e20, 1e7}) {
+    MillingProcess proc(setup);
+    in.spindle_rpm = rpm;
+    try {
+      proc.step(in);
+      ADD_FAILURE() << rpm << " rpm accepted";
+    } catch (const ModelError& e) {
+      EXPECT_NE(std::string(e.what()).find("force samples"), std::string::npos) << e.what();
+    }
+  }
+  MillingProcess proc(setup);
+  in.spindle_rpm = 250000.0;
+  const ProcessOutput out = proc.step(in);
+  EXPECT_GT(std::abs(out.F_avg_N[0]) + std::abs(out.F_avg_N[1]), 1.0);  // it cuts: the force is not lost
+  // At the finest angle step a process file may set (0.05 deg), 100000 rpm
+  // asks for 1200 samples per tick: refused.
+  setup.options.angle_step_deg = 0.05;
+  MillingProcess fine(setup);
+  in.spindle_rpm = 100000.0;
+  EXPECT_THROW(fine.step(in), ModelError);
+}
+
 // clone() deep-copies the stock and the spindle angle: the clone and the
 // original give bit-identical outputs afterwards, and cutting with one leaves
 // the other's stock untouched.

@@ -199,6 +199,10 @@ std::vector<double> upsample_reference(const std::vector<double>& r, std::int64_
   return out;
 }
 
+/// Controller periods rebuilt between two trace samples: a 1 ms log of a
+/// 0.1 ms loop needs 10; 1000 allows a 0.1 s log of that loop.
+constexpr std::int64_t kMaxUpsampling = 1000;
+
 ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& machine_in, std::size_t rows,
                         feeddrive::IntegratorOptions options) {
   ReplayResult res;
@@ -209,6 +213,10 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
     if (std::find(run.axes.begin(), run.axes.end(), a) == run.axes.end()) machine.axes[index(a)].present = false;
   const double Ts = machine.Ts_s;
   const double ratio = run.sample_period_s / Ts;
+  if (!(ratio < static_cast<double>(kMaxUpsampling) + 0.5))
+    throw ConfigError(fmt::format("{}: the trace is sampled every {} s, {:.4g} controller periods of {} s: more than "
+                                  "the {} a replay rebuilds between two samples (check controller_period_s in meta.json)",
+                                  run.trace.source, run.sample_period_s, ratio, Ts, kMaxUpsampling));
   const auto m = static_cast<std::int64_t>(std::llround(ratio));
   if (m < 1 || std::abs(ratio - static_cast<double>(m)) > 0.01)
     throw ConfigError(fmt::format(

@@ -303,6 +303,7 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
     stats.add(s);
     fill_run_trace_row(s, axes, row);
     writer.write_row(row);
+    if (options.progress && (k & 4095) == 0) options.progress(k, total);
   }
   nlohmann::json summary;
   summary["scenario"] = scenario.name;

@@ -5,6 +5,7 @@
 /// the peak force and the time lost.
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -99,6 +100,8 @@ struct RunOutputs {
 struct RunOptions {
   std::filesystem::path out_dir;
   bool plots{true};
+  /// Called every few thousand ticks with (ticks done, ticks in all); may be empty.
+  std::function<void(std::int64_t, std::int64_t)> progress;
 };
 
 /// The whole `twin run`: plan, simulate, stream the trace, write the summary

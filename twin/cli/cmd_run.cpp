@@ -20,6 +20,7 @@ void register_run(CLI::App& app) {
     std::string machine;
     std::vector<std::string> sets;
     bool no_plots{false};
+    RunBudget budget;
   };
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
@@ -29,14 +30,25 @@ void register_run(CLI::App& app) {
   cmd->add_option("--machine", opt->machine, "machine definition (name or YAML file) replacing the scenario's");
   cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.Kp=600")->take_all();
   cmd->add_flag("--no-plots", opt->no_plots, "do not draw the PNG plots");
+  add_budget_options(*cmd, opt->budget);
   cmd->callback([opt]() {
     const auto path = opt->scenario.empty() ? io::default_scenario_path() : io::resolve_scenario_path(opt->scenario);
     io::Scenario scenario = io::load_scenario(path, opt->machine);
     apply_sets(scenario.machine, opt->sets);
+    check_run_budget(scenario, plan_run_size(scenario), opt->budget);
     analysis::RunOptions ro;
     ro.out_dir = opt->out;
     ro.plots = !opt->no_plots;
-    const analysis::RunOutputs out = analysis::run_scenario(scenario, ro);
+    analysis::RunOutputs out;
+    {
+      TerminalProgress progress("twin run " + scenario.name);  // erased at the end of this block
+      ro.progress = [&progress](std::int64_t done, std::int64_t total) { progress.update(done, total); };
+      try {
+        out = analysis::run_scenario(scenario, ro);
+      } catch (const SolverError& e) {
+        throw explain_solver_failure(e, scenario.machine, opt->sets);
+      }
+    }
     const auto& s = out.summary;
     std::printf("%s\n", fmt::format("{}: cycle time {:.4f} s (at programmed feed {:.4f} s, lost at corners {:.4f} s), "
                                     "max contour error {:.2f} um",

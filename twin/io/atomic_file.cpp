@@ -4,7 +4,9 @@
 #include <cstring>
 #include <system_error>
 
+#include <fcntl.h>
 #include <fmt/format.h>
+#include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
 
@@ -53,9 +55,33 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view text)
   f.commit();
 }
 
-std::string read_file(const std::filesystem::path& path) {
-  gzFile gz = gzopen(path.c_str(), "rb");
-  if (gz == nullptr) throw IoError(fmt::format("cannot read {}: {}", path.string(), std::strerror(errno)));
+std::string read_file(const std::filesystem::path& path, std::uintmax_t max_bytes) {
+  auto fail = [&](const std::string& why) {
+    return IoError(fmt::format("cannot read {}: {}", path.string(), why));
+  };
+  // O_NONBLOCK: opening a FIFO must not wait for a writer; it is refused below.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) throw fail(errno == ENOENT ? std::string("no such file") : std::string(std::strerror(errno)));
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) {
+    const int e = errno;
+    ::close(fd);
+    throw fail(std::strerror(e));
+  }
+  if (!S_ISREG(st.st_mode)) {
+    ::close(fd);
+    throw fail(S_ISDIR(st.st_mode) ? "is a directory" : "not a regular file (a FIFO, device or socket)");
+  }
+  const std::string limit = fmt::format("the limit is {:.0f} MB", static_cast<double>(max_bytes) / 1048576.0);
+  if (static_cast<std::uintmax_t>(st.st_size) > max_bytes) {
+    ::close(fd);
+    throw fail(fmt::format("{} bytes, {}", static_cast<long long>(st.st_size), limit));
+  }
+  gzFile gz = gzdopen(fd, "rb");
+  if (gz == nullptr) {
+    ::close(fd);
+    throw fail("cannot open");
+  }
   std::string out;
   char buf[1 << 16];
   for (;;) {
@@ -64,9 +90,13 @@ std::string read_file(const std::filesystem::path& path) {
       int err = 0;
       const std::string msg = gzerror(gz, &err);
       gzclose(gz);
-      throw IoError(fmt::format("cannot read {}: {}", path.string(), msg));
+      throw fail(msg);
     }
     if (n == 0) break;
+    if (out.size() + static_cast<std::size_t>(n) > max_bytes) {
+      gzclose(gz);
+      throw fail(fmt::format("more than {} bytes once uncompressed, {}", max_bytes, limit));
+    }
     out.append(buf, static_cast<std::size_t>(n));
   }
   gzclose(gz);

@@ -119,9 +119,9 @@ process::ToolGeometry parse_tool(const YAML::Node& n, const std::string& where) 
              {"name", "type", "diameter_mm", "flutes", "helix_deg", "corner_radius_mm", "flute_length_mm",
               "runout_rho_mm", "runout_lambda_deg", "source"});
   process::ToolGeometry t;
-  if (n["name"]) t.name = yaml_string(n["name"], at(where, n["name"], p + "name"));
+  if (n["name"]) t.name = yaml_name(n["name"], at(where, n["name"], p + "name"));
   if (!n["type"]) throw ConfigError(fmt::format("{}: missing key 'tool.type' (flat, bull_nose, ball)", where));
-  t.shape = process::parse_tool_shape(yaml_string(n["type"], at(where, n["type"], p + "type")), at(where, n["type"], p + "type"));
+  t.shape = process::parse_tool_shape(yaml_name(n["type"], at(where, n["type"], p + "type")), at(where, n["type"], p + "type"));
   t.diameter_mm = number(n, "diameter_mm", where, p, 0.0, true);
   const double flutes = number(n, "flutes", where, p, 0.0, true);
   if (flutes != std::floor(flutes) || flutes < 1 || flutes > 16)
@@ -149,7 +149,7 @@ process::CuttingCoefficients parse_material(const YAML::Node& n, const std::stri
                                             double tilt_deg) {
   require_map(n, where, "material");
   check_keys(n, where, "material.", {"name", "source", "sets"});
-  std::string name = n["name"] ? yaml_string(n["name"], at(where, n["name"], "material.name")) : "material";
+  std::string name = n["name"] ? yaml_name(n["name"], at(where, n["name"], "material.name")) : "material";
   const YAML::Node sets = n["sets"];
   if (!sets || !sets.IsSequence() || sets.size() == 0)
     throw ConfigError(fmt::format("{}: material.sets must be a non-empty list", where));
@@ -212,7 +212,7 @@ process::ProcessSetup parse_process_setup(const YAML::Node& n, const std::string
   s.spindle_angle0_deg = number(n, "spindle_angle0_deg", where, "process.", 0.0);
   const YAML::Node tool = n["tool"];
   if (!tool) throw ConfigError(fmt::format("{}: missing key 'process.tool'", where));
-  if (tool.IsScalar()) s.tool = load_tool_file(dir / yaml_string(tool, at(where, tool, "process.tool")));
+  if (tool.IsScalar()) s.tool = load_tool_file(dir / yaml_name(tool, at(where, tool, "process.tool")));
   else s.tool = parse_tool(tool, where);
   if (const YAML::Node r = n["runout"]) {
     require_map(r, at(where, r, "process.runout"), "process.runout");
@@ -224,7 +224,7 @@ process::ProcessSetup parse_process_setup(const YAML::Node& n, const std::string
   const YAML::Node mat = n["material"];
   if (!mat) throw ConfigError(fmt::format("{}: missing key 'process.material'", where));
   if (mat.IsScalar())
-    s.coefficients = load_material_file(dir / yaml_string(mat, at(where, mat, "process.material")), s.lead_deg, s.tilt_deg);
+    s.coefficients = load_material_file(dir / yaml_name(mat, at(where, mat, "process.material")), s.lead_deg, s.tilt_deg);
   else
     s.coefficients = parse_material(mat, where, s.lead_deg, s.tilt_deg);
   if (!n["stock"]) throw ConfigError(fmt::format("{}: missing key 'process.stock'", where));

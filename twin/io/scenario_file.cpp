@@ -1,8 +1,11 @@
 #include "twin/io/scenario_file.hpp"
 
+#include <cmath>
+
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
+#include "controller/interpolator.hpp"
 #include "twin/core/error.hpp"
 #include "twin/io/atomic_file.hpp"
 #include "twin/io/machine_file.hpp"
@@ -10,6 +13,10 @@
 #include "twin/io/yaml_util.hpp"
 
 namespace twin::io {
+namespace {
+/// No machine tool reaches 100 m from its origin.
+constexpr double kMaxStart_mm = 1e5;
+}  // namespace
 
 std::filesystem::path default_scenario_path() { return scenarios_dir() / "fadal_pocket_corner" / "scenario.yaml"; }
 
@@ -36,31 +43,36 @@ Scenario load_scenario(const std::filesystem::path& path, const std::string& mac
     const std::string key = kv.first.as<std::string>();
     const std::string w = where + ": " + key;
     if (key == "name") {
-      s.name = yaml_string(kv.second, w);
+      s.name = yaml_name(kv.second, w);
     } else if (key == "description") {
       s.description = yaml_string(kv.second, w);
     } else if (key == "machine") {
-      machine_name = yaml_string(kv.second, w);
+      machine_name = yaml_name(kv.second, w);
     } else if (key == "program") {
-      s.program_path = dir / yaml_string(kv.second, w);
+      s.program_path = dir / yaml_name(kv.second, w);
     } else if (key == "start_mm") {
       if (!kv.second.IsSequence() || kv.second.size() != 3)
         throw ConfigError(fmt::format("{} must be a list [x, y, z]", w));
-      for (std::size_t i = 0; i < 3; ++i) s.start_mm[i] = yaml_number(kv.second[i], fmt::format("{}[{}]", w, i));
+      for (std::size_t i = 0; i < 3; ++i) {
+        s.start_mm[i] = yaml_number(kv.second[i], fmt::format("{}[{}]", w, i));
+        if (!(std::abs(s.start_mm[i]) <= kMaxStart_mm))
+          throw ConfigError(fmt::format("{}[{}] = {:g} mm is beyond +-{:g} mm, the reach of any machine", w, i,
+                                        s.start_mm[i], kMaxStart_mm));
+      }
     } else if (key == "settle_s") {
       s.settle_s = yaml_number(kv.second, w);
       if (s.settle_s < 0.0 || s.settle_s > 60.0) throw ConfigError(fmt::format("{} = {} must be in [0, 60] s", w, s.settle_s));
     } else if (key == "process") {
       process_node = kv.second;
     } else {
-      throw ConfigError(fmt::format("{}: unknown key '{}'", where, key));
+      throw ConfigError(fmt::format("{}: unknown key '{}'", where, escaped(key)));
     }
   }
   if (machine_name.empty() && machine_override.empty())
     throw ConfigError(fmt::format("{}: missing key 'machine'", where));
   if (s.program_path.empty()) throw ConfigError(fmt::format("{}: missing key 'program'", where));
   s.machine = load_machine(resolve_machine_path(machine_override.empty() ? machine_name : machine_override, dir));
-  s.program_text = read_file(s.program_path);
+  s.program_text = read_file(s.program_path, controller::kMaxProgramBytes);
   if (process_node && !process_node.IsNull()) {
     ProcessBinding setup = bind_process(process_node, where + ": process", dir);
     s.process_summary = setup.summary;
@@ -70,7 +82,15 @@ Scenario load_scenario(const std::filesystem::path& path, const std::string& mac
 }
 
 controller::Program parse_program(const Scenario& s) {
-  return controller::parse_gcode(s.program_text, s.program_path.string(), s.start_mm, s.machine.rapid_mm_per_min);
+  controller::Program program =
+      controller::parse_gcode(s.program_text, s.program_path.string(), s.start_mm, s.machine.rapid_mm_per_min);
+  AxisArray<double> lo{}, hi{};
+  for (std::size_t a = 0; a < kNumAxes; ++a) {
+    lo[a] = s.machine.axes[a].travel_min_mm;
+    hi[a] = s.machine.axes[a].travel_max_mm;
+  }
+  controller::check_travel(program, lo, hi);
+  return program;
 }
 
 }  // namespace twin::io

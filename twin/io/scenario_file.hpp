@@ -35,7 +35,9 @@ std::filesystem::path default_scenario_path();
 std::filesystem::path resolve_scenario_path(const std::string& name_or_path);
 /// Loads the scenario; `machine_override` (a name or path) replaces its machine.
 Scenario load_scenario(const std::filesystem::path& path, const std::string& machine_override = {});
-/// Parses the scenario's program against its (possibly overridden) machine.
+/// Parses the scenario's program against its (possibly overridden) machine;
+/// ConfigError if the program does not fit in the machine's travel
+/// (controller::check_travel).
 controller::Program parse_program(const Scenario& scenario);
 
 }  // namespace twin::io

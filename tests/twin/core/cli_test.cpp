@@ -224,5 +224,269 @@ TEST(Cli, CalibrateRunOfAnUnnamedMachineWithAnAxisUnmeasured) {
   EXPECT_TRUE(std::filesystem::exists(out / "overlay.png") || report.find("gnuplot") != std::string::npos);
 }
 
+// ---------------------------------------------------------------------------
+// Hostile inputs (issue 19). Each must end, within the test's own bound, in
+// one line on stderr naming the file and line (or key), a non-zero exit and
+// no file at a final name. Oracle: the input itself (what it asks for, a
+// duration, a span, a size, is known by construction) and the error contract
+// of the readers. A hang is bounded by `timeout` (exit 124 fails the test).
+
+Result twin_bounded(const std::string& args, int seconds = 120) {
+  const auto out = work() / "stdout.txt";
+  const auto err = work() / "stderr.txt";
+  const std::string cmd = "timeout -k 5 " + std::to_string(seconds) + " " + std::string(TWIN_BINARY_DIR) +
+                          "/bin/twin " + args + " >" + out.string() + " 2>" + err.string() + " </dev/null";
+  const int rc = std::system(cmd.c_str());
+  Result r;
+  r.exit_code = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+std::filesystem::path scenario_with(const std::string& dir, const std::string& program,
+                                    const std::string& extra = "start_mm: [0, 0, 0]\n") {
+  file(dir + "/program.nc", program);
+  return file(dir + "/scenario.yaml", "name: " + dir + "\nmachine: fadal2216\nprogram: program.nc\n" + extra);
+}
+
+void expect_no_files(const std::filesystem::path& out) {
+  if (!std::filesystem::exists(out)) return;
+  for (const auto& e : std::filesystem::directory_iterator(out)) ADD_FAILURE() << "left behind: " << e.path();
+}
+
+TEST(CliHostile, NonFiniteOrAstronomicalDurationsRefusedWithTheLine) {
+  const auto out = work() / "out";
+  std::filesystem::remove_all(out);
+  // X1 followed by 300 zeros: 1e300 mm, a planned duration beyond any tick count.
+  const auto s1 = scenario_with("inf", "G21 G90\nG1 X1" + std::string(300, '0') + " F1000\nM30\n");
+  expect_one_line_failure(twin_bounded("run " + s1.string() + " -o " + out.string()), "inf/program.nc:2");
+  // Two incremental moves of 1e307 mm.
+  const std::string big = "1" + std::string(307, '0');
+  const auto s2 = scenario_with("g91", "G21 G91\nG1 X" + big + " F1000\nX" + big + "\nM30\n");
+  expect_one_line_failure(twin_bounded("run " + s2.string() + " -o " + out.string()), "g91/program.nc:2");
+  // A start position no machine reaches.
+  const auto s3 = scenario_with("start", "G21 G90\nG1 Y10 F1000\nM30\n", "start_mm: [1e300, 0, 0]\n");
+  expect_one_line_failure(twin_bounded("run " + s3.string() + " -o " + out.string()), "start_mm[0]");
+  expect_no_files(out);
+}
+
+TEST(CliHostile, MovesBeyondTheTravelRefusedWithTheLine) {
+  const auto out = work() / "out";
+  std::filesystem::remove_all(out);
+  // fadal2216: x travel 559 mm, y 406 mm, z 508 mm.
+  const auto s1 = scenario_with("rapid", "G21 G90\nG1 X10 F1000\nG0 X700 Y-100 Z-300\nM30\n");
+  const Result r1 = twin_bounded("run " + s1.string() + " -o " + out.string());
+  expect_one_line_failure(r1, "rapid/program.nc:3");
+  EXPECT_THAT(r1.err, HasSubstr("travel of 559 mm"));
+  // An arc whose ends are 20 mm apart in y but which, counter-clockwise the
+  // long way round its centre (300, 10) of radius 300.2 mm, reaches x = 600 mm.
+  const auto s2 = scenario_with("bulge", "G21 G90\nG3 X0 Y20 I300 J10 F1000\nM30\n");
+  const Result r2 = twin_bounded("run " + s2.string() + " -o " + out.string());
+  expect_one_line_failure(r2, "bulge/program.nc:2");
+  EXPECT_THAT(r2.err, HasSubstr("in x"));
+  // An arc of radius 1e12 mm (a full circle: start = end).
+  const auto s3 = scenario_with("huge_arc", "G21 G90\nG2 X0 Y0 I1000000000000 F1000\nM30\n");
+  expect_one_line_failure(twin_bounded("run " + s3.string() + " -o " + out.string()), "huge_arc/program.nc:2");
+  expect_no_files(out);
+  // The whole travel is allowed: a 559 mm move in x reaches the planning
+  // stage (and is refused there only by the budget asked for here).
+  const auto s4 = scenario_with("full", "G21 G90\nG0 X559\nM30\n");
+  const Result r4 = twin_bounded("run " + s4.string() + " -o " + out.string() + " --max-duration-s 0.001");
+  expect_one_line_failure(r4, "--max-duration-s");
+}
+
+TEST(CliHostile, LongRunsRefusedBeforeSimulatingWithBothFigures) {
+  const auto out = work() / "out";
+  std::filesystem::remove_all(out);
+  // A dwell of 1e9 s: 1e13 ticks of 1e-4 s.
+  const auto s1 = scenario_with("dwell", "G21 G90\nG4 P1000000000\nM30\n");
+  const Result r1 = twin_bounded("run " + s1.string() + " -o " + out.string());
+  expect_one_line_failure(r1, "--max-duration-s");
+  EXPECT_THAT(r1.err, HasSubstr("--max-trace-mb"));
+  EXPECT_THAT(r1.err, HasSubstr("1e+09 s"));
+  expect_no_files(out);
+  // Ts = 1e-9 s on a 10 mm move: about 1e9 ticks, a trace of hundreds of GB.
+  const auto s2 = scenario_with("fine", "G21 G90\nG1 X10 F1000\nM30\n");
+  const Result r2 = twin_bounded("run " + s2.string() + " -o " + out.string() + " --set Ts=1e-9");
+  expect_one_line_failure(r2, "--max-trace-mb");
+  expect_no_files(out);
+  // The flags set the limits: the same small program is refused under a
+  // 1 ms budget and runs under the defaults.
+  const Result r3 = twin_bounded("run " + s2.string() + " -o " + out.string() + " --max-duration-s 0.001");
+  expect_one_line_failure(r3, "0.001 s (--max-duration-s)");
+  const Result r4 = twin_bounded("run " + s2.string() + " -o " + out.string() + " --no-plots");
+  EXPECT_EQ(r4.exit_code, 0) << r4.err;
+}
+
+TEST(CliHostile, IntegerWordsAndSpindleSpeedRangeChecked) {
+  const auto out = work() / "out";
+  std::filesystem::remove_all(out);
+  const struct {
+    const char* dir;
+    std::string program;
+    const char* what;
+  } cases[] = {
+      {"g_huge", "G21 G90\nG100000000000000000000 X2\nM30\n", "unknown G code"},
+      {"m_huge", "G21 G90\nG1 X1 F100\nM60000000000000000\n", "unknown M code"},
+      {"s_huge", "G21 G90\nS100000000000000000000 M3\nG1 X1 F100\nM30\n", "spindle speed"},
+      {"s_cut", "G21 G90\nS10000000 M3\nG1 X1 F100\nM30\n", "spindle speed"},
+      {"n_frac", "G21 G90\nN1.5 G1 X1 F100\nM30\n", "N must be a whole number"},
+      {"t_neg", "G21 G90\nT-3\nG1 X1 F100\nM30\n", "T must be a whole number"},
+  };
+  for (const auto& c : cases) {
+    const auto s = scenario_with(c.dir, c.program);
+    const Result r = twin_bounded("run " + s.string() + " -o " + out.string());
+    expect_one_line_failure(r, std::string(c.dir) + "/program.nc:");
+    EXPECT_THAT(r.err, HasSubstr(c.what)) << c.dir;
+  }
+  expect_no_files(out);
+}
+
+TEST(CliHostile, EmptyProgramsRefused) {
+  const auto out = work() / "out";
+  for (const auto& [dir, text] : std::vector<std::pair<std::string, std::string>>{
+           {"empty", ""}, {"percent", "%\n%\n"}, {"settings", "%\nG21 G90 (no motion)\nM30\n%\n"}}) {
+    const auto s = scenario_with(dir, text);
+    expect_one_line_failure(twin_bounded("run " + s.string() + " -o " + out.string()), "holds no move");
+  }
+  expect_no_files(out);
+}
+
+TEST(CliHostile, DuplicateAndComplexYamlKeysRefusedWithFileAndLine) {
+  const auto out = work() / "out";
+  // Scenario: program given twice.
+  const auto s1 = scenario_with("dup_scen", "G21 G90\nG1 X1 F100\nM30\n", "start_mm: [0, 0, 0]\nprogram: other.nc\n");
+  expect_one_line_failure(twin_bounded("run " + s1.string() + " -o " + out.string()),
+                          "dup_scen/scenario.yaml:5: key 'program' appears twice");
+  // Machine: the shipped file with a second Kp for x right before the first.
+  std::string machine = slurp(std::filesystem::path(TWIN_SOURCE_DIR) / "scenarios/machines/fadal2216.yaml");
+  const auto kp = machine.find("    Kp:");
+  ASSERT_NE(kp, std::string::npos);
+  machine.insert(kp, "    Kp: 1000000\n");
+  const auto m = file("dup_machine/m.yaml", machine);
+  const auto s2 = scenario_with("dup_machine", "G21 G90\nG1 X1 F100\nM30\n");
+  const Result r2 = twin_bounded("run " + s2.string() + " --machine " + m.string() + " -o " + out.string());
+  expect_one_line_failure(r2, m.string() + ":");
+  EXPECT_THAT(r2.err, HasSubstr("key 'Kp' appears twice"));
+  // A complex (list) key: named with file and line, not a bare yaml-cpp "bad conversion".
+  const auto s3 = scenario_with("complex", "G21 G90\nG1 X1 F100\nM30\n", "? [a, b]\n: 1\n");
+  expect_one_line_failure(twin_bounded("run " + s3.string() + " -o " + out.string()),
+                          "complex/scenario.yaml:4: a key must be a plain name");
+  // The process section (read by the same loader): a duplicate inside it.
+  const auto s4 = scenario_with("dup_process", "G21 G90\nG1 X1 F100\nM30\n",
+                                "process:\n  lead_deg: 0\n  lead_deg: 5\n");
+  expect_one_line_failure(twin_bounded("run " + s4.string() + " -o " + out.string()),
+                          "dup_process/scenario.yaml:6: key 'lead_deg' appears twice");
+  // Newlines smuggled into a key or a file name (YAML escapes): still one
+  // line, the bytes shown escaped (found by the machine-file fuzzer).
+  const auto s5 = scenario_with("nl_key", "G21 G90\nG1 X1 F100\nM30\n", "\"a\\nb\": 1\n");
+  expect_one_line_failure(twin_bounded("run " + s5.string() + " -o " + out.string()),
+                          "nl_key/scenario.yaml:4: a key must be a plain name, not 'a\\x0ab'");
+  const auto s6 = file("nl_prog/scenario.yaml", "name: n\nmachine: fadal2216\nprogram: \"p\\n.nc\"\n");
+  expect_one_line_failure(twin_bounded("run " + s6.string() + " -o " + out.string()), "single line");
+  expect_no_files(out);
+}
+
+TEST(CliHostile, OnlyRegularFilesOfBoundedSizeAreRead) {
+  const auto out = work() / "out";
+  // program: /dev/zero
+  const auto s1 = file("zero/scenario.yaml", "name: zero\nmachine: fadal2216\nprogram: /dev/zero\n");
+  expect_one_line_failure(twin_bounded("run " + s1.string() + " -o " + out.string()),
+                          "/dev/zero: not a regular file");
+  // A FIFO as the program: no writer ever comes; the read must not wait.
+  const auto fifo = work() / "fifo/program.nc";
+  std::filesystem::create_directories(fifo.parent_path());
+  std::filesystem::remove(fifo);
+  ASSERT_EQ(std::system(("mkfifo " + fifo.string()).c_str()), 0);
+  const auto s2 = file("fifo/scenario.yaml", "name: fifo\nmachine: fadal2216\nprogram: program.nc\n");
+  expect_one_line_failure(twin_bounded("run " + s2.string() + " -o " + out.string(), 30), "not a regular file");
+  // A directory as the machine file.
+  const auto dir = work() / "a_dir.yaml";
+  std::filesystem::create_directories(dir);
+  const auto s3 = scenario_with("dirmachine", "G21 G90\nG1 X1 F100\nM30\n");
+  expect_one_line_failure(twin_bounded("run " + s3.string() + " --machine " + dir.string() + " -o " + out.string()),
+                          "is a directory");
+  // A measured trace that links to /dev/zero.
+  file("zerorun/meta.json", R"({"machine": "fadal2216", "controller_period_s": 0.0001})");
+  const auto link = work() / "zerorun/trace.csv";
+  std::filesystem::remove(link);
+  std::filesystem::create_symlink("/dev/zero", link);
+  expect_one_line_failure(twin_bounded("replay " + (work() / "zerorun").string() + " -o " + out.string()),
+                          "not a regular file");
+  // A program over the 256 MB limit: a sparse file costs no disk.
+  const auto bigprog = work() / "bigprog/program.nc";
+  std::filesystem::create_directories(bigprog.parent_path());
+  { std::ofstream(bigprog) << "G1 X1 F100\n"; }
+  std::filesystem::resize_file(bigprog, (std::uintmax_t{256} << 20) + 1);
+  const auto s5 = file("bigprog/scenario.yaml", "name: big\nmachine: fadal2216\nprogram: program.nc\n");
+  expect_one_line_failure(twin_bounded("run " + s5.string() + " -o " + out.string()), "the limit is 256 MB");
+  std::filesystem::remove(bigprog);
+  expect_no_files(out);
+}
+
+TEST(CliHostile, ReplayRefusesAControllerPeriodFarBelowTheSamplePeriod) {
+  // meta.json asks for Ts = 1e-9 s under a 1e-4 s trace: 1e5 controller
+  // periods per sample. Before: std::bad_alloc; now a message with the figures.
+  file("finerun/meta.json", R"({"machine": "fadal2216", "controller_period_s": 1e-9, "sample_period_s": 0.0001})");
+  std::string csv = "t_s,x_ref_mm,x_mm\n";
+  for (int k = 0; k < 2000; ++k) csv += std::to_string(k * 1e-4) + ",0,0\n";
+  file("finerun/trace.csv", csv);
+  const auto out = work() / "out";
+  const Result r = twin_bounded("replay " + (work() / "finerun").string() + " -o " + out.string());
+  expect_one_line_failure(r, "controller periods");
+  EXPECT_THAT(r.err, Not(HasSubstr("bad_alloc")));
+  expect_no_files(out);
+}
+
+TEST(CliHostile, GcodeErrorsQuoteAShortEscapedExcerpt) {
+  const auto out = work() / "out";
+  // A 1 MB comment never closed, with a control byte and a NUL: the message
+  // quotes the line, and stays short.
+  std::string line = "G1 X1 F100 (\x01";
+  line += std::string(1 << 20, 'A');
+  line.push_back('\0');
+  line += "tail";
+  const auto s = scenario_with("longline", "G21 G90\n" + line + "\nM30\n");
+  const Result r = twin_bounded("run " + s.string() + " -o " + out.string());
+  expect_one_line_failure(r, "longline/program.nc:2: comment not closed");
+  EXPECT_LT(r.err.size(), 400u) << r.err.size() << " bytes";
+  EXPECT_THAT(r.err, HasSubstr("..."));
+  EXPECT_EQ(r.err.find('\x01'), std::string::npos);
+  expect_no_files(out);
+}
+
+TEST(CliHostile, IntegratorFailureNamesTheAxisAndTheParameter) {
+  const auto s = scenario_with("tinyJ", "G21 G90\nG1 X5 F1000\nM30\n");
+  const auto out = work() / "out";
+  const Result r = twin_bounded("run " + s.string() + " -o " + out.string() + " --set x.J=1e-12");
+  expect_one_line_failure(r, "axis x");
+  EXPECT_THAT(r.err, HasSubstr("J = 1e-12"));
+  expect_no_files(out);
+}
+
+// Progress of long runs on a terminal, never in a pipe. Oracle: the run's
+// tick count (a 12 s dwell is 120000 ticks of 1e-4 s, above the 100000 from
+// which progress is shown; 1 % of it is 1200 ticks). `script` gives the run a
+// terminal; without it (a file) stderr stays empty.
+TEST(CliHostile, ProgressOnATerminalOnly) {
+  const auto s = scenario_with("dwell12", "G21 G90\nG4 P12\nM30\n");
+  const auto out = work() / "out";
+  const Result piped = twin_bounded("run " + s.string() + " -o " + out.string() + " --no-plots");
+  ASSERT_EQ(piped.exit_code, 0) << piped.err;
+  EXPECT_EQ(piped.err, "");
+  if (std::system("command -v script >/dev/null 2>&1") != 0) GTEST_SKIP() << "no `script` to give the run a terminal";
+  const auto log = work() / "tty.txt";
+  const std::string inner = "timeout 120 " + std::string(TWIN_BINARY_DIR) + "/bin/twin run " + s.string() + " -o " +
+                            out.string() + " --no-plots";
+  const std::string cmd = "script -qec '" + inner + "' /dev/null >" + log.string() + " 2>&1 </dev/null";
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  const std::string tty = slurp(log);
+  EXPECT_THAT(tty, HasSubstr("twin run dwell12: "));
+  EXPECT_THAT(tty, HasSubstr("% ("));
+  EXPECT_THAT(tty, HasSubstr("of 120500 ticks)"));  // 120000 + 500 ticks of settle_s = 0.05 s
+  EXPECT_THAT(tty, HasSubstr("cycle time"));
+}
+
 }  // namespace
 }  // namespace twin
