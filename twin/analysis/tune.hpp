@@ -29,6 +29,7 @@
 #include "controller/interpolator.hpp"
 #include "twin/analysis/linear_analysis.hpp"
 #include "twin/analysis/run_report.hpp"
+#include "twin/io/atomic_file.hpp"
 #include "twin/io/scenario_file.hpp"
 
 namespace twin::analysis {
@@ -84,6 +85,8 @@ struct ScenarioMetrics {
   AxisArray<double> max_tracking_error_mm{};   ///< through the corners
   AxisArray<double> rms_tracking_error_mm{};   ///< through the corners
   AxisArray<double> u_peak_V{};                ///< over the whole window
+  AxisArray<double> u_peak_t_s{};              ///< when the peak |u| was reached
+  AxisArray<int> u_peak_block{};               ///< program block running then (-1: none, settling)
   AxisArray<std::int64_t> saturated_ticks{};
   double max_contour_error_mm{0.0};            ///< through the corners
   double rms_contour_error_mm{0.0};            ///< through the corners
@@ -126,6 +129,8 @@ ScenarioMetrics simulate_window(const io::Scenario& scenario, const PlannedScena
 
 struct AxisTuneResult {
   Axis axis{Axis::kX};
+  bool tuned{true};                          ///< false: the machine's gains were kept (see note)
+  std::string note;                          ///< why the gains were kept, or what limited the tuning
   controller::PositionLoopParams before, after;
   FeedforwardGains model_feedforward;
   LoopAnalysis analysis_before, analysis_after;
@@ -157,8 +162,9 @@ nlohmann::json tune_report(const io::Scenario& scenario, const TuneOptions& opti
 
 /// Writes the Bode plot (bode.png: |L|, arg L, |S|, |T| before and after per axis) and
 /// the tracking error through the first tuning corner before and after
-/// (corner_error.png). Returns the files written.
-std::vector<std::filesystem::path> plot_tune(const std::filesystem::path& out_dir, const io::Scenario& scenario,
+/// (corner_error.png), with their data bode.dat and corner_error.dat, in the result
+/// set. Returns the plots written (staged paths).
+std::vector<std::filesystem::path> plot_tune(io::ResultSet& results, const io::Scenario& scenario,
                                              const TuneResult& result);
 
 }  // namespace twin::analysis

@@ -1,6 +1,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -85,64 +86,22 @@ void write_residuals(const std::filesystem::path& path, const analysis::Measured
   w.commit();
 }
 
-// run_gnuplot renames <name>.tmp.png to <name> once gnuplot succeeded.
-std::string tmp_png(const std::filesystem::path& p) {
-  auto t = p;
-  t += ".tmp.png";
-  return analysis::gnuplot_quote(t);
-}
-
-std::vector<std::filesystem::path> make_plots(const std::filesystem::path& out, const analysis::MeasuredRun& run,
+// The figures are drawn by analysis::plot_calibration from residuals.csv.
+std::vector<std::filesystem::path> make_plots(io::ResultSet& results, const analysis::MeasuredRun& run,
                                               const analysis::CalibrationResult& r) {
   const std::vector<Axis> axes = measured_axes(run);
   if (axes.empty()) throw ConfigError("no axis logs its measured position <a>_mm: no residual to plot");
-  const auto data = out / "residuals.csv";
-  write_residuals(data, run, r, axes);
-  const std::string d = analysis::gnuplot_quote(data);
-  std::string script = "set datafile separator ','\nset key autotitle columnhead\nset grid\n";
-  std::vector<std::filesystem::path> outputs;
-  const std::size_t na = axes.size();
-  for (const char* which : {"before", "after"}) {
-    const auto png = out / fmt::format("residual_{}.png", which);
-    outputs.push_back(png);
-    script += fmt::format("set terminal pngcairo size 1200,{} noenhanced\nset output {}\nset multiplot layout {},2\n",
-                          300 * na, tmp_png(png), na);
-    for (std::size_t j = 0; j < na; ++j) {
-      const std::size_t c0 = 2 + 5 * j;  // gnuplot columns are 1-based: t_s is 1
-      const std::string an(axis_name(axes[j]));
-      const std::size_t ce = c0 + (std::string(which) == "before" ? 1 : 2);
-      const std::size_t cu = c0 + (std::string(which) == "before" ? 3 : 4);
-      script += fmt::format("set title '{} tracking error, measured minus model ({})'\nset xlabel 't s'\n"
-                            "set ylabel 'mm'\nplot {} using 1:{} with lines notitle\n",
-                            an, which, d, ce);
-      script += fmt::format("set title '{} low-passed u, measured minus model ({})'\nset ylabel 'V (or A)'\n"
-                            "plot {} using 1:{} with lines notitle\n",
-                            an, which, d, cu);
-    }
-    script += "unset multiplot\n";
-  }
-  if (!r.added.empty() && std::find(axes.begin(), axes.end(), r.added.front().candidate.axis) != axes.end()) {
+  write_residuals(results.path("residuals.csv"), run, r, axes);
+  std::optional<analysis::CalibrationEvidence> evidence;
+  if (!r.added.empty()) {
     const auto& c = r.added.front().candidate;
-    std::size_t j = 0;
-    for (; j < na; ++j)
-      if (axes[j] == c.axis) break;
-    const std::size_t c0 = 2 + 5 * j;
-    const auto png = out / "evidence.png";
-    outputs.push_back(png);
-    const bool in_x = c.effect == "cogging" || c.effect == "screw_pitch_error" ||
-                      c.effect == "position_dependent_friction";
-    script += fmt::format("set terminal pngcairo size 1200,500 noenhanced\nset output {}\nset multiplot layout 1,2\n",
-                          tmp_png(png));
-    script += fmt::format("set title '{} on {}: low-passed u residual of the model without it'\n"
-                          "set xlabel '{}'\nset ylabel 'V (or A)'\nplot {} using {}:{} with dots notitle\n",
-                          c.effect, axis_name(c.axis), in_x ? "x mm" : "t s", d, in_x ? c0 : 1, c0 + 3);
-    script += fmt::format("set title 'tracking-error residual, without (red) and with (blue) it'\nset xlabel '{}'\n"
-                          "set ylabel 'mm'\nplot {} using {}:{} with dots lc rgb 'red' notitle, '' using {}:{} with "
-                          "dots lc rgb 'blue' notitle\nunset multiplot\n",
-                          in_x ? "x mm" : "t s", d, in_x ? c0 : 1, c0 + 1, in_x ? c0 : 1, c0 + 2);
+    const auto it = std::find(axes.begin(), axes.end(), c.axis);
+    if (it != axes.end())
+      evidence = analysis::CalibrationEvidence{
+          c.effect, c.axis, static_cast<std::size_t>(it - axes.begin()),
+          c.effect == "cogging" || c.effect == "screw_pitch_error" || c.effect == "position_dependent_friction"};
   }
-  analysis::run_gnuplot(out, script, outputs);
-  return outputs;
+  return analysis::plot_calibration(results, "residuals.csv", axes, evidence);
 }
 
 }  // namespace
@@ -166,6 +125,7 @@ void register_calibrate(CLI::App& app) {
   cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.J=0.008")->take_all();
   cmd->add_flag("--no-plots", opt->no_plots, "skip the gnuplot figures");
   cmd->callback([opt]() {
+    refuse_output_over_input("calibrate", opt->out, opt->run, opt->machine);
     const analysis::MeasuredRun run = analysis::load_run(opt->run);
     std::vector<std::string> notes;
     sim::MachineDefinition machine = analysis::machine_for_run(run, opt->machine, &notes);
@@ -173,22 +133,23 @@ void register_calibrate(CLI::App& app) {
     analysis::CalibrationResult r = analysis::calibrate(run, machine);
     r.notes.insert(r.notes.begin(), notes.begin(), notes.end());
     const std::filesystem::path out(opt->out);
-    io::ensure_directory(out);
-    analysis::write_replay_trace(out / "trace_before.csv", r.replay_before);
-    analysis::write_replay_trace(out / "trace.csv", r.replay_after);
-    io::write_file_atomic(out / "machine.yaml",
+    io::ResultSet results(out, "calibrate");  // the files appear in OUT together, manifest.json last
+    analysis::write_replay_trace(results.path("trace_before.csv"), r.replay_before);
+    analysis::write_replay_trace(results.path("trace.csv"), r.replay_after);
+    io::write_file_atomic(results.path("machine.yaml"),
                           io::machine_to_yaml(r.final_machine, fmt::format("calibrated by twin calibrate from {}: "
                                                                            "identified J, B, Tc and added effects",
                                                                            opt->run)));
-    io::write_file_atomic(out / "report.json", analysis::calibration_report_json(r).dump(2) + "\n");
+    io::write_file_atomic(results.path("report.json"), analysis::calibration_report_json(r).dump(2) + "\n");
     if (!opt->no_plots) {
       try {
-        make_plots(out, run, r);
+        make_plots(results, run, r);
       } catch (const Error& e) {
         r.notes.push_back(fmt::format("plots not drawn: {}", e.what()));
       }
     }
-    io::write_file_atomic(out / "report.md", analysis::calibration_report_markdown(r, opt->run));
+    io::write_file_atomic(results.path("report.md"), analysis::calibration_report_markdown(r, opt->run));
+    results.commit();
     for (const auto& n : r.notes) std::fprintf(stderr, "twin calibrate: note: %s\n", n.c_str());
     std::string added;
     for (const auto& a : r.added)

@@ -27,14 +27,16 @@ void register_replay(CLI::App& app) {
   cmd->add_option("--machine", opt->machine, "machine definition (name or YAML file) replacing the run's meta.machine");
   cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.J=0.008")->take_all();
   cmd->callback([opt]() {
+    refuse_output_over_input("replay", opt->out, opt->run, opt->machine);
     const analysis::MeasuredRun run = analysis::load_run(opt->run);
     std::vector<std::string> notes = run.notes;
     sim::MachineDefinition machine = analysis::machine_for_run(run, opt->machine, &notes);
     apply_sets(machine, opt->sets);
     analysis::ReplayResult r = analysis::replay_run(run, machine);
-    io::ensure_directory(opt->out);
-    const auto path = std::filesystem::path(opt->out) / "trace.csv";
-    analysis::write_replay_trace(path, r);
+    io::ResultSet results(opt->out, "replay");
+    analysis::write_replay_trace(results.path("trace.csv"), r);
+    results.commit();
+    const auto path = results.final_path("trace.csv");
     notes.insert(notes.end(), r.notes.begin(), r.notes.end());
     for (const auto& n : notes) std::fprintf(stderr, "twin replay: note: %s\n", n.c_str());
     std::printf("replayed %zu samples of %s on machine %s; wrote %s\n", r.t_s.size(), opt->run.c_str(),
