@@ -82,11 +82,19 @@ PlannedScenario plan_scenario(const io::Scenario& scenario) {
   if (p.tuning_corners.empty()) p.tuning_corners = p.corners;
   p.total_ticks =
       p.trajectory.num_ticks() + static_cast<std::int64_t>(std::ceil(scenario.settle_s / scenario.machine.Ts_s));
+  if (p.tuning_corners.empty()) {
+    // A program without corners (a straight slot): its errors are judged over the whole run.
+    CornerWindow whole;
+    whole.k_begin = 0;
+    whole.k_end = p.total_ticks;
+    whole.t_end_s = static_cast<double>(p.total_ticks) * p.trajectory.Ts_s();
+    p.tuning_corners.push_back(whole);
+  }
   return p;
 }
 
 SimulationWindow full_window(const PlannedScenario& planned) {
-  return SimulationWindow{0, planned.total_ticks, planned.corners};
+  return SimulationWindow{0, planned.total_ticks, planned.corners.empty() ? planned.tuning_corners : planned.corners};
 }
 
 SimulationWindow corner_window(const PlannedScenario& planned, double before_s, double after_s) {
@@ -349,6 +357,29 @@ AxisTuneResult axis_result(const AxisScales& s, const controller::PositionLoopPa
   return ar;
 }
 
+/// The largest alpha in [0, 1] (to 1/32) for which axis `a` with gains `g`, its feedforward
+/// K1, K2 scaled by alpha, keeps its peak |u| within `limit_V` on the window (the other axes
+/// as in `machine`); -1 when even alpha = 0 does not. At most 6 simulations.
+double reachable_feedforward(const io::Scenario& scenario, const PlannedScenario& planned,
+                             sim::MachineDefinition machine, Axis a, const controller::PositionLoopParams& g,
+                             const SimulationWindow& window, double limit_V) {
+  auto ok = [&](double alpha) {
+    controller::PositionLoopParams ga = g;
+    ga.K1_V_s2_per_mm *= alpha;
+    ga.K2_V_s_per_mm *= alpha;
+    machine.axes[index(a)].loop = ga;
+    const ScenarioMetrics m = simulate_window(scenario, planned, machine, window);
+    return m.completed && m.u_peak_V[index(a)] <= limit_V;
+  };
+  if (!ok(0.0)) return -1.0;
+  double lo = 0.0, hi = 1.0;
+  for (int i = 0; i < 5; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (ok(mid) ? lo : hi) = mid;
+  }
+  return lo;
+}
+
 }  // namespace
 
 TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) {
@@ -455,8 +486,9 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
         kept.emplace_back(
             scales[i],
             fmt::format("its own gains already reach peak |u| {:.3f} V > {:.3f} V ({:g} x u_max) on this scenario, at "
-                        "t = {:.4f} s {} ({} ticks at the clamp); the |u| limit cannot be met there by any gains the "
-                        "scenario could judge, so axis {} is not tuned on it",
+                        "t = {:.4f} s {} ({} ticks at the clamp), so the scenario cannot show that new gains keep the "
+                        "limit; axis {} is left as it is (tune it on a scenario without that move, or raise "
+                        "--u-fraction)",
                         peak, limit, c.u_fraction_max, result.full_before.u_peak_t_s[index(a)],
                         motion_text(planned, result.full_before.u_peak_block[index(a)]),
                         result.full_before.saturated_ticks[index(a)], axis_name(a)));
@@ -477,8 +509,52 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
     return result;
   }
 
-  // Stage B: the coupled simulation through the corners.
+  // Stage B: the coupled simulation through the corners. Its starting point (stage-A
+  // feedback, model feedforward) must keep the |u| limit on the window: an axis that breaks
+  // it starts with its feedforward scaled down to what keeps it (or, if even no feedforward
+  // does, keeps its own gains), so the search starts from reachable gains.
   const SimulationWindow window = corner_window(planned, options.window_before_s, options.window_after_s);
+  std::vector<std::string> limited(kNumAxes);  // per axis: what limited the tuning
+  {
+    sim::MachineDefinition ms = m0;
+    for (std::size_t i = 0; i < scales.size(); ++i) ms.axes[index(scales[i].axis)].loop = scales[i].gains(&q0[5 * i]);
+    const ScenarioMetrics start = simulate_window(scenario, planned, ms, window);
+    std::vector<AxisScales> reachable;
+    std::vector<double> q_reachable;
+    for (std::size_t i = 0; i < scales.size(); ++i) {
+      const Axis a = scales[i].axis;
+      const double limit = c.u_fraction_max * m0.axes[index(a)].loop.u_max_V;
+      std::vector<double> q(q0.begin() + static_cast<std::ptrdiff_t>(5 * i),
+                            q0.begin() + static_cast<std::ptrdiff_t>(5 * i + 5));
+      if (start.completed && start.u_peak_V[index(a)] > limit) {
+        const double alpha = reachable_feedforward(scenario, planned, ms, a, scales[i].gains(q.data()), window, limit);
+        const std::string where = fmt::format("with the model feedforward the peak |u| is {:.3f} V > {:.3f} V at t = "
+                                              "{:.4f} s {}",
+                                              start.u_peak_V[index(a)], limit, start.u_peak_t_s[index(a)],
+                                              motion_text(planned, start.u_peak_block[index(a)]));
+        if (alpha < 0.0) {
+          kept.emplace_back(scales[i], where + "; without feedforward too, at the nearest gains meeting the margins, so "
+                                               "no starting point keeps the limit");
+          continue;
+        }
+        q[3] *= alpha;
+        q[4] *= alpha;
+        limited[index(a)] = fmt::format("{}; the search started from {:.3f} x the model feedforward", where, alpha);
+        ms.axes[index(a)].loop = scales[i].gains(q.data());
+      }
+      reachable.push_back(scales[i]);
+      q_reachable.insert(q_reachable.end(), q.begin(), q.end());
+    }
+    scales = std::move(reachable);
+    q0 = std::move(q_reachable);
+  }
+  if (scales.empty()) {
+    result.feasible = false;
+    result.message = kept_text();
+    finish_kept(result.full_before, result.full_before);
+    result.full_after = result.full_before;
+    return result;
+  }
   StageB data;
   data.scenario = &scenario;
   data.planned = &planned;
@@ -564,19 +640,41 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
       tuned.push_back(s);
       continue;
     }
+    if (ar.constraints_after.linear_ok) {
+      // Only the |u| limit is broken: scale this axis's feedforward down to what keeps it.
+      const double limit = ar.constraints_after.u_limit_V;
+      const double alpha = reachable_feedforward(scenario, planned, result.machine_after, s.axis,
+                                                 result.machine_after.axes[index(s.axis)].loop, full, limit);
+      if (alpha >= 0.0) {
+        auto& g = result.machine_after.axes[index(s.axis)].loop;
+        g.K1_V_s2_per_mm *= alpha;
+        g.K2_V_s_per_mm *= alpha;
+        limited[index(s.axis)] +=
+            fmt::format("{}on the full scenario the gains tuned on the corner window reach peak |u| {:.3f} V > {:.3f} "
+                        "V at t = {:.4f} s {}: the feedforward was scaled by {:.3f} to keep the limit",
+                        limited[index(s.axis)].empty() ? "" : "; ", ar.constraints_after.u_peak_V, limit,
+                        result.full_after.u_peak_t_s[index(s.axis)],
+                        motion_text(planned, result.full_after.u_peak_block[index(s.axis)]), alpha);
+        tuned.push_back(s);
+        continue;
+      }
+    }
     kept.emplace_back(s, fmt::format("the gains tuned on the corner window break a constraint on the full scenario "
-                                     "({}; peak at t = {:.4f} s {}), so axis {} keeps its own gains",
+                                     "({}; peak |u| at t = {:.4f} s {}) where its own gains keep it, so axis {} "
+                                     "keeps its own gains",
                                      ar.constraints_after.violation, result.full_after.u_peak_t_s[index(s.axis)],
                                      motion_text(planned, result.full_after.u_peak_block[index(s.axis)]),
                                      axis_name(s.axis)));
     result.machine_after.axes[index(s.axis)].loop = s.start;
   }
-  if (tuned.size() != scales.size())
-    result.full_after = simulate_window(scenario, planned, result.machine_after, full);
+  bool changed = tuned.size() != scales.size();
+  for (const auto& l : limited) changed = changed || l.find("on the full scenario") != std::string::npos;
+  if (changed) result.full_after = simulate_window(scenario, planned, result.machine_after, full);
   result.feasible = !tuned.empty();
   for (const auto& s : tuned) {
     AxisTuneResult ar =
         axis_result(s, result.machine_after.axes[index(s.axis)].loop, result.full_before, result.full_after, c);
+    ar.note = limited[index(s.axis)];
     if (!ar.constraints_after.violation.empty() && result.feasible) {
       result.feasible = false;
       result.message = fmt::format("tuned gains break a constraint on the full scenario: {}",
@@ -798,8 +896,10 @@ std::vector<std::filesystem::path> plot_tune(io::ResultSet& results, const io::S
     const std::string png = "corner_error.png";
     script += fmt::format("set output {}\nset multiplot layout 2,1\nunset logscale x\nset xlabel 't [s]'\n",
                           gnuplot_output(png));
-    script += fmt::format("set ylabel 'um'\nset title 'Tracking error through the corner at line {}'\nplot ",
-                          cw.line_after);
+    script += fmt::format("set ylabel 'um'\nset title {}\nplot ",
+                          gnuplot_text(planned.corners.empty()
+                                           ? std::string("Tracking error over the whole scenario (it has no corner)")
+                                           : fmt::format("Tracking error through the corner at line {}", cw.line_after)));
     int col = 2;
     bool first = true;
     for (const auto& a : r.axes) {

@@ -156,6 +156,7 @@ void register_tune(CLI::App& app) {
                              a.analysis_after.gain_margin_dB, a.analysis_before.sensitivity_peak,
                              a.analysis_after.sensitivity_peak, a.analysis_before.bandwidth_Hz,
                              a.analysis_after.bandwidth_Hz));
+      if (!a.note.empty()) print_line(fmt::format("axis {}: {}", axis_name(a.axis), a.note));
     }
     if (check_metrics)
       print_line(fmt::format("check scenario {}: max contour error through the corners {:.3f} um -> {:.3f} um",
