@@ -97,11 +97,14 @@ SimulationWindow full_window(const PlannedScenario& planned) {
   return SimulationWindow{0, planned.total_ticks, planned.corners.empty() ? planned.tuning_corners : planned.corners};
 }
 
-SimulationWindow corner_window(const PlannedScenario& planned, double before_s, double after_s) {
+SimulationWindow corner_window(const PlannedScenario& planned, double before_s, double after_s, double max_span_s) {
   if (planned.tuning_corners.empty()) return full_window(planned);
   const double Ts = planned.trajectory.Ts_s();
   SimulationWindow w;
-  w.corners = planned.tuning_corners;
+  // The first tuning corner, and the next ones while they end within max_span_s of its start.
+  const auto& first = planned.tuning_corners.front();
+  for (const auto& c : planned.tuning_corners)
+    if (w.corners.empty() || static_cast<double>(c.k_end - first.k_begin) * Ts <= max_span_s) w.corners.push_back(c);
   w.k_begin = std::max<std::int64_t>(0, w.corners.front().k_begin - static_cast<std::int64_t>(std::llround(before_s / Ts)));
   w.k_end = std::min(planned.total_ticks, w.corners.back().k_end + static_cast<std::int64_t>(std::llround(after_s / Ts)));
   return w;
@@ -388,9 +391,12 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
   result.machine_before = m0;
   result.machine_after = m0;
   if (options.axes.empty()) throw ConfigError("tune: no axis to tune");
-  if (!(options.gain_range > 1.0) || !(options.feedforward_range > 0.0) || options.max_evaluations < 1)
-    throw ConfigError(fmt::format("tune: gain_range {} must be > 1, feedforward_range {} > 0, max_evaluations {} >= 1",
-                                  options.gain_range, options.feedforward_range, options.max_evaluations));
+  if (!(options.gain_range > 1.0) || !(options.feedforward_range > 0.0) || options.max_evaluations < 1 ||
+      !(options.max_window_span_s > 0.0))
+    throw ConfigError(fmt::format("tune: gain_range {} must be > 1, feedforward_range {} > 0, max_evaluations {} >= 1, "
+                                  "--max-window {} s > 0",
+                                  options.gain_range, options.feedforward_range, options.max_evaluations,
+                                  options.max_window_span_s));
   const TuneConstraints& c = options.constraints;
   std::vector<AxisScales> requested;
   for (Axis a : options.axes) {
@@ -513,7 +519,8 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
   // feedback, model feedforward) must keep the |u| limit on the window: an axis that breaks
   // it starts with its feedforward scaled down to what keeps it (or, if even no feedforward
   // does, keeps its own gains), so the search starts from reachable gains.
-  const SimulationWindow window = corner_window(planned, options.window_before_s, options.window_after_s);
+  const SimulationWindow window =
+      corner_window(planned, options.window_before_s, options.window_after_s, options.max_window_span_s);
   std::vector<std::string> limited(kNumAxes);  // per axis: what limited the tuning
   {
     sim::MachineDefinition ms = m0;
@@ -533,8 +540,8 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
                                               start.u_peak_V[index(a)], limit, start.u_peak_t_s[index(a)],
                                               motion_text(planned, start.u_peak_block[index(a)]));
         if (alpha < 0.0) {
-          kept.emplace_back(scales[i], where + "; without feedforward too, at the nearest gains meeting the margins, so "
-                                               "no starting point keeps the limit");
+          kept.emplace_back(scales[i], where + ", and above it without feedforward too (feedback at the nearest gains "
+                                               "meeting the margins): no starting point keeps the limit");
           continue;
         }
         q[3] *= alpha;
@@ -660,10 +667,11 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
       }
     }
     kept.emplace_back(s, fmt::format("the gains tuned on the corner window break a constraint on the full scenario "
-                                     "({}; peak |u| at t = {:.4f} s {}) where its own gains keep it, so axis {} "
+                                     "({}; peak |u| at t = {:.4f} s {}{}) where its own gains keep it, so axis {} "
                                      "keeps its own gains",
                                      ar.constraints_after.violation, result.full_after.u_peak_t_s[index(s.axis)],
                                      motion_text(planned, result.full_after.u_peak_block[index(s.axis)]),
+                                     ar.constraints_after.linear_ok ? ", also with no feedforward" : "",
                                      axis_name(s.axis)));
     result.machine_after.axes[index(s.axis)].loop = s.start;
   }
@@ -777,6 +785,7 @@ nlohmann::json tune_report(const io::Scenario& scenario, const TuneOptions& opti
                  {"max_evaluations", options.max_evaluations},
                  {"window_before_s", options.window_before_s},
                  {"window_after_s", options.window_after_s},
+                 {"max_window_span_s", options.max_window_span_s},
                  {"objective_before", r.objective_before},
                  {"objective_after", r.objective_after}};
   std::vector<Axis> axes;

@@ -19,6 +19,7 @@
 /// in steady motion, see docs/tuning.md); the result is judged on the full scenario.
 #include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -48,6 +49,7 @@ struct TuneOptions {
   int max_evaluations{160};            ///< simulations in stage B
   double window_before_s{0.1};         ///< simulated before the first tuning corner
   double window_after_s{0.1};          ///< simulated after the last tuning corner
+  double max_window_span_s{2.0};       ///< corners searched on: those ending within this of the first one's start
   double gain_range{4.0};              ///< Kp, Ki, Kd stay within [start / range, start * range]
   double feedforward_range{2.0};       ///< K1, K2 stay within [0, range * model value]
   double rms_weight{0.5};              ///< weight of the RMS tracking error against the max contour error
@@ -115,7 +117,10 @@ PlannedScenario plan_scenario(const io::Scenario& scenario);
 /// The whole scenario, or a window from window_before_s ahead of the first tuning
 /// corner to window_after_s past the last one.
 SimulationWindow full_window(const PlannedScenario& planned);
-SimulationWindow corner_window(const PlannedScenario& planned, double before_s, double after_s);
+/// With many corners, only the first tuning corner and those ending within max_span_s of
+/// its start are in the window (a search step then costs a bounded simulation).
+SimulationWindow corner_window(const PlannedScenario& planned, double before_s, double after_s,
+                               double max_span_s = std::numeric_limits<double>::infinity());
 
 /// Runs the coupled simulation over the window with the machine `machine`. A window
 /// that starts after tick 0 starts in steady motion on the reference (drives at the

@@ -68,6 +68,9 @@ void register_tune(CLI::App& app) {
   cmd->add_option("--check", opt->check,
                   "second scenario, not used for tuning, on which before/after are reported ('none' to skip)");
   cmd->add_option("--max-evals", opt->tune.max_evaluations, "coupled simulations in the search (default 160)");
+  cmd->add_option("--max-window", opt->tune.max_window_span_s,
+                  "corners searched on: the first and those ending within this many seconds of it (default 2); all "
+                  "are judged on the full scenario");
   cmd->add_option("--pm", opt->tune.constraints.phase_margin_min_deg, "minimum phase margin, deg (default 40)");
   cmd->add_option("--gm", opt->tune.constraints.gain_margin_min_dB, "minimum gain margin, dB (default 6)");
   cmd->add_option("--ms", opt->tune.constraints.sensitivity_peak_max, "maximum sensitivity peak |S| (default 2)");
