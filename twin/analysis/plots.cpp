@@ -1,45 +1,146 @@
 #include "twin/analysis/plots.hpp"
 
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
 #include <array>
-#include <cstdio>
+#include <cerrno>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <sstream>
 
 #include <fmt/format.h>
-#include <sys/wait.h>
 
 #include "twin/core/error.hpp"
-#include "twin/io/atomic_file.hpp"
 
 namespace twin::analysis {
 
-std::string gnuplot_quote(const std::filesystem::path& p) {
+namespace {
+
+bool plain_name(std::string_view name) {
+  if (name.empty() || name.front() == '.') return false;
+  for (char c : name) {
+    const bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' ||
+                    c == '-' || c == '.';
+    if (!ok) return false;
+  }
+  return true;
+}
+
+// The gnuplot executable on PATH, or empty.
+std::string find_gnuplot() {
+  const char* path = std::getenv("PATH");
+  std::string dirs = path != nullptr ? path : "/usr/local/bin:/usr/bin:/bin";
+  std::size_t pos = 0;
+  while (pos <= dirs.size()) {
+    const std::size_t colon = dirs.find(':', pos);
+    std::string dir = dirs.substr(pos, colon == std::string::npos ? std::string::npos : colon - pos);
+    if (dir.empty()) dir = ".";
+    const std::string candidate = dir + "/gnuplot";
+    struct stat st {};
+    if (::stat(candidate.c_str(), &st) == 0 && S_ISREG(st.st_mode) && ::access(candidate.c_str(), X_OK) == 0)
+      return candidate;
+    if (colon == std::string::npos) break;
+    pos = colon + 1;
+  }
+  return {};
+}
+
+// Runs `exe` with argv {"gnuplot", script_name} in `dir`, stdout and stderr to `log_name`.
+// Returns the wait status, or -1 if the process could not be started.
+int exec_gnuplot(const std::string& exe, const std::filesystem::path& dir, const char* script_name,
+                 const char* log_name) {
+  // Block the signals the cleanup handler takes while forking, so that the child
+  // is registered (and killed by the handler) before any of them can arrive.
+  sigset_t block, old;
+  sigemptyset(&block);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaddset(&block, sig);
+  ::sigprocmask(SIG_BLOCK, &block, &old);
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    // Child: only async-signal-safe calls until exec.
+    for (int sig : {SIGINT, SIGTERM, SIGHUP}) ::signal(sig, SIG_DFL);
+    ::sigprocmask(SIG_SETMASK, &old, nullptr);
+    if (::chdir(dir.c_str()) != 0) ::_exit(126);
+    const int in = ::open("/dev/null", O_RDONLY);
+    const int log = ::open(log_name, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (in < 0 || log < 0) ::_exit(126);
+    ::dup2(in, 0);
+    ::dup2(log, 1);
+    ::dup2(log, 2);
+    char arg0[] = "gnuplot";
+    std::array<char*, 3> argv{arg0, const_cast<char*>(script_name), nullptr};
+    ::execv(exe.c_str(), argv.data());
+    ::_exit(127);
+  }
+  if (pid < 0) {
+    ::sigprocmask(SIG_SETMASK, &old, nullptr);
+    return -1;
+  }
+  io::ChildGuard child(pid);
+  ::sigprocmask(SIG_SETMASK, &old, nullptr);
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0) {
+    if (errno != EINTR) return -1;
+  }
+  return status;
+}
+
+}  // namespace
+
+std::string gnuplot_file(std::string_view name) {
+  if (!plain_name(name))
+    throw InternalError(fmt::format("gnuplot: '{}' is not a plain file name", gnuplot_text(name)));
+  return "'" + std::string(name) + "'";
+}
+
+std::string gnuplot_text(std::string_view text) {
   std::string s = "'";
-  for (char c : p.string()) {
+  for (char c : text) {
+    const auto u = static_cast<unsigned char>(c);
     if (c == '\'') s += "''";
+    else if (u < 0x20 || u >= 0x7f) s += '?';
     else s += c;
   }
   return s + "'";
 }
 
+std::string gnuplot_output(std::string_view final_name) {
+  return gnuplot_file(std::string(final_name) + ".tmp.png");
+}
+
 void run_gnuplot(const std::filesystem::path& work_dir, const std::string& script,
-                 const std::vector<std::filesystem::path>& outputs) {
-  // Outputs are written as <name>.tmp.png and renamed after gnuplot succeeds.
-  const auto script_path = work_dir / ".plots.gp.tmp";
+                 const std::vector<std::string>& outputs) {
+  for (const auto& o : outputs) static_cast<void>(gnuplot_file(o));
+  constexpr const char* kScript = "plot-script.gp.tmp";
+  constexpr const char* kLog = "plot-log.txt.tmp";
+  const auto script_path = work_dir / kScript;
+  const auto log_path = work_dir / kLog;
+  std::vector<io::TempPathGuard> guards;
+  guards.emplace_back(script_path);
+  guards.emplace_back(log_path);
+  for (const auto& o : outputs) guards.emplace_back(work_dir / (o + ".tmp.png"));
+  std::error_code ec;
+  auto remove_temporaries = [&] {
+    std::filesystem::remove(script_path, ec);
+    std::filesystem::remove(log_path, ec);
+    for (const auto& o : outputs) std::filesystem::remove(work_dir / (o + ".tmp.png"), ec);
+  };
   {
     std::ofstream f(script_path);
     f << script;
-    if (!f) throw IoError(fmt::format("cannot write {}", script_path.string()));
+    if (!f) {
+      remove_temporaries();
+      throw IoError(fmt::format("cannot write {}", script_path.string()));
+    }
   }
-  const auto log_path = work_dir / ".plots.log.tmp";
-  auto shell_quote = [](const std::filesystem::path& p) {
-    std::string q = "'";
-    for (char c : p.string()) q += (c == '\'') ? std::string("'\\''") : std::string(1, c);
-    return q + "'";
-  };
-  const std::string cmd = fmt::format("gnuplot {} > {} 2>&1", shell_quote(script_path), shell_quote(log_path));
-  const int rc = std::system(cmd.c_str());
+  const std::string exe = find_gnuplot();
+  const int rc = exe.empty() ? -1 : exec_gnuplot(exe, work_dir, kScript, kLog);
   std::string first_error;
   {
     std::ifstream lf(log_path);
@@ -50,38 +151,34 @@ void run_gnuplot(const std::filesystem::path& work_dir, const std::string& scrip
       }
     }
   }
-  std::error_code ec;
-  std::filesystem::remove(script_path, ec);
-  std::filesystem::remove(log_path, ec);
   const bool ok = rc != -1 && WIFEXITED(rc) && WEXITSTATUS(rc) == 0;
   for (const auto& o : outputs) {
-    auto tmp = o;
-    tmp += ".tmp.png";
-    if (!ok || !std::filesystem::exists(tmp)) {
-      for (const auto& p : outputs) {
-        auto t = p;
-        t += ".tmp.png";
-        std::filesystem::remove(t, ec);
-      }
-      throw IoError(fmt::format("gnuplot could not draw {}: {}", o.filename().string(),
-                                first_error.empty() ? (ok ? "no output" : "gnuplot failed or is not installed")
-                                                    : first_error));
+    if (!ok || !std::filesystem::exists(work_dir / (o + ".tmp.png"))) {
+      remove_temporaries();
+      throw IoError(fmt::format("gnuplot could not draw {}: {}", o,
+                                exe.empty() ? std::string("gnuplot is not installed (not on PATH)")
+                                : !first_error.empty() ? first_error
+                                : ok                   ? std::string("no output")
+                                                       : std::string("gnuplot failed")));
     }
   }
   for (const auto& o : outputs) {
-    auto tmp = o;
-    tmp += ".tmp.png";
-    std::filesystem::rename(tmp, o, ec);
-    if (ec) throw IoError(fmt::format("cannot rename {}: {}", tmp.string(), ec.message()));
+    std::filesystem::rename(work_dir / (o + ".tmp.png"), work_dir / o, ec);
+    if (ec) {
+      const std::string msg = ec.message();
+      remove_temporaries();
+      throw IoError(fmt::format("cannot rename {}: {}", (work_dir / (o + ".tmp.png")).string(), msg));
+    }
   }
+  remove_temporaries();
 }
 
-std::vector<std::filesystem::path> plot_run(const std::filesystem::path& out_dir, const std::filesystem::path& trace,
+std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::string& trace_name,
                                             const std::vector<Axis>& axes, const std::vector<CornerWindow>& corners,
                                             bool cutting) {
-  std::vector<std::filesystem::path> outputs{out_dir / "feedrate.png", out_dir / "errors.png"};
-  if (cutting) outputs.push_back(out_dir / "forces.png");
-  const std::string T = gnuplot_quote(trace);
+  std::vector<std::string> outputs{"feedrate.png", "errors.png"};
+  if (cutting) outputs.push_back("forces.png");
+  const std::string T = gnuplot_file(trace_name);
   std::ostringstream g;
   g << "set datafile separator ','\n"
     << "set terminal pngcairo size 1400,1000 font 'DejaVu Sans,11' noenhanced\n"
@@ -101,11 +198,6 @@ std::vector<std::filesystem::path> plot_run(const std::filesystem::path& out_dir
   g << "stats " << T << " using 1 nooutput\n"
     << "every_n = (STATS_records > 20000) ? int(STATS_records / 20000) : 1\n"
     << marks.str();
-  auto tmp = [](const std::filesystem::path& p) {
-    auto t = p;
-    t += ".tmp.png";
-    return gnuplot_quote(t);
-  };
   // Each figure: the whole run on top and, when the program has corners, the
   // first corner's window below (+-0.25 s or the window, whichever is wider).
   std::string zoom;
@@ -115,13 +207,13 @@ std::vector<std::filesystem::path> plot_run(const std::filesystem::path& out_dir
     const double t1 = std::max(c.corner.t_s + 0.25, c.t_end_s + 0.05);
     zoom = fmt::format("set xrange [{:.6f}:{:.6f}]\n", t0, t1);
   }
-  auto figure = [&](const std::filesystem::path& out, const std::string& title, const std::string& setup,
+  auto figure = [&](const std::string& out, const std::string& title, const std::string& setup,
                     const std::string& plot_full, const std::string& plot_zoom) {
-    g << "set output " << tmp(out) << "\n";
+    g << "set output " << gnuplot_output(out) << "\n";
     if (!zoom.empty()) g << "set multiplot layout 2,1\n";
-    g << setup << "set title '" << title << "'\nset autoscale x\n" << plot_full << "\n";
+    g << setup << "set title " << gnuplot_text(title) << "\nset autoscale x\n" << plot_full << "\n";
     if (!zoom.empty())
-      g << "set title '" << title << ", around corner 1'\n" << zoom << plot_zoom << "\nunset multiplot\n";
+      g << "set title " << gnuplot_text(title + ", around corner 1") << "\n" << zoom << plot_zoom << "\nunset multiplot\n";
     g << "set autoscale x\nunset y2tics\nunset y2label\nset ytics mirror\n";
   };
   auto feed_plot = [&](const std::string& every) {
@@ -158,8 +250,59 @@ std::vector<std::filesystem::path> plot_run(const std::filesystem::path& out_dir
            force_plot(" every every_n"), force_plot(""));
   }
   g << "unset output\n";
-  run_gnuplot(out_dir, g.str(), outputs);
-  return outputs;
+  std::vector<std::filesystem::path> written;
+  for (const auto& o : outputs) written.push_back(results.path(o));
+  run_gnuplot(results.staging_dir(), g.str(), outputs);
+  return written;
+}
+
+std::vector<std::filesystem::path> plot_calibration(io::ResultSet& results, const std::string& residuals_name,
+                                                    const std::vector<Axis>& axes,
+                                                    const std::optional<CalibrationEvidence>& evidence) {
+  const std::string d = gnuplot_file(residuals_name);
+  std::string script = "set datafile separator ','\nset key autotitle columnhead\nset grid\n";
+  std::vector<std::string> outputs;
+  const std::size_t na = axes.size();
+  for (const std::string which : {"before", "after"}) {
+    const std::string png = fmt::format("residual_{}.png", which);
+    outputs.push_back(png);
+    script += fmt::format("set terminal pngcairo size 1200,{} noenhanced\nset output {}\nset multiplot layout {},2\n",
+                          300 * na, gnuplot_output(png), na);
+    for (std::size_t j = 0; j < na; ++j) {
+      const std::size_t c0 = 2 + 5 * j;  // gnuplot columns are 1-based: t_s is 1
+      const std::string an(axis_name(axes[j]));
+      const std::size_t ce = c0 + (which == "before" ? 1 : 2);
+      const std::size_t cu = c0 + (which == "before" ? 3 : 4);
+      script += fmt::format("set title {}\nset xlabel 't s'\nset ylabel 'mm'\nplot {} using 1:{} with lines notitle\n",
+                            gnuplot_text(fmt::format("{} tracking error, measured minus model ({})", an, which)), d,
+                            ce);
+      script += fmt::format("set title {}\nset ylabel 'V (or A)'\nplot {} using 1:{} with lines notitle\n",
+                            gnuplot_text(fmt::format("{} low-passed u, measured minus model ({})", an, which)), d,
+                            cu);
+    }
+    script += "unset multiplot\n";
+  }
+  if (evidence && evidence->axis_slot < na) {
+    const std::size_t c0 = 2 + 5 * evidence->axis_slot;
+    const std::string png = "evidence.png";
+    outputs.push_back(png);
+    const std::string xlabel = evidence->over_position ? fmt::format("{} mm", axis_name(evidence->axis)) : "t s";
+    const std::size_t cx = evidence->over_position ? c0 : 1;
+    script += fmt::format("set terminal pngcairo size 1200,500 noenhanced\nset output {}\nset multiplot layout 1,2\n",
+                          gnuplot_output(png));
+    script += fmt::format("set title {}\nset xlabel {}\nset ylabel 'V (or A)'\nplot {} using {}:{} with dots notitle\n",
+                          gnuplot_text(fmt::format("{} on {}: low-passed u residual of the model without it",
+                                                   evidence->effect, axis_name(evidence->axis))),
+                          gnuplot_text(xlabel), d, cx, c0 + 3);
+    script += fmt::format("set title 'tracking-error residual, without (red) and with (blue) it'\nset xlabel {}\n"
+                          "set ylabel 'mm'\nplot {} using {}:{} with dots lc rgb 'red' notitle, '' using {}:{} with "
+                          "dots lc rgb 'blue' notitle\nunset multiplot\n",
+                          gnuplot_text(xlabel), d, cx, c0 + 1, cx, c0 + 2);
+  }
+  std::vector<std::filesystem::path> written;
+  for (const auto& o : outputs) written.push_back(results.path(o));
+  run_gnuplot(results.staging_dir(), script, outputs);
+  return written;
 }
 
 }  // namespace twin::analysis

@@ -281,7 +281,6 @@ nlohmann::json RunStatistics::summary() const {
 }
 
 RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options) {
-  io::ensure_directory(options.out_dir);
   const controller::Program program = io::parse_program(scenario);
   auto reference = std::make_shared<sim::ProgramReference>(
       controller::plan_trajectory(program, scenario.machine.motion_limits(), scenario.machine.Ts_s));
@@ -292,10 +291,11 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
   const std::int64_t settle_ticks = static_cast<std::int64_t>(std::ceil(scenario.settle_s / scenario.machine.Ts_s));
   const std::int64_t total = traj.num_ticks() + settle_ticks;
 
+  // Every file is written in the result set's staging folder and appears in
+  // OUT with the others, the manifest last (io::ResultSet).
+  io::ResultSet results(options.out_dir, "run");
   RunOutputs out;
-  out.trace_path = options.out_dir / "trace.csv";
-  out.summary_path = options.out_dir / "summary.json";
-  io::TraceWriter writer(out.trace_path, run_trace_columns(axes));
+  io::TraceWriter writer(results.path("trace.csv"), run_trace_columns(axes));
   RunStatistics stats(program, traj, axes, scenario.machine.encoder_resolution_mm);
   std::vector<double> row;
   for (std::int64_t k = 0; k < total; ++k) {
@@ -314,9 +314,21 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
   const nlohmann::json st = stats.summary();
   summary.update(st);
   writer.commit();
-  io::write_file_atomic(out.summary_path, summary.dump(2) + "\n");
+  io::write_file_atomic(results.path("summary.json"), summary.dump(2) + "\n");
   out.summary = summary;
-  if (options.plots) out.plots = plot_run(options.out_dir, out.trace_path, axes, stats.corners(), scenario.make_process != nullptr);
+  std::vector<std::filesystem::path> plots;
+  if (options.plots) {
+    try {
+      plots = plot_run(results, "trace.csv", axes, stats.corners(), scenario.make_process != nullptr);
+    } catch (const Error&) {
+      results.commit();  // the trace and the summary stand without the plots
+      throw;
+    }
+  }
+  results.commit();
+  out.trace_path = results.final_path("trace.csv");
+  out.summary_path = results.final_path("summary.json");
+  for (const auto& p : plots) out.plots.push_back(results.final_path(p.filename().string()));
   return out;
 }
 

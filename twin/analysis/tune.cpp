@@ -82,18 +82,29 @@ PlannedScenario plan_scenario(const io::Scenario& scenario) {
   if (p.tuning_corners.empty()) p.tuning_corners = p.corners;
   p.total_ticks =
       p.trajectory.num_ticks() + static_cast<std::int64_t>(std::ceil(scenario.settle_s / scenario.machine.Ts_s));
+  if (p.tuning_corners.empty()) {
+    // A program without corners (a straight slot): its errors are judged over the whole run.
+    CornerWindow whole;
+    whole.k_begin = 0;
+    whole.k_end = p.total_ticks;
+    whole.t_end_s = static_cast<double>(p.total_ticks) * p.trajectory.Ts_s();
+    p.tuning_corners.push_back(whole);
+  }
   return p;
 }
 
 SimulationWindow full_window(const PlannedScenario& planned) {
-  return SimulationWindow{0, planned.total_ticks, planned.corners};
+  return SimulationWindow{0, planned.total_ticks, planned.corners.empty() ? planned.tuning_corners : planned.corners};
 }
 
-SimulationWindow corner_window(const PlannedScenario& planned, double before_s, double after_s) {
+SimulationWindow corner_window(const PlannedScenario& planned, double before_s, double after_s, double max_span_s) {
   if (planned.tuning_corners.empty()) return full_window(planned);
   const double Ts = planned.trajectory.Ts_s();
   SimulationWindow w;
-  w.corners = planned.tuning_corners;
+  // The first tuning corner, and the next ones while they end within max_span_s of its start.
+  const auto& first = planned.tuning_corners.front();
+  for (const auto& c : planned.tuning_corners)
+    if (w.corners.empty() || static_cast<double>(c.k_end - first.k_begin) * Ts <= max_span_s) w.corners.push_back(c);
   w.k_begin = std::max<std::int64_t>(0, w.corners.front().k_begin - static_cast<std::int64_t>(std::llround(before_s / Ts)));
   w.k_end = std::min(planned.total_ticks, w.corners.back().k_end + static_cast<std::int64_t>(std::llround(after_s / Ts)));
   return w;
@@ -103,6 +114,7 @@ ScenarioMetrics simulate_window(const io::Scenario& scenario, const PlannedScena
                                 const sim::MachineDefinition& machine, const SimulationWindow& window,
                                 CornerTrace* trace, std::int64_t trace_begin, std::int64_t trace_end) {
   ScenarioMetrics m;
+  m.u_peak_block.fill(-1);
   auto reference = std::make_shared<sim::ProgramReference>(planned.trajectory);
   const double Ts = machine.Ts_s;
   const std::int64_t k0 = window.k_begin;
@@ -156,7 +168,11 @@ ScenarioMetrics simulate_window(const io::Scenario& scenario, const PlannedScena
       ++m.ticks;
       for (Axis ax : axes) {
         const auto& x = s.axes[index(ax)];
-        m.u_peak_V[index(ax)] = std::max(m.u_peak_V[index(ax)], std::abs(x.u_V));
+        if (std::abs(x.u_V) > m.u_peak_V[index(ax)]) {
+          m.u_peak_V[index(ax)] = std::abs(x.u_V);
+          m.u_peak_t_s[index(ax)] = s.t_s;
+          m.u_peak_block[index(ax)] = s.block;
+        }
         if (x.saturated) ++m.saturated_ticks[index(ax)];
         if (s.reference_done)
           m.max_error_after_stop_mm[index(ax)] = std::max(m.max_error_after_stop_mm[index(ax)], std::abs(x.e_mm));
@@ -306,17 +322,83 @@ double stage_b_objective(unsigned n, const double* q, double*, void* data) {
 
 }  // namespace
 
+namespace {
+
+std::string motion_text(const PlannedScenario& planned, int block) {
+  if (block < 0 || block >= static_cast<int>(planned.program.blocks.size())) return "while settling after the program";
+  const auto& b = planned.program.blocks[static_cast<std::size_t>(block)];
+  const char* kind = b.kind == controller::MotionKind::kRapid    ? "a rapid (G0)"
+                     : b.kind == controller::MotionKind::kLinear ? "a feed move (G1)"
+                     : b.kind == controller::MotionKind::kDwell  ? "a dwell (G4)"
+                                                                 : "an arc";
+  return fmt::format("in {} at line {}", kind, b.line);
+}
+
+/// Before/after figures of one axis; the |u| constraint from the full-scenario runs.
+AxisTuneResult axis_result(const AxisScales& s, const controller::PositionLoopParams& after,
+                           const ScenarioMetrics& full_before, const ScenarioMetrics& full_after,
+                           const TuneConstraints& c) {
+  AxisTuneResult ar;
+  ar.axis = s.axis;
+  ar.before = s.start;
+  ar.after = after;
+  ar.model_feedforward = s.ff;
+  const std::string name(axis_name(s.axis));
+  ar.analysis_before = analyse_loop(DiscreteLoopModel(s.plant, ar.before, name));
+  ar.analysis_after = analyse_loop(DiscreteLoopModel(s.plant, ar.after, name));
+  ar.constraints_before = linear_constraints(s.plant, ar.before, c, name);
+  ar.constraints_after = linear_constraints(s.plant, ar.after, c, name);
+  for (auto* pair : {&ar.constraints_before, &ar.constraints_after}) {
+    const ScenarioMetrics& fm = pair == &ar.constraints_before ? full_before : full_after;
+    pair->u_peak_V = fm.u_peak_V[index(s.axis)];
+    pair->simulation_ok = fm.completed && pair->u_peak_V <= pair->u_limit_V;
+    if (pair->violation.empty() && !pair->simulation_ok)
+      pair->violation = fm.completed ? fmt::format("{}: peak |u| {:.3f} V > {:.3f} V in the full scenario", name,
+                                                   pair->u_peak_V, pair->u_limit_V)
+                                     : fmt::format("{}: {}", name, fm.failure);
+  }
+  return ar;
+}
+
+/// The largest alpha in [0, 1] (to 1/32) for which axis `a` with gains `g`, its feedforward
+/// K1, K2 scaled by alpha, keeps its peak |u| within `limit_V` on the window (the other axes
+/// as in `machine`); -1 when even alpha = 0 does not. At most 6 simulations.
+double reachable_feedforward(const io::Scenario& scenario, const PlannedScenario& planned,
+                             sim::MachineDefinition machine, Axis a, const controller::PositionLoopParams& g,
+                             const SimulationWindow& window, double limit_V) {
+  auto ok = [&](double alpha) {
+    controller::PositionLoopParams ga = g;
+    ga.K1_V_s2_per_mm *= alpha;
+    ga.K2_V_s_per_mm *= alpha;
+    machine.axes[index(a)].loop = ga;
+    const ScenarioMetrics m = simulate_window(scenario, planned, machine, window);
+    return m.completed && m.u_peak_V[index(a)] <= limit_V;
+  };
+  if (!ok(0.0)) return -1.0;
+  double lo = 0.0, hi = 1.0;
+  for (int i = 0; i < 5; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (ok(mid) ? lo : hi) = mid;
+  }
+  return lo;
+}
+
+}  // namespace
+
 TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) {
   TuneResult result;
   const sim::MachineDefinition& m0 = scenario.machine;
   result.machine_before = m0;
   result.machine_after = m0;
   if (options.axes.empty()) throw ConfigError("tune: no axis to tune");
-  if (!(options.gain_range > 1.0) || !(options.feedforward_range > 0.0) || options.max_evaluations < 1)
-    throw ConfigError(fmt::format("tune: gain_range {} must be > 1, feedforward_range {} > 0, max_evaluations {} >= 1",
-                                  options.gain_range, options.feedforward_range, options.max_evaluations));
+  if (!(options.gain_range > 1.0) || !(options.feedforward_range > 0.0) || options.max_evaluations < 1 ||
+      !(options.max_window_span_s > 0.0))
+    throw ConfigError(fmt::format("tune: gain_range {} must be > 1, feedforward_range {} > 0, max_evaluations {} >= 1, "
+                                  "--max-window {} s > 0",
+                                  options.gain_range, options.feedforward_range, options.max_evaluations,
+                                  options.max_window_span_s));
   const TuneConstraints& c = options.constraints;
-  std::vector<AxisScales> scales;
+  std::vector<AxisScales> requested;
   for (Axis a : options.axes) {
     const auto& def = m0.axes[index(a)];
     if (!def.present)
@@ -330,13 +412,16 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
     s.Ki_b = def.loop.Ki_V_per_s_mm;
     s.Kd_b = def.loop.Kd_V_s_per_mm > 0.0 ? def.loop.Kd_V_s_per_mm : s.Kp_b * 1e-3;
     s.ff = model_feedforward(s.plant);
-    scales.push_back(s);
+    requested.push_back(s);
   }
   const double lr = std::log(options.gain_range);
+  // Axes that keep the machine's gains, with the reason (in the order asked).
+  std::vector<std::pair<AxisScales, std::string>> kept;
 
   // Stage A: nearest feedback gains that meet the linear constraints, per axis.
+  std::vector<AxisScales> scales;
   std::vector<double> q0;
-  for (const auto& s : scales) {
+  for (const auto& s : requested) {
     StageA data{&s, &c, std::string(axis_name(s.axis))};
     nlopt::opt opt(nlopt::LN_COBYLA, 3);
     opt.set_lower_bounds(std::vector<double>{-lr, s.Ki_b > 0.0 ? -lr : 0.0, -lr});
@@ -356,30 +441,127 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
     double full[5] = {x[0], x[1], x[2], 1.0, 1.0};
     const ConstraintValues v = linear_constraints(s.plant, s.gains(full), c, std::string(axis_name(s.axis)));
     if (!v.linear_ok) {
-      result.feasible = false;
-      result.message = fmt::format(
-          "no gains satisfy the constraints on axis {} within the search range (Kp, Ki, Kd in [1/{:g}, {:g}] x "
-          "start): best found {} ({}); start {}",
-          axis_name(s.axis), options.gain_range, options.gain_range, gains_text(s.gains(full)), v.violation,
-          gains_text(s.start));
-      for (const auto& sc : scales) {
-        AxisTuneResult ar;
-        ar.axis = sc.axis;
-        ar.before = ar.after = sc.start;
-        ar.model_feedforward = sc.ff;
-        ar.analysis_before = ar.analysis_after = analyse_loop(DiscreteLoopModel(sc.plant, sc.start));
-        ar.constraints_before = ar.constraints_after =
-            linear_constraints(sc.plant, sc.start, c, std::string(axis_name(sc.axis)));
-        result.axes.push_back(ar);
-      }
-      return result;
+      kept.emplace_back(s, fmt::format("no gains satisfy the constraints on axis {} within the search range (Kp, Ki, "
+                                       "Kd in [1/{:g}, {:g}] x start): best found {} ({}); start {}",
+                                       axis_name(s.axis), options.gain_range, options.gain_range,
+                                       gains_text(s.gains(full)), v.violation, gains_text(s.start)));
+      continue;
     }
+    scales.push_back(s);
     q0.insert(q0.end(), {x[0], x[1], x[2], 1.0, 1.0});
   }
 
-  // Stage B: the coupled simulation through the corners.
+  auto finish_kept = [&](const ScenarioMetrics& fb, const ScenarioMetrics& fa) {
+    for (const auto& [s, why] : kept) {
+      AxisTuneResult ar = axis_result(s, s.start, fb, fa, c);
+      ar.tuned = false;
+      ar.note = why;
+      result.axes.push_back(ar);
+    }
+    std::stable_sort(result.axes.begin(), result.axes.end(),
+                     [](const AxisTuneResult& x, const AxisTuneResult& y) { return index(x.axis) < index(y.axis); });
+  };
+  auto kept_text = [&] {
+    std::string t;
+    for (const auto& [s, why] : kept)
+      t += fmt::format("{}axis {} keeps the machine's gains: {}", t.empty() ? "" : "; ", axis_name(s.axis), why);
+    return t;
+  };
+  if (scales.empty()) {
+    // No axis can meet the linear constraints: nothing is simulated.
+    result.feasible = false;
+    result.message = kept_text();
+    finish_kept(ScenarioMetrics{}, ScenarioMetrics{});
+    return result;
+  }
+
+  // The machine's own gains on the full scenario: an axis whose peak |u| is already
+  // above the limit there cannot be judged against it (no new gains could pass where the
+  // program itself asks for that much, e.g. a rapid plunge): it keeps its gains.
   const PlannedScenario planned = plan_scenario(scenario);
-  const SimulationWindow window = corner_window(planned, options.window_before_s, options.window_after_s);
+  const SimulationWindow full = full_window(planned);
+  result.full_before = simulate_window(scenario, planned, m0, full);
+  if (result.full_before.completed) {
+    std::vector<AxisScales> reachable;
+    std::vector<double> q_reachable;
+    for (std::size_t i = 0; i < scales.size(); ++i) {
+      const Axis a = scales[i].axis;
+      const double limit = c.u_fraction_max * m0.axes[index(a)].loop.u_max_V;
+      const double peak = result.full_before.u_peak_V[index(a)];
+      if (peak > limit) {
+        kept.emplace_back(
+            scales[i],
+            fmt::format("its own gains already reach peak |u| {:.3f} V > {:.3f} V ({:g} x u_max) on this scenario, at "
+                        "t = {:.4f} s {} ({} ticks at the clamp), so the scenario cannot show that new gains keep the "
+                        "limit; axis {} is left as it is (tune it on a scenario without that move, or raise "
+                        "--u-fraction)",
+                        peak, limit, c.u_fraction_max, result.full_before.u_peak_t_s[index(a)],
+                        motion_text(planned, result.full_before.u_peak_block[index(a)]),
+                        result.full_before.saturated_ticks[index(a)], axis_name(a)));
+        continue;
+      }
+      reachable.push_back(scales[i]);
+      q_reachable.insert(q_reachable.end(), q0.begin() + static_cast<std::ptrdiff_t>(5 * i),
+                         q0.begin() + static_cast<std::ptrdiff_t>(5 * i + 5));
+    }
+    scales = std::move(reachable);
+    q0 = std::move(q_reachable);
+  }
+  if (scales.empty()) {
+    result.feasible = false;
+    result.message = kept_text();
+    finish_kept(result.full_before, result.full_before);
+    result.full_after = result.full_before;
+    return result;
+  }
+
+  // Stage B: the coupled simulation through the corners. Its starting point (stage-A
+  // feedback, model feedforward) must keep the |u| limit on the window: an axis that breaks
+  // it starts with its feedforward scaled down to what keeps it (or, if even no feedforward
+  // does, keeps its own gains), so the search starts from reachable gains.
+  const SimulationWindow window =
+      corner_window(planned, options.window_before_s, options.window_after_s, options.max_window_span_s);
+  std::vector<std::string> limited(kNumAxes);  // per axis: what limited the tuning
+  {
+    sim::MachineDefinition ms = m0;
+    for (std::size_t i = 0; i < scales.size(); ++i) ms.axes[index(scales[i].axis)].loop = scales[i].gains(&q0[5 * i]);
+    const ScenarioMetrics start = simulate_window(scenario, planned, ms, window);
+    std::vector<AxisScales> reachable;
+    std::vector<double> q_reachable;
+    for (std::size_t i = 0; i < scales.size(); ++i) {
+      const Axis a = scales[i].axis;
+      const double limit = c.u_fraction_max * m0.axes[index(a)].loop.u_max_V;
+      std::vector<double> q(q0.begin() + static_cast<std::ptrdiff_t>(5 * i),
+                            q0.begin() + static_cast<std::ptrdiff_t>(5 * i + 5));
+      if (start.completed && start.u_peak_V[index(a)] > limit) {
+        const double alpha = reachable_feedforward(scenario, planned, ms, a, scales[i].gains(q.data()), window, limit);
+        const std::string where = fmt::format("with the model feedforward the peak |u| is {:.3f} V > {:.3f} V at t = "
+                                              "{:.4f} s {}",
+                                              start.u_peak_V[index(a)], limit, start.u_peak_t_s[index(a)],
+                                              motion_text(planned, start.u_peak_block[index(a)]));
+        if (alpha < 0.0) {
+          kept.emplace_back(scales[i], where + ", and above it without feedforward too (feedback at the nearest gains "
+                                               "meeting the margins): no starting point keeps the limit");
+          continue;
+        }
+        q[3] *= alpha;
+        q[4] *= alpha;
+        limited[index(a)] = fmt::format("{}; the search started from {:.3f} x the model feedforward", where, alpha);
+        ms.axes[index(a)].loop = scales[i].gains(q.data());
+      }
+      reachable.push_back(scales[i]);
+      q_reachable.insert(q_reachable.end(), q.begin(), q.end());
+    }
+    scales = std::move(reachable);
+    q0 = std::move(q_reachable);
+  }
+  if (scales.empty()) {
+    result.feasible = false;
+    result.message = kept_text();
+    finish_kept(result.full_before, result.full_before);
+    result.full_after = result.full_before;
+    return result;
+  }
   StageB data;
   data.scenario = &scenario;
   data.planned = &planned;
@@ -432,55 +614,91 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
       // A stop by round-off or by the evaluation budget keeps the best feasible point below.
     }
   }
+  result.evaluations = data.evaluations;
   if (data.best_q.empty()) {
     result.feasible = false;
     result.message = "no evaluated gains met every constraint in the simulation (|u| below the limit, no runaway)";
-    data.best_q = q0;
-  } else {
-    result.feasible = true;
+    if (!kept.empty()) result.message += "; " + kept_text();
+    result.window_after = result.window_before;
+    result.full_after = result.full_before;
+    for (const auto& s : scales) {
+      AxisTuneResult ar = axis_result(s, s.start, result.full_before, result.full_after, c);
+      ar.tuned = false;
+      ar.note = result.message;
+      result.axes.push_back(ar);
+    }
+    finish_kept(result.full_before, result.full_after);
+    return result;
   }
-  result.evaluations = data.evaluations;
   result.window_after = data.best_metrics;
   result.objective_after = data.best_objective;
   for (std::size_t i = 0; i < scales.size(); ++i)
     result.machine_after.axes[index(scales[i].axis)].loop = scales[i].gains(&data.best_q[5 * i]);
 
-  // Judge on the full scenario.
-  const SimulationWindow full = full_window(planned);
-  result.full_before = simulate_window(scenario, planned, m0, full);
+  // Judge on the full scenario. An axis whose tuned gains break a constraint there
+  // (the search saw only the corner window) goes back to its own gains, and the
+  // scenario is run again with the remaining tuned axes.
   result.full_after = simulate_window(scenario, planned, result.machine_after, full);
+  std::vector<AxisScales> tuned;
   for (const auto& s : scales) {
-    AxisTuneResult ar;
-    ar.axis = s.axis;
-    ar.before = s.start;
-    ar.after = result.machine_after.axes[index(s.axis)].loop;
-    ar.model_feedforward = s.ff;
-    const std::string name(axis_name(s.axis));
-    ar.analysis_before = analyse_loop(DiscreteLoopModel(s.plant, ar.before, name));
-    ar.analysis_after = analyse_loop(DiscreteLoopModel(s.plant, ar.after, name));
-    ar.constraints_before = linear_constraints(s.plant, ar.before, c, name);
-    ar.constraints_after = linear_constraints(s.plant, ar.after, c, name);
-    for (auto* pair : {&ar.constraints_before, &ar.constraints_after}) {
-      const ScenarioMetrics& fm = pair == &ar.constraints_before ? result.full_before : result.full_after;
-      pair->u_peak_V = fm.u_peak_V[index(s.axis)];
-      pair->simulation_ok = fm.completed && pair->u_peak_V <= pair->u_limit_V;
-      if (pair->violation.empty() && !pair->simulation_ok)
-        pair->violation = fm.completed ? fmt::format("{}: peak |u| {:.3f} V > {:.3f} V in the full scenario", name,
-                                                     pair->u_peak_V, pair->u_limit_V)
-                                       : fmt::format("{}: {}", name, fm.failure);
+    const AxisTuneResult ar =
+        axis_result(s, result.machine_after.axes[index(s.axis)].loop, result.full_before, result.full_after, c);
+    if (ar.constraints_after.violation.empty() || !result.full_after.completed) {
+      tuned.push_back(s);
+      continue;
     }
-    if (result.feasible && !ar.constraints_after.violation.empty()) {
+    if (ar.constraints_after.linear_ok) {
+      // Only the |u| limit is broken: scale this axis's feedforward down to what keeps it.
+      const double limit = ar.constraints_after.u_limit_V;
+      const double alpha = reachable_feedforward(scenario, planned, result.machine_after, s.axis,
+                                                 result.machine_after.axes[index(s.axis)].loop, full, limit);
+      if (alpha >= 0.0) {
+        auto& g = result.machine_after.axes[index(s.axis)].loop;
+        g.K1_V_s2_per_mm *= alpha;
+        g.K2_V_s_per_mm *= alpha;
+        limited[index(s.axis)] +=
+            fmt::format("{}on the full scenario the gains tuned on the corner window reach peak |u| {:.3f} V > {:.3f} "
+                        "V at t = {:.4f} s {}: the feedforward was scaled by {:.3f} to keep the limit",
+                        limited[index(s.axis)].empty() ? "" : "; ", ar.constraints_after.u_peak_V, limit,
+                        result.full_after.u_peak_t_s[index(s.axis)],
+                        motion_text(planned, result.full_after.u_peak_block[index(s.axis)]), alpha);
+        tuned.push_back(s);
+        continue;
+      }
+    }
+    kept.emplace_back(s, fmt::format("the gains tuned on the corner window break a constraint on the full scenario "
+                                     "({}; peak |u| at t = {:.4f} s {}{}) where its own gains keep it, so axis {} "
+                                     "keeps its own gains",
+                                     ar.constraints_after.violation, result.full_after.u_peak_t_s[index(s.axis)],
+                                     motion_text(planned, result.full_after.u_peak_block[index(s.axis)]),
+                                     ar.constraints_after.linear_ok ? ", also with no feedforward" : "",
+                                     axis_name(s.axis)));
+    result.machine_after.axes[index(s.axis)].loop = s.start;
+  }
+  bool changed = tuned.size() != scales.size();
+  for (const auto& l : limited) changed = changed || l.find("on the full scenario") != std::string::npos;
+  if (changed) result.full_after = simulate_window(scenario, planned, result.machine_after, full);
+  result.feasible = !tuned.empty();
+  for (const auto& s : tuned) {
+    AxisTuneResult ar =
+        axis_result(s, result.machine_after.axes[index(s.axis)].loop, result.full_before, result.full_after, c);
+    ar.note = limited[index(s.axis)];
+    if (!ar.constraints_after.violation.empty() && result.feasible) {
       result.feasible = false;
       result.message = fmt::format("tuned gains break a constraint on the full scenario: {}",
                                    ar.constraints_after.violation);
     }
     result.axes.push_back(ar);
   }
+  finish_kept(result.full_before, result.full_after);
   if (result.feasible) {
     result.message = fmt::format(
         "tuned {} axis(es) in {} simulations: max contour error through the corners {:.3f} um -> {:.3f} um",
-        scales.size(), result.evaluations, 1e3 * result.full_before.max_contour_error_mm,
+        tuned.size(), result.evaluations, 1e3 * result.full_before.max_contour_error_mm,
         1e3 * result.full_after.max_contour_error_mm);
+    if (!kept.empty()) result.message += "; " + kept_text();
+  } else if (result.message.empty()) {
+    result.message = kept_text();
   }
   return result;
 }
@@ -567,12 +785,15 @@ nlohmann::json tune_report(const io::Scenario& scenario, const TuneOptions& opti
                  {"max_evaluations", options.max_evaluations},
                  {"window_before_s", options.window_before_s},
                  {"window_after_s", options.window_after_s},
+                 {"max_window_span_s", options.max_window_span_s},
                  {"objective_before", r.objective_before},
                  {"objective_after", r.objective_after}};
   std::vector<Axis> axes;
   for (const auto& a : r.axes) axes.push_back(a.axis);
   for (const auto& a : r.axes) {
     nlohmann::json ja;
+    ja["tuned"] = a.tuned;
+    ja["note"] = a.note;
     ja["gains_before"] = gains_json(a.before);
     ja["gains_after"] = gains_json(a.after);
     ja["model_feedforward"] = {{"K1_V_s2_per_mm", a.model_feedforward.K1_V_s2_per_mm},
@@ -601,11 +822,11 @@ nlohmann::json tune_report(const io::Scenario& scenario, const TuneOptions& opti
   return j;
 }
 
-std::vector<std::filesystem::path> plot_tune(const std::filesystem::path& out_dir, const io::Scenario& scenario,
+std::vector<std::filesystem::path> plot_tune(io::ResultSet& results, const io::Scenario& scenario,
                                              const TuneResult& r) {
-  std::vector<std::filesystem::path> outputs;
+  std::vector<std::string> outputs;
   // Bode data: one block per axis and gain set.
-  const auto bode_dat = out_dir / "bode.dat";
+  const std::string bode_dat = "bode.dat";
   {
     std::string text = "# f_Hz |L|_dB argL_deg |S|_dB |T|_dB |E/R|_dB\n";
     for (const auto& a : r.axes) {
@@ -628,18 +849,15 @@ std::vector<std::filesystem::path> plot_tune(const std::filesystem::path& out_di
         text += "\n\n";
       }
     }
-    io::write_file_atomic(bode_dat, text);
+    io::write_file_atomic(results.path(bode_dat), text);
   }
-  std::string script = "set terminal pngcairo size 1200,900\n";
-  const auto bode_png = out_dir / "bode.png";
-  auto tmp_png = [](std::filesystem::path p) {
-    p += ".tmp.png";
-    return gnuplot_quote(p);
-  };
-  script += fmt::format("set output {}\n", tmp_png(bode_png));
+  std::string script = "set terminal pngcairo size 1200,900 noenhanced\n";
+  const std::string bode_png = "bode.png";
+  script += fmt::format("set output {}\n", gnuplot_output(bode_png));
   script += "set multiplot layout 2,1\nset logscale x\nset grid\nset xlabel 'f [Hz]'\nset ylabel 'dB'\n";
-  script += fmt::format("set title 'Open loop L (broken at u), {}: before (Table gains) and after tuning'\n",
-                        scenario.machine.name);
+  script += fmt::format("set title {}\n",
+                        gnuplot_text(fmt::format("Open loop L (broken at u), {}: before (Table gains) and after tuning",
+                                                 scenario.machine.name)));
   std::string mag = "plot ", ph = "plot ";
   int idx = 0;
   for (const auto& a : r.axes) {
@@ -649,10 +867,11 @@ std::vector<std::filesystem::path> plot_tune(const std::filesystem::path& out_di
         mag += ", ";
         ph += ", ";
       }
-      mag += fmt::format("{} index {} using 1:2 with lines title '|L| {}', '' index {} using 1:4 with lines dt 2 "
-                         "title '|S| {}'",
-                         gnuplot_quote(bode_dat), idx, label, idx, label);
-      ph += fmt::format("{} index {} using 1:3 with lines title 'arg L {}'", gnuplot_quote(bode_dat), idx, label);
+      mag += fmt::format("{} index {} using 1:2 with lines title {}, '' index {} using 1:4 with lines dt 2 "
+                         "title {}",
+                         gnuplot_file(bode_dat), idx, gnuplot_text("|L| " + label), idx, gnuplot_text("|S| " + label));
+      ph += fmt::format("{} index {} using 1:3 with lines title {}", gnuplot_file(bode_dat), idx,
+                        gnuplot_text("arg L " + label));
       ++idx;
     }
   }
@@ -671,7 +890,7 @@ std::vector<std::filesystem::path> plot_tune(const std::filesystem::path& out_di
     CornerTrace before, after;
     simulate_window(scenario, planned, r.machine_before, w, &before, t0, t1);
     simulate_window(scenario, planned, r.machine_after, w, &after, t0, t1);
-    const auto dat = out_dir / "corner_error.dat";
+    const std::string dat = "corner_error.dat";
     std::string text = "# t_s";
     for (const auto& a : r.axes) text += fmt::format(" {0}_err_before_um {0}_err_after_um", axis_name(a.axis));
     text += " contour_before_um contour_after_um\n";
@@ -682,29 +901,33 @@ std::vector<std::filesystem::path> plot_tune(const std::filesystem::path& out_di
         text += fmt::format(" {:.6g} {:.6g}", 1e3 * before.e_mm[index(a.axis)][k], 1e3 * after.e_mm[index(a.axis)][k]);
       text += fmt::format(" {:.6g} {:.6g}\n", 1e3 * before.contour_mm[k], 1e3 * after.contour_mm[k]);
     }
-    io::write_file_atomic(dat, text);
-    const auto png = out_dir / "corner_error.png";
+    io::write_file_atomic(results.path(dat), text);
+    const std::string png = "corner_error.png";
     script += fmt::format("set output {}\nset multiplot layout 2,1\nunset logscale x\nset xlabel 't [s]'\n",
-                          tmp_png(png));
-    script += fmt::format("set ylabel 'um'\nset title 'Tracking error through the corner at line {}'\nplot ",
-                          cw.line_after);
+                          gnuplot_output(png));
+    script += fmt::format("set ylabel 'um'\nset title {}\nplot ",
+                          gnuplot_text(planned.corners.empty()
+                                           ? std::string("Tracking error over the whole scenario (it has no corner)")
+                                           : fmt::format("Tracking error through the corner at line {}", cw.line_after)));
     int col = 2;
     bool first = true;
     for (const auto& a : r.axes) {
       if (!first) script += ", ";
       first = false;
       script += fmt::format("{} using 1:{} with lines title '{} before', '' using 1:{} with lines title '{} after'",
-                            gnuplot_quote(dat), col, axis_name(a.axis), col + 1, axis_name(a.axis));
+                            gnuplot_file(dat), col, axis_name(a.axis), col + 1, axis_name(a.axis));
       col += 2;
     }
     script += fmt::format("\nset title 'Contour error'\nplot {} using 1:{} with lines title 'before', '' using 1:{} "
                           "with lines title 'after'\nunset multiplot\n",
-                          gnuplot_quote(dat), col, col + 1);
+                          gnuplot_file(dat), col, col + 1);
     outputs.push_back(png);
   }
   script += "unset output\n";
-  run_gnuplot(out_dir, script, outputs);
-  return outputs;
+  std::vector<std::filesystem::path> written;
+  for (const auto& o : outputs) written.push_back(results.path(o));
+  run_gnuplot(results.staging_dir(), script, outputs);
+  return written;
 }
 
 }  // namespace twin::analysis

@@ -19,6 +19,7 @@
 /// in steady motion, see docs/tuning.md); the result is judged on the full scenario.
 #include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -29,6 +30,7 @@
 #include "controller/interpolator.hpp"
 #include "twin/analysis/linear_analysis.hpp"
 #include "twin/analysis/run_report.hpp"
+#include "twin/io/atomic_file.hpp"
 #include "twin/io/scenario_file.hpp"
 
 namespace twin::analysis {
@@ -47,6 +49,7 @@ struct TuneOptions {
   int max_evaluations{160};            ///< simulations in stage B
   double window_before_s{0.1};         ///< simulated before the first tuning corner
   double window_after_s{0.1};          ///< simulated after the last tuning corner
+  double max_window_span_s{2.0};       ///< corners searched on: those ending within this of the first one's start
   double gain_range{4.0};              ///< Kp, Ki, Kd stay within [start / range, start * range]
   double feedforward_range{2.0};       ///< K1, K2 stay within [0, range * model value]
   double rms_weight{0.5};              ///< weight of the RMS tracking error against the max contour error
@@ -84,6 +87,8 @@ struct ScenarioMetrics {
   AxisArray<double> max_tracking_error_mm{};   ///< through the corners
   AxisArray<double> rms_tracking_error_mm{};   ///< through the corners
   AxisArray<double> u_peak_V{};                ///< over the whole window
+  AxisArray<double> u_peak_t_s{};              ///< when the peak |u| was reached
+  AxisArray<int> u_peak_block{};               ///< program block running then (-1: none, settling)
   AxisArray<std::int64_t> saturated_ticks{};
   double max_contour_error_mm{0.0};            ///< through the corners
   double rms_contour_error_mm{0.0};            ///< through the corners
@@ -112,7 +117,10 @@ PlannedScenario plan_scenario(const io::Scenario& scenario);
 /// The whole scenario, or a window from window_before_s ahead of the first tuning
 /// corner to window_after_s past the last one.
 SimulationWindow full_window(const PlannedScenario& planned);
-SimulationWindow corner_window(const PlannedScenario& planned, double before_s, double after_s);
+/// With many corners, only the first tuning corner and those ending within max_span_s of
+/// its start are in the window (a search step then costs a bounded simulation).
+SimulationWindow corner_window(const PlannedScenario& planned, double before_s, double after_s,
+                               double max_span_s = std::numeric_limits<double>::infinity());
 
 /// Runs the coupled simulation over the window with the machine `machine`. A window
 /// that starts after tick 0 starts in steady motion on the reference (drives at the
@@ -126,6 +134,8 @@ ScenarioMetrics simulate_window(const io::Scenario& scenario, const PlannedScena
 
 struct AxisTuneResult {
   Axis axis{Axis::kX};
+  bool tuned{true};                          ///< false: the machine's gains were kept (see note)
+  std::string note;                          ///< why the gains were kept, or what limited the tuning
   controller::PositionLoopParams before, after;
   FeedforwardGains model_feedforward;
   LoopAnalysis analysis_before, analysis_after;
@@ -157,8 +167,9 @@ nlohmann::json tune_report(const io::Scenario& scenario, const TuneOptions& opti
 
 /// Writes the Bode plot (bode.png: |L|, arg L, |S|, |T| before and after per axis) and
 /// the tracking error through the first tuning corner before and after
-/// (corner_error.png). Returns the files written.
-std::vector<std::filesystem::path> plot_tune(const std::filesystem::path& out_dir, const io::Scenario& scenario,
+/// (corner_error.png), with their data bode.dat and corner_error.dat, in the result
+/// set. Returns the plots written (staged paths).
+std::vector<std::filesystem::path> plot_tune(io::ResultSet& results, const io::Scenario& scenario,
                                              const TuneResult& result);
 
 }  // namespace twin::analysis

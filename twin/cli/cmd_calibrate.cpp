@@ -1,6 +1,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -86,64 +87,22 @@ void write_residuals(const std::filesystem::path& path, const analysis::Measured
   w.commit();
 }
 
-// run_gnuplot renames <name>.tmp.png to <name> once gnuplot succeeded.
-std::string tmp_png(const std::filesystem::path& p) {
-  auto t = p;
-  t += ".tmp.png";
-  return analysis::gnuplot_quote(t);
-}
-
-std::vector<std::filesystem::path> make_plots(const std::filesystem::path& out, const analysis::MeasuredRun& run,
+// The figures are drawn by analysis::plot_calibration from residuals.csv.
+std::vector<std::filesystem::path> make_plots(io::ResultSet& results, const analysis::MeasuredRun& run,
                                               const analysis::CalibrationResult& r) {
   const std::vector<Axis> axes = measured_axes(run);
   if (axes.empty()) throw ConfigError("no axis logs its measured position <a>_mm: no residual to plot");
-  const auto data = out / "residuals.csv";
-  write_residuals(data, run, r, axes);
-  const std::string d = analysis::gnuplot_quote(data);
-  std::string script = "set datafile separator ','\nset key autotitle columnhead\nset grid\n";
-  std::vector<std::filesystem::path> outputs;
-  const std::size_t na = axes.size();
-  for (const char* which : {"before", "after"}) {
-    const auto png = out / fmt::format("residual_{}.png", which);
-    outputs.push_back(png);
-    script += fmt::format("set terminal pngcairo size 1200,{} noenhanced\nset output {}\nset multiplot layout {},2\n",
-                          300 * na, tmp_png(png), na);
-    for (std::size_t j = 0; j < na; ++j) {
-      const std::size_t c0 = 2 + 5 * j;  // gnuplot columns are 1-based: t_s is 1
-      const std::string an(axis_name(axes[j]));
-      const std::size_t ce = c0 + (std::string(which) == "before" ? 1 : 2);
-      const std::size_t cu = c0 + (std::string(which) == "before" ? 3 : 4);
-      script += fmt::format("set title '{} tracking error, measured minus model ({})'\nset xlabel 't s'\n"
-                            "set ylabel 'mm'\nplot {} using 1:{} with lines notitle\n",
-                            an, which, d, ce);
-      script += fmt::format("set title '{} low-passed u, measured minus model ({})'\nset ylabel 'V (or A)'\n"
-                            "plot {} using 1:{} with lines notitle\n",
-                            an, which, d, cu);
-    }
-    script += "unset multiplot\n";
-  }
-  if (!r.added.empty() && std::find(axes.begin(), axes.end(), r.added.front().candidate.axis) != axes.end()) {
+  write_residuals(results.path("residuals.csv"), run, r, axes);
+  std::optional<analysis::CalibrationEvidence> evidence;
+  if (!r.added.empty()) {
     const auto& c = r.added.front().candidate;
-    std::size_t j = 0;
-    for (; j < na; ++j)
-      if (axes[j] == c.axis) break;
-    const std::size_t c0 = 2 + 5 * j;
-    const auto png = out / "evidence.png";
-    outputs.push_back(png);
-    const bool in_x = c.effect == "cogging" || c.effect == "screw_pitch_error" ||
-                      c.effect == "position_dependent_friction";
-    script += fmt::format("set terminal pngcairo size 1200,500 noenhanced\nset output {}\nset multiplot layout 1,2\n",
-                          tmp_png(png));
-    script += fmt::format("set title '{} on {}: low-passed u residual of the model without it'\n"
-                          "set xlabel '{}'\nset ylabel 'V (or A)'\nplot {} using {}:{} with dots notitle\n",
-                          c.effect, axis_name(c.axis), in_x ? "x mm" : "t s", d, in_x ? c0 : 1, c0 + 3);
-    script += fmt::format("set title 'tracking-error residual, without (red) and with (blue) it'\nset xlabel '{}'\n"
-                          "set ylabel 'mm'\nplot {} using {}:{} with dots lc rgb 'red' notitle, '' using {}:{} with "
-                          "dots lc rgb 'blue' notitle\nunset multiplot\n",
-                          in_x ? "x mm" : "t s", d, in_x ? c0 : 1, c0 + 1, in_x ? c0 : 1, c0 + 2);
+    const auto it = std::find(axes.begin(), axes.end(), c.axis);
+    if (it != axes.end())
+      evidence = analysis::CalibrationEvidence{
+          c.effect, c.axis, static_cast<std::size_t>(it - axes.begin()),
+          c.effect == "cogging" || c.effect == "screw_pitch_error" || c.effect == "position_dependent_friction"};
   }
-  analysis::run_gnuplot(out, script, outputs);
-  return outputs;
+  return analysis::plot_calibration(results, "residuals.csv", axes, evidence);
 }
 
 
@@ -156,22 +115,20 @@ bool names_known_machine(const analysis::MeasuredRun& run) {
 // Measured against model per axis (torque channel and following error), the
 // fitted and held-out parts marked; and the evidence of the friction model:
 // the channel against the commanded speed, measured and model.
-std::vector<std::filesystem::path> make_data_plots(const std::filesystem::path& out,
-                                                   const analysis::MeasuredRun& run,
+std::vector<std::filesystem::path> make_data_plots(io::ResultSet& results, const analysis::MeasuredRun& run,
                                                    const analysis::DataCalibration& r) {
   const auto& rr = r.replay_after;
   std::vector<analysis::AxisFromData> axes;
   for (const auto& ax : r.axis)
     if (ax.identified && !rr.x_mm[index(ax.axis)].empty()) axes.push_back(ax);
   if (axes.empty()) throw ConfigError("no axis was identified: nothing to plot");
-  const auto data = out / "overlay.csv";
   std::vector<std::string> names{"t_s"};
   for (const auto& ax : axes) {
     const std::string n(axis_name(ax.axis));
     names.insert(names.end(), {n + "_T_meas", n + "_T_model", n + "_e_meas_mm", n + "_e_model_mm", n + "_v_cmd"});
   }
   {
-    io::TraceWriter w(data, names);
+    io::TraceWriter w(results.path("overlay.csv"), names);
     const auto& t = run.trace.at("t_s");
     std::vector<double> row;
     for (std::size_t k = 0; k < t.size(); ++k) {
@@ -190,48 +147,48 @@ std::vector<std::filesystem::path> make_data_plots(const std::filesystem::path& 
     }
     w.commit();
   }
-  const std::string d = analysis::gnuplot_quote(data);
+  const std::string d = analysis::gnuplot_file("overlay.csv");
   const auto& t = run.trace.at("t_s");
   const double t_split = t[static_cast<std::size_t>(r.fit_fraction * static_cast<double>(t.size()))];
   std::string script = "set datafile separator ','\nset key autotitle columnhead\nset grid\n";
-  std::vector<std::filesystem::path> outputs;
-  const auto overlay = out / "overlay.png";
-  outputs.push_back(overlay);
   script += fmt::format("set terminal pngcairo size 1400,{} noenhanced\nset output {}\nset multiplot layout {},1\n",
-                        380 * 2 * axes.size(), tmp_png(overlay), 2 * axes.size());
+                        380 * 2 * axes.size(), analysis::gnuplot_output("overlay.png"), 2 * axes.size());
   script += fmt::format("set arrow 1 from {0},graph 0 to {0},graph 1 nohead dt 2 lc rgb 'black'\n", t_split);
   for (std::size_t j = 0; j < axes.size(); ++j) {
     const std::size_t c0 = 2 + 5 * j;
     const std::string an(axis_name(axes[j].axis));
     const std::string unit = axes[j].channel.unit == "raw" ? "log's unit" : axes[j].channel.unit;
-    script += fmt::format("set title '{0} {1}: measured (grey) and twin (blue); fitted left of the dashed line, held "
-                          "out right of it'\nset xlabel 't s'\nset ylabel '{2}'\n"
-                          "plot {3} using 1:{4} with lines lc rgb '#999999' title 'measured', '' using 1:{5} with lines "
+    script += fmt::format("set title {}\nset xlabel 't s'\nset ylabel {}\n"
+                          "plot {} using 1:{} with lines lc rgb '#999999' title 'measured', '' using 1:{} with lines "
                           "lc rgb 'blue' title 'twin'\n",
-                          an, axes[j].channel.column, unit, d, c0, c0 + 1);
-    script += fmt::format("set title '{0} following error: measured (grey) and twin (blue)'\nset ylabel 'mm'\n"
-                          "plot {1} using 1:{2} with lines lc rgb '#999999' title 'measured', '' using 1:{3} with "
+                          analysis::gnuplot_text(fmt::format("{} {}: measured (grey) and twin (blue); fitted left of "
+                                                             "the dashed line, held out right of it",
+                                                             an, axes[j].channel.column)),
+                          analysis::gnuplot_text(unit), d, c0, c0 + 1);
+    script += fmt::format("set title {}\nset ylabel 'mm'\n"
+                          "plot {} using 1:{} with lines lc rgb '#999999' title 'measured', '' using 1:{} with "
                           "lines lc rgb 'blue' title 'twin'\n",
-                          an, d, c0 + 2, c0 + 3);
+                          analysis::gnuplot_text(an + " following error: measured (grey) and twin (blue)"), d, c0 + 2,
+                          c0 + 3);
   }
   script += "unset multiplot\nunset arrow 1\n";
-  const auto evidence = out / "evidence.png";
-  outputs.push_back(evidence);
   script += fmt::format("set terminal pngcairo size 1200,{} noenhanced\nset output {}\nset multiplot layout {},1\n",
-                        420 * axes.size(), tmp_png(evidence), axes.size());
+                        420 * axes.size(), analysis::gnuplot_output("evidence.png"), axes.size());
   for (std::size_t j = 0; j < axes.size(); ++j) {
     const std::size_t c0 = 2 + 5 * j;
     const std::string unit = axes[j].channel.unit == "raw" ? "log's unit" : axes[j].channel.unit;
-    script += fmt::format("set title '{0}: {1} against the commanded speed, both directions: measured (grey) and twin "
-                          "(blue); friction levels and the constant load show as the two bands'\n"
-                          "set xlabel 'commanded speed mm/s'\nset ylabel '{2}'\n"
-                          "plot {3} using {4}:{5} with points pt 7 ps 0.3 lc rgb '#999999' title 'measured', '' using "
-                          "{4}:{6} with points pt 7 ps 0.3 lc rgb 'blue' title 'twin'\n",
-                          axis_name(axes[j].axis), axes[j].channel.column, unit, d, c0 + 4, c0, c0 + 1);
+    script += fmt::format("set title {}\nset xlabel 'commanded speed mm/s'\nset ylabel {}\n"
+                          "plot {} using {}:{} with points pt 7 ps 0.3 lc rgb '#999999' title 'measured', '' using "
+                          "{}:{} with points pt 7 ps 0.3 lc rgb 'blue' title 'twin'\n",
+                          analysis::gnuplot_text(fmt::format(
+                              "{}: {} against the commanded speed, both directions: measured (grey) and twin (blue); "
+                              "friction levels and the constant load show as the two bands",
+                              axis_name(axes[j].axis), axes[j].channel.column)),
+                          analysis::gnuplot_text(unit), d, c0 + 4, c0, c0 + 4, c0 + 1);
   }
   script += "unset multiplot\n";
-  analysis::run_gnuplot(out, script, outputs);
-  return outputs;
+  analysis::run_gnuplot(results.staging_dir(), script, {"overlay.png", "evidence.png"});
+  return {results.path("overlay.png"), results.path("evidence.png")};
 }
 
 }  // namespace
@@ -260,6 +217,8 @@ void register_calibrate(CLI::App& app) {
   cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.J=0.008")->take_all();
   cmd->add_flag("--no-plots", opt->no_plots, "skip the gnuplot figures");
   cmd->callback([opt]() {
+    for (const auto& r : opt->runs) refuse_output_over_input("calibrate", opt->out, r, opt->machine);
+    for (const auto& r : opt->validate) refuse_output_over_input("calibrate", opt->out, r, opt->machine);
     std::vector<analysis::MeasuredRun> fit_runs, validate_runs;
     for (const auto& r : opt->runs) fit_runs.push_back(analysis::load_run(r));
     for (const auto& r : opt->validate) validate_runs.push_back(analysis::load_run(r));
@@ -275,25 +234,26 @@ void register_calibrate(CLI::App& app) {
                      "law, drives in the log's torque unit); the nominal machine the errors are compared with is the "
                      "shipped " + std::string(io::kDefaultMachineName) + " standing in");
       const std::filesystem::path out(opt->out);
-      io::ensure_directory(out);
-      analysis::write_data_trace(out / "trace_before.csv", fit_runs.front(), r.replay_before);
-      analysis::write_data_trace(out / "trace.csv", fit_runs.front(), r.replay_after);
+      io::ResultSet results(out, "calibrate");  // the files appear in OUT together, manifest.json last
+      analysis::write_data_trace(results.path("trace_before.csv"), fit_runs.front(), r.replay_before);
+      analysis::write_data_trace(results.path("trace.csv"), fit_runs.front(), r.replay_after);
       std::string runs_text;
       for (const auto& s : opt->runs) runs_text += (runs_text.empty() ? "" : " ") + s;
-      io::write_file_atomic(out / "machine.yaml",
+      io::write_file_atomic(results.path("machine.yaml"),
                             io::machine_to_yaml(r.final_machine, fmt::format("identified by twin calibrate from {}: "
                                                                              "cascade loop and drives in the log's "
                                                                              "torque unit (Kt = Ka = 1, rg = 1 mm/rad)",
                                                                              runs_text)));
       if (!opt->no_plots) {
         try {
-          make_data_plots(out, fit_runs.front(), r);
+          make_data_plots(results, fit_runs.front(), r);
         } catch (const Error& e) {
           r.notes.push_back(fmt::format("plots not drawn: {}", e.what()));
         }
       }
-      io::write_file_atomic(out / "report.json", analysis::data_calibration_report_json(r).dump(2) + "\n");
-      io::write_file_atomic(out / "report.md", analysis::data_calibration_report_markdown(r, runs_text));
+      io::write_file_atomic(results.path("report.json"), analysis::data_calibration_report_json(r).dump(2) + "\n");
+      io::write_file_atomic(results.path("report.md"), analysis::data_calibration_report_markdown(r, runs_text));
+      results.commit();
       for (const auto& n : r.notes) std::fprintf(stderr, "twin calibrate: note: %s\n", n.c_str());
       std::printf("calibrated %s from the data (%zu runs, %d replays); wrote %s\n", runs_text.c_str(),
                   fit_runs.size(), r.replays, out.c_str());
@@ -312,10 +272,10 @@ void register_calibrate(CLI::App& app) {
     analysis::CalibrationResult r = analysis::calibrate(run, machine);
     r.notes.insert(r.notes.begin(), notes.begin(), notes.end());
     const std::filesystem::path out(opt->out);
-    io::ensure_directory(out);
-    analysis::write_replay_trace(out / "trace_before.csv", r.replay_before);
-    analysis::write_replay_trace(out / "trace.csv", r.replay_after);
-    io::write_file_atomic(out / "machine.yaml",
+    io::ResultSet results(out, "calibrate");  // the files appear in OUT together, manifest.json last
+    analysis::write_replay_trace(results.path("trace_before.csv"), r.replay_before);
+    analysis::write_replay_trace(results.path("trace.csv"), r.replay_after);
+    io::write_file_atomic(results.path("machine.yaml"),
                           io::machine_to_yaml(r.final_machine, fmt::format("calibrated by twin calibrate from {}: "
                                                                            "identified J, B, Tc and added effects",
                                                                            opt->runs.front())));
@@ -350,15 +310,16 @@ void register_calibrate(CLI::App& app) {
       report["validation_runs"].push_back(entry);
     }
     if (validate_runs.empty()) report.erase("validation_runs");
-    io::write_file_atomic(out / "report.json", report.dump(2) + "\n");
+    io::write_file_atomic(results.path("report.json"), report.dump(2) + "\n");
     if (!opt->no_plots) {
       try {
-        make_plots(out, run, r);
+        make_plots(results, run, r);
       } catch (const Error& e) {
         r.notes.push_back(fmt::format("plots not drawn: {}", e.what()));
       }
     }
-    io::write_file_atomic(out / "report.md", analysis::calibration_report_markdown(r, opt->runs.front()));
+    io::write_file_atomic(results.path("report.md"), analysis::calibration_report_markdown(r, opt->runs.front()));
+    results.commit();
     for (const auto& n : r.notes) std::fprintf(stderr, "twin calibrate: note: %s\n", n.c_str());
     std::string added;
     for (const auto& a : r.added)

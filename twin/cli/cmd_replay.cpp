@@ -30,6 +30,7 @@ void register_replay(CLI::App& app) {
   cmd->add_option("--machine", opt->machine, "machine definition (name or YAML file) replacing the run's meta.machine");
   cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.J=0.008")->take_all();
   cmd->callback([opt]() {
+    refuse_output_over_input("replay", opt->out, opt->run, opt->machine);
     const analysis::MeasuredRun run = analysis::load_run(opt->run);
     std::vector<std::string> notes = run.notes;
     sim::MachineDefinition machine = analysis::machine_for_run(run, opt->machine, &notes);
@@ -40,15 +41,16 @@ void register_replay(CLI::App& app) {
       // and its errors written beside the trace.
       analysis::ReplayResult rr;
       const analysis::RunErrors e = analysis::evaluate_machine_on_run(run, machine, &rr, &notes);
-      io::ensure_directory(opt->out);
-      const auto path = std::filesystem::path(opt->out) / "trace.csv";
-      analysis::write_data_trace(path, run, rr);
+      io::ResultSet results(opt->out, "replay");
+      analysis::write_data_trace(results.path("trace.csv"), run, rr);
       nlohmann::json j;
       j["run"] = e.run;
       j["rows_compared"] = e.rows_compared;
       j["error"] = e.calibrated.to_json();
       j["baseline"] = {{"zero", e.zero.to_json()}};
-      io::write_file_atomic(std::filesystem::path(opt->out) / "errors.json", j.dump(2) + "\n");
+      io::write_file_atomic(results.path("errors.json"), j.dump(2) + "\n");
+      results.commit();
+      const auto path = results.final_path("trace.csv");
       for (const auto& n : notes) std::fprintf(stderr, "twin replay: note: %s\n", n.c_str());
       std::string figs;
       for (const auto& [k, v] : e.calibrated.nrms) figs += fmt::format("{}{} {:.4g}", figs.empty() ? "" : ", ", k, v);
@@ -57,9 +59,10 @@ void register_replay(CLI::App& app) {
       return;
     }
     analysis::ReplayResult r = analysis::replay_run(run, machine);
-    io::ensure_directory(opt->out);
-    const auto path = std::filesystem::path(opt->out) / "trace.csv";
-    analysis::write_replay_trace(path, r);
+    io::ResultSet results(opt->out, "replay");
+    analysis::write_replay_trace(results.path("trace.csv"), r);
+    results.commit();
+    const auto path = results.final_path("trace.csv");
     notes.insert(notes.end(), r.notes.begin(), r.notes.end());
     for (const auto& n : notes) std::fprintf(stderr, "twin replay: note: %s\n", n.c_str());
     std::printf("replayed %zu samples of %s on machine %s; wrote %s\n", r.t_s.size(), opt->run.c_str(),

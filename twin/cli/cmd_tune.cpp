@@ -68,6 +68,9 @@ void register_tune(CLI::App& app) {
   cmd->add_option("--check", opt->check,
                   "second scenario, not used for tuning, on which before/after are reported ('none' to skip)");
   cmd->add_option("--max-evals", opt->tune.max_evaluations, "coupled simulations in the search (default 160)");
+  cmd->add_option("--max-window", opt->tune.max_window_span_s,
+                  "corners searched on: the first and those ending within this many seconds of it (default 2); all "
+                  "are judged on the full scenario");
   cmd->add_option("--pm", opt->tune.constraints.phase_margin_min_deg, "minimum phase margin, deg (default 40)");
   cmd->add_option("--gm", opt->tune.constraints.gain_margin_min_dB, "minimum gain margin, dB (default 6)");
   cmd->add_option("--ms", opt->tune.constraints.sensitivity_peak_max, "maximum sensitivity peak |S| (default 2)");
@@ -100,7 +103,7 @@ void register_tune(CLI::App& app) {
     if (opt->out.empty()) throw ConfigError("tune: -o OUT is required (or use --analyse)");
     opt->tune.axes = axes;
     const std::filesystem::path out(opt->out);
-    io::ensure_directory(out);
+    io::ResultSet results(out, "tune");  // the files appear in OUT together, manifest.json last
     print_line(fmt::format("tuning axes {} on {} ({} simulations at most) ...", opt->axes, scenario.name,
                            opt->tune.max_evaluations));
     const analysis::TuneResult result = analysis::tune_gains(scenario, opt->tune);
@@ -122,19 +125,29 @@ void register_tune(CLI::App& app) {
       check = std::move(cs);
     }
     const nlohmann::json report = analysis::tune_report(scenario, opt->tune, result, check, check_metrics);
-    io::write_file_atomic(out / "report.json", report.dump(2) + "\n");
-    std::vector<std::filesystem::path> written{out / "report.json"};
+    io::write_file_atomic(results.path("report.json"), report.dump(2) + "\n");
     if (result.feasible) {
       const std::string header = fmt::format(
           "{} with position-loop gains tuned by `twin tune` on scenario {} (axes {}); see report.json",
           scenario.machine.name, scenario.name, opt->axes);
-      io::write_file_atomic(out / "machine.yaml", io::machine_to_yaml(result.machine_after, header));
-      written.push_back(out / "machine.yaml");
+      io::write_file_atomic(results.path("machine.yaml"), io::machine_to_yaml(result.machine_after, header));
     }
     if (!opt->no_plots && !result.axes.empty()) {
-      for (const auto& p : analysis::plot_tune(out, scenario, result)) written.push_back(p);
+      try {
+        static_cast<void>(analysis::plot_tune(results, scenario, result));
+      } catch (const Error&) {
+        results.commit();  // the report and the machine stand without the plots
+        throw;
+      }
     }
+    const std::vector<std::filesystem::path> written = results.commit();
     for (const auto& a : result.axes) {
+      if (!a.tuned) {
+        print_line(fmt::format("axis {}: gains kept (Kp {:.4g}, Ki {:.4g}, Kd {:.4g}, K1 {:.4g}, K2 {:.4g}): {}",
+                               axis_name(a.axis), a.before.Kp_V_per_mm, a.before.Ki_V_per_s_mm,
+                               a.before.Kd_V_s_per_mm, a.before.K1_V_s2_per_mm, a.before.K2_V_s_per_mm, a.note));
+        continue;
+      }
       print_line(fmt::format("axis {}: Kp {:.4g} -> {:.4g}, Ki {:.4g} -> {:.4g}, Kd {:.4g} -> {:.4g}, K1 {:.4g} -> "
                              "{:.4g}, K2 {:.4g} -> {:.4g}; PM {:.1f} -> {:.1f} deg, GM {:.1f} -> {:.1f} dB, Ms {:.2f} "
                              "-> {:.2f}, bandwidth {:.1f} -> {:.1f} Hz",
@@ -146,6 +159,7 @@ void register_tune(CLI::App& app) {
                              a.analysis_after.gain_margin_dB, a.analysis_before.sensitivity_peak,
                              a.analysis_after.sensitivity_peak, a.analysis_before.bandwidth_Hz,
                              a.analysis_after.bandwidth_Hz));
+      if (!a.note.empty()) print_line(fmt::format("axis {}: {}", axis_name(a.axis), a.note));
     }
     if (check_metrics)
       print_line(fmt::format("check scenario {}: max contour error through the corners {:.3f} um -> {:.3f} um",

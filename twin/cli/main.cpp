@@ -7,9 +7,12 @@
 
 #include "twin/cli/commands.hpp"
 #include "twin/core/error.hpp"
+#include "twin/io/atomic_file.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"twin: a digital twin of a 3-axis milling machine (feed drives, CNC, cutting process)", "twin"};
+  // Temporary files and partial result sets are removed when the program is ended by a signal.
+  twin::io::install_signal_cleanup();
   app.require_subcommand(1);
   twin::cli::register_run(app);
   twin::cli::register_replay(app);

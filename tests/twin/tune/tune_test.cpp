@@ -174,6 +174,41 @@ TEST(Tune, SteadyMotionWindowMatchesTheFullRun) {
   EXPECT_NEAR(win.max_contour_error_mm, full.max_contour_error_mm, 1e-3);
 }
 
+// Oracle: the corner windows' own tick ranges. The search window holds the first tuning
+// corner and those ending within max_span_s of its start, no more: a span just short of
+// the second corner's end keeps one corner, one just past it keeps two, no limit keeps all.
+TEST(Tune, WindowSpanLimitsTheCornersSearchedOn) {
+  const io::Scenario sc = write_scenario("tune_square", "G1 X4 Y0 F1200\nG1 X4 Y4\nG1 X0 Y4\nG1 X0 Y0\n");
+  const PlannedScenario planned = plan_scenario(sc);
+  ASSERT_GE(planned.tuning_corners.size(), 3u);
+  const double Ts = planned.trajectory.Ts_s();
+  const auto& c0 = planned.tuning_corners[0];
+  const auto& c1 = planned.tuning_corners[1];
+  const double to_second_s = static_cast<double>(c1.k_end - c0.k_begin) * Ts;
+  EXPECT_EQ(corner_window(planned, 0.03, 0.03).corners.size(), planned.tuning_corners.size());
+  EXPECT_EQ(corner_window(planned, 0.03, 0.03, to_second_s - Ts).corners.size(), 1u);
+  const SimulationWindow two = corner_window(planned, 0.03, 0.03, to_second_s + Ts);
+  ASSERT_EQ(two.corners.size(), 2u);
+  EXPECT_EQ(two.k_end, std::min(planned.total_ticks, c1.k_end + static_cast<std::int64_t>(std::llround(0.03 / Ts))));
+}
+
+// Oracle: a straight cut has no corner; the tuning then judges its whole run, so the
+// window is the full scenario and holds one stretch from tick 0 to the end of settling.
+TEST(Tune, ProgramWithoutCornersIsJudgedOverItsWholeRun) {
+  const io::Scenario sc = write_scenario("tune_line", "G1 X4 Y0 F1200\n");
+  const PlannedScenario planned = plan_scenario(sc);
+  ASSERT_TRUE(planned.corners.empty());
+  ASSERT_EQ(planned.tuning_corners.size(), 1u);
+  EXPECT_EQ(planned.tuning_corners[0].k_begin, 0);
+  EXPECT_EQ(planned.tuning_corners[0].k_end, planned.total_ticks);
+  const SimulationWindow w = corner_window(planned, 0.03, 0.03, 2.0);
+  EXPECT_EQ(w.k_begin, 0);
+  EXPECT_EQ(w.k_end, planned.total_ticks);
+  const ScenarioMetrics m = simulate_window(sc, planned, sc.machine, w);
+  ASSERT_TRUE(m.completed);
+  EXPECT_GT(m.max_tracking_error_mm[index(Axis::kX)], 0.0);  // the cut's errors count (before: none did)
+}
+
 TEST(Tune, AbsentAxisIsAConfigError) {
   io::Scenario sc = tuning_scenario();
   sc.machine.axes[index(Axis::kZ)].present = false;
