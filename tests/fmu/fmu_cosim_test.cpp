@@ -215,7 +215,11 @@ TEST_F(FmuCosim, AnInputEventBetweenTicksActsFromTheNextTick) {
 
 TEST_F(FmuCosim, DefaultStopTimeIsTheProgramEndOnTheTickGrid) {
   // Oracle: the twin's own plan of the program (duration) plus settle_s,
-  // rounded up to a whole tick.
+  // rounded up to a whole tick. Tolerances: the stop time is decimal text,
+  // so stop / Ts reads back within a few ulps of a whole number (1e-6 ticks
+  // is far above that and far below the 0.19 ticks the old default stop
+  // time 8.801919244755586 s was off the grid);
+  // 1e-9 s covers the rounding of duration + settle_s.
   for (const std::string& path : {std::string(TWIN_FMU_AIRCUT), std::string(TWIN_FMU_DEFAULT)}) {
     REQUIRE_EXPORTED(path);
     LoadedFmu fmu(path);
