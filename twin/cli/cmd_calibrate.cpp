@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 
 #include "twin/analysis/calibrate.hpp"
+#include "twin/analysis/force_calibrate.hpp"
 #include "twin/analysis/plots.hpp"
 #include "twin/analysis/signal.hpp"
 #include "twin/cli/commands.hpp"
@@ -166,6 +167,10 @@ void register_calibrate(CLI::App& app) {
   cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.J=0.008")->take_all();
   cmd->add_flag("--no-plots", opt->no_plots, "skip the gnuplot figures");
   cmd->callback([opt]() {
+    if (analysis::force::is_force_data(opt->run)) {  // a force run or series: meta.json has a `cut`
+      analysis::force::run_force_calibration(opt->run, opt->out, opt->no_plots);
+      return;
+    }
     const analysis::MeasuredRun run = analysis::load_run(opt->run);
     std::vector<std::string> notes;
     sim::MachineDefinition machine = analysis::machine_for_run(run, opt->machine, &notes);
