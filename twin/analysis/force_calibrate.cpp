@@ -870,11 +870,12 @@ class Identifier {
     for (std::size_t i = 0; i < p_.size(); ++i) {
       if (p_[i].has_angle) continue;
       const double pitch = 360.0 / p_[i].run->cut.flutes;
-      const double keep = m.phi0_deg[i];
-      double best = keep, best_c = 1e300;
+      // Each run's phase from its own pattern (its own coefficients): the others' phases do not bias it.
+      const std::vector<int> one{static_cast<int>(i)};
+      double best = m.phi0_deg[i], best_c = 1e300;
       for (double a = 0.0; a < pitch; a += 2.0) {
         m.phi0_deg[i] = a;
-        const double c = solve(m, all_).ssr;
+        const double c = solve(m, one).ssr;
         if (c < best_c) {
           best_c = c;
           best = a;
@@ -883,13 +884,14 @@ class Identifier {
       m.phi0_deg[i] = golden(
           [&](double a) {
             m.phi0_deg[i] = a;
-            return solve(m, all_).ssr;
+            return solve(m, one).ssr;
           },
           best - 2.0, best + 2.0, 20);
     }
     if (any_angle_) {
       double best = 0.0, best_c = 1e300;
-      for (double d = 0.0; d <= 1e-3 + 1e-12; d += 5e-5) {
+      // A log may lag the trigger (filters) or, where the trigger is late, lead it.
+      for (double d = -5e-4; d <= 1e-3 + 1e-12; d += 5e-5) {
         m.delay_s = d;
         const double c = solve(m, all_).ssr;
         if (c < best_c) {
@@ -902,7 +904,7 @@ class Identifier {
             m.delay_s = d;
             return solve(m, all_).ssr;
           },
-          std::max(0.0, best - 5e-5), best + 5e-5, 20);
+          best - 5e-5, best + 5e-5, 20);
     }
   }
 
@@ -957,7 +959,7 @@ class Identifier {
     const double d0 = m.delay_s;
     auto cost3 = [&](const std::vector<double>& v) {
       if (any_angle_) {
-        if (v[2] < 0.0 || v[2] > 20.0) return 1e300;
+        if (v[2] < -5.0 || v[2] > 10.0) return 1e300;
         m.delay_s = v[2] * 1e-4;
       }
       return cost(std::exp(v[0]), std::exp(v[1]));
@@ -975,7 +977,9 @@ class Identifier {
       m.k.exponential = true;
       m.k.c_per_mm = std::exp(lc);
       sm_.build(m.runout, m.k.c_per_mm, kExpRegressors, use.size() == all_.size() ? nullptr : &use);
-      return sm_.solve(m, use).ssr;
+      const Fit f = sm_.solve(m, use);
+      // A size effect raises K as the chip thins (b_t > 0, Duan 2025); the other sign is not one.
+      return f.model.k.b[0] > 0.0 ? f.ssr : 1e300;
     };
     double best = std::log(2.0), bc = 1e300;
     for (double lc = std::log(2.0); lc <= std::log(2000.0); lc += 0.35) {
