@@ -33,7 +33,7 @@ struct ToolGeometry {
   double corner_radius_mm{0.0};     ///< 0 flat, (0, R) bull-nose, R ball
   double flute_length_mm{20.0};
   double runout_rho_mm{0.0};        ///< radial offset of the tool axis
-  double runout_lambda_deg{0.0};    ///< its direction, from flute 0, against the rotation
+  double runout_lambda_deg{0.0};    ///< its direction in the rotating frame, from flute 0's tip in the sense of phi
 
   /// Throws ConfigError naming `where` and the field when a value is out of range
   /// (diameter > 0, 1 <= flutes <= 16, 0 <= helix < 60 deg, corner radius by shape,

@@ -44,17 +44,18 @@ void register_cut(CLI::App& app) {
   cmd->add_option("--lead", opt->lead_deg, "lead angle thetaL, deg (Duan 2025 eq. 4; picks the material set)")
       ->capture_default_str();
   cmd->add_option("--tilt", opt->tilt_deg, "tilt angle thetaT, deg (picks the material set)")->capture_default_str();
-  cmd->add_option("--runout-rho", opt->rho_mm, "radial runout offset, mm")->capture_default_str();
-  cmd->add_option("--runout-lambda", opt->lambda_deg, "runout direction from flute 0, deg")->capture_default_str();
+  cmd->add_option("--runout-rho", opt->rho_mm, "radial runout offset, mm (default: the tool file's)");
+  cmd->add_option("--runout-lambda", opt->lambda_deg, "runout direction from flute 0, deg (default: the tool file's)");
   cmd->add_option("--step", opt->step_deg, "spindle angle step, deg")->capture_default_str();
   cmd->add_option("-o,--out", opt->out, "CSV file for the revolution (angle_deg, fx_N, fy_N, fz_N, torque_Nm, chip_mm)");
-  cmd->callback([opt]() {
+  cmd->callback([opt, cmd]() {
     if (opt->mode != "up" && opt->mode != "down")
       throw ConfigError(fmt::format("cut: --mode = '{}' must be up or down", opt->mode));
     process::SteadyCutSpec spec;
     spec.tool = io::load_tool_file(opt->tool);
-    spec.tool.runout_rho_mm = opt->rho_mm;
-    spec.tool.runout_lambda_deg = opt->lambda_deg;
+    // The tool file's runout (e.g. identified by twin calibrate) unless given here.
+    if (cmd->count("--runout-rho") > 0) spec.tool.runout_rho_mm = opt->rho_mm;
+    if (cmd->count("--runout-lambda") > 0) spec.tool.runout_lambda_deg = opt->lambda_deg;
     spec.coefficients = io::load_material_file(opt->material, opt->lead_deg, opt->tilt_deg);
     spec.lead_deg = opt->lead_deg;
     spec.tilt_deg = opt->tilt_deg;
