@@ -28,6 +28,9 @@ void register_cut(CLI::App& app) {
     double rho_mm{0.0};
     double lambda_deg{0.0};
     double step_deg{1.0};
+    double sensor_f_hz{0.0};
+    double sensor_zeta{0.03};
+    double wear_scale{1.0};
     std::string out;
   };
   auto opt = std::make_shared<Options>();
@@ -47,6 +50,11 @@ void register_cut(CLI::App& app) {
   cmd->add_option("--runout-rho", opt->rho_mm, "radial runout offset, mm (default: the tool file's)");
   cmd->add_option("--runout-lambda", opt->lambda_deg, "runout direction from flute 0, deg (default: the tool file's)");
   cmd->add_option("--step", opt->step_deg, "spindle angle step, deg")->capture_default_str();
+  cmd->add_option("--sensor-f", opt->sensor_f_hz, "a sensor mode in the force output, Hz (0: none; twin calibrate's "
+                                                   "sensor_f_hz)")->capture_default_str();
+  cmd->add_option("--sensor-zeta", opt->sensor_zeta, "damping ratio of that mode")->capture_default_str();
+  cmd->add_option("--wear-scale", opt->wear_scale, "wear state: factor on every coefficient, 1 + w (L - L_ref) of "
+                                                   "twin calibrate's tool_wear")->capture_default_str();
   cmd->add_option("-o,--out", opt->out, "CSV file for the revolution (angle_deg, fx_N, fy_N, fz_N, torque_Nm, chip_mm)");
   cmd->callback([opt, cmd]() {
     if (opt->mode != "up" && opt->mode != "down")
@@ -65,6 +73,9 @@ void register_cut(CLI::App& app) {
     spec.ap_mm = opt->ap_mm;
     spec.up_milling = opt->mode == "up";
     spec.angle_step_deg = opt->step_deg;
+    spec.sensor_f_hz = opt->sensor_f_hz;
+    spec.sensor_zeta = opt->sensor_zeta;
+    spec.coefficient_scale = opt->wear_scale;
     const process::SteadyCutResult r = process::run_steady_cut(spec);
     if (!opt->out.empty()) {
       std::string csv = "angle_deg,fx_N,fy_N,fz_N,torque_Nm,chip_mm\n";
