@@ -1154,6 +1154,7 @@ ForceCalibration calibrate_forces(const std::vector<ForceRun>& runs, const Force
     preps.push_back(prepare(r, R.notes));
     R.runs.push_back(r.name);
   }
+  R.material = runs.front().cut.material;
   double L = 0.0;
   for (Prep& p : preps) {
     p.L0_mm = L;
@@ -1617,6 +1618,13 @@ std::string force_report_markdown(const ForceCalibration& r, const std::string& 
                      r.runs[i], r.zero[i].offset_N[0], r.zero[i].offset_N[1], r.zero[i].offset_N[2],
                      r.zero[i].drift_N_per_s[0], r.zero[i].drift_N_per_s[1], r.zero[i].drift_N_per_s[2],
                      r.zero[i].drift_source, r.zero[i].noise_N, r.zero[i].t_entry_s, r.zero[i].revolutions);
+  s += "\n## Reproduce a cut\n\n```\ntwin cut --tool OUT/tool.yaml --material OUT/material.yaml --rpm RPM --fz FZ "
+       "--ae AE --ap AP";
+  if (r.after.mode) s += fmt::format(" --sensor-f {:.1f} --sensor-zeta {:.4f}", r.after.mode->f_hz, r.after.mode->zeta);
+  if (r.after.wear_per_mm != 0.0)
+    s += fmt::format(" --wear-scale S   # S = 1 + {:.5g} (L - {:.1f}), L mm of cut", r.after.wear_per_mm,
+                     r.after.wear_L_ref_mm);
+  s += "\n```\n";
   if (!r.notes.empty()) {
     s += "\n## Notes\n\n";
     for (const auto& n : r.notes) s += "- " + n + "\n";
@@ -1657,7 +1665,7 @@ std::string material_yaml(const ForceCalibration& r, const std::string& source) 
   if (r.after.wear_per_mm != 0.0)
     s += comment(fmt::format("coefficients at cut length {:.1f} mm; they grow by {:.4f} % per mm of cut (tool_wear)",
                              r.after.wear_L_ref_mm, 100 * r.after.wear_per_mm));
-  const std::string name = r.feeds.empty() ? std::string("calibrated") : std::string("calibrated");
+  const std::string name = r.material.empty() ? std::string("calibrated") : r.material + " (calibrated)";
   s += fmt::format("material:\n  name: {}\n  sets:\n    - lead_deg: 0\n      tilt_deg: 0\n", yaml_quote(name));
   if (k.exponential) {
     const char* q[3] = {"Kt", "Kr", "Ka"};

@@ -130,6 +130,7 @@ struct FeedResult {
 
 struct ForceCalibration {
   std::vector<std::string> runs;
+  std::string material;                   ///< cut.material of the first run
   ForceModel before;                      ///< linear coefficients (+ delay), no effect
   ForceModel after;                       ///< with the effects added
   ForceCoefficients average_force;        ///< Altintas' average-force regression
