@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 
 #include "twin/analysis/force_calibrate.hpp"
 
@@ -25,6 +26,8 @@ TEST(ForceCalibrateExamples, SlotSeriesWithRunout) {
   const auto runs = load_force_series(kExamples / "forces_slot_series");
   ASSERT_EQ(runs.size(), 5u);
   const ForceCalibration r = calibrate_forces(runs);
+  std::ofstream(std::filesystem::path(TWIN_BINARY_DIR) / "tests" / "forces_slot_series_report.json")
+      << force_report_json(r).dump(2);   // for a reader of a failure
   const auto& k = r.after.k;
   EXPECT_LT(rel(k.a[0], 850.0), 0.02);
   EXPECT_LT(rel(k.a[1], 280.0), 0.02);
@@ -41,6 +44,9 @@ TEST(ForceCalibrateExamples, SlotSeriesWithRunout) {
   EXPECT_NEAR(r.average_force.a[1], 295.3, 0.005 * 295.3);
   EXPECT_NEAR(r.average_force.e[0], 21.0, 0.01 * 21.0);
   for (int a = 0; a < 3; ++a) EXPECT_LE(r.error_after[a], r.error_before[a]);
+  // README: the anti-alias filter is a 2nd-order Butterworth at 3 kHz; the
+  // sensor path finds it (15 %: its phase trades with the fitted delay).
+  EXPECT_NEAR(r.after.lowpass_hz, 3000.0, 450.0);
 }
 
 // forces_slot_resonance/README.md: Ktc 780, Krc 240, Kac 90 N/mm^2, Kte 18,
@@ -50,6 +56,8 @@ TEST(ForceCalibrateExamples, SlotSeriesWithRunout) {
 TEST(ForceCalibrateExamples, SlotSeriesWithSensorResonance) {
   const auto runs = load_force_series(kExamples / "forces_slot_resonance");
   const ForceCalibration r = calibrate_forces(runs);
+  std::ofstream(std::filesystem::path(TWIN_BINARY_DIR) / "tests" / "forces_slot_resonance_report.json")
+      << force_report_json(r).dump(2);
   const auto& k = r.after.k;
   EXPECT_LT(rel(k.a[0], 780.0), 0.02);
   EXPECT_LT(rel(k.a[1], 240.0), 0.02);
@@ -61,6 +69,7 @@ TEST(ForceCalibrateExamples, SlotSeriesWithSensorResonance) {
   EXPECT_EQ(r.added.front().effect, "sensor_resonance");
   ASSERT_TRUE(r.after.mode.has_value());
   EXPECT_LT(rel(r.after.mode->f_hz, 1150.0), 0.03);
+  EXPECT_NEAR(r.after.lowpass_hz, 3000.0, 450.0);
   for (int a = 0; a < 3; ++a) EXPECT_LE(r.error_after[a], r.error_before[a]);
 }
 

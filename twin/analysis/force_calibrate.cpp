@@ -228,8 +228,12 @@ std::vector<cd> harmonics(const std::vector<double>& g, int nq, int M, int K) {
 }
 
 // The sensor path at frequency f: delay and, where present, the mode.
-cd transfer(double f_hz, double delay_s, const std::optional<SensorMode>& mode) {
+cd transfer(double f_hz, double delay_s, const std::optional<SensorMode>& mode, double lowpass_hz) {
   cd H = std::polar(1.0, -kTwoPi * f_hz * delay_s);
+  if (lowpass_hz > 0.0) {
+    const double r = f_hz / lowpass_hz;   // 2nd-order Butterworth, unit DC gain
+    H /= cd(1.0 - r * r, std::sqrt(2.0) * r);
+  }
   if (mode) {
     const double r = f_hz / mode->f_hz;
     H /= cd(1.0 - r * r, 2.0 * mode->zeta * r);
@@ -539,7 +543,7 @@ class SeriesModel {
 
   std::vector<cd> transfers(const Prep& p, const ForceModel& m) const {
     std::vector<cd> Hk(p.K + 1);
-    for (int k = 0; k <= p.K; ++k) Hk[k] = transfer(k * p.f_rev_hz, p.has_angle ? m.delay_s : 0.0, m.mode);
+    for (int k = 0; k <= p.K; ++k) Hk[k] = transfer(k * p.f_rev_hz, p.has_angle ? m.delay_s : 0.0, m.mode, p.has_angle ? m.lowpass_hz : 0.0);
     return Hk;
   }
 
@@ -866,7 +870,7 @@ class Identifier {
   }
 
   // The delay of the sensor path (runs with spindle_deg) and the phase of runs without it.
-  void fit_phase(ForceModel& m) {
+  void fit_phase(ForceModel& m, bool lowpass = true) {
     for (std::size_t i = 0; i < p_.size(); ++i) {
       if (p_[i].has_angle) continue;
       const double pitch = 360.0 / p_[i].run->cut.flutes;
@@ -899,16 +903,55 @@ class Identifier {
           best = d;
         }
       }
+      const double keep_lp = m.lowpass_hz;
+      m.lowpass_hz = 0.0;
       m.delay_s = golden(
           [&](double d) {
             m.delay_s = d;
             return solve(m, all_).ssr;
           },
           best - 5e-5, best + 5e-5, 20);
+      const double c_delay = solve(m, all_).ssr;
+      if (!lowpass) return;
+      // The log's anti-alias filter: a 2nd-order low-pass in the sensor path (with the delay
+      // of the rest), kept where it explains the data better than the delay alone.
+      const double fs = p_.front().fs_hz;
+      const double d_only = m.delay_s;
+      auto cost = [&](const std::vector<double>& v) {
+        const double fc = std::exp(v[1]);
+        if (fc < 0.1 * fs || fc > 3.0 * fs || v[0] < -5.0 || v[0] > 10.0) return 1e300;
+        m.lowpass_hz = fc;
+        m.delay_s = v[0] * 1e-4;
+        return solve(m, all_).ssr;
+      };
+      // Several starts: the filter's phase trades with the delay (and with a sensor mode).
+      std::vector<double> x;
+      double c_lp = 1e300;
+      for (double fc0 : {keep_lp, 0.3 * fs, 0.6 * fs}) {
+        if (!(fc0 > 0.0)) continue;
+        const double d0 = d_only - std::sqrt(2.0) / (kTwoPi * fc0);
+        const auto xi = nelder_mead(cost, {d0 * 1e4, std::log(fc0)}, {0.1, 0.2}, 60);
+        const double ci = cost(xi);
+        if (ci < c_lp) {
+          c_lp = ci;
+          x = xi;
+        }
+      }
+      if (c_lp < c_delay * (1.0 - 1e-3) && std::exp(x[1]) < 2.5 * fs) {
+        m.lowpass_hz = std::exp(x[1]);
+        m.delay_s = x[0] * 1e-4;
+      } else {
+        m.lowpass_hz = 0.0;
+        m.delay_s = d_only;
+      }
     }
   }
 
   ForceModel fit_runout(ForceModel m) {
+    // Searched with the delay alone (a low-pass fitted to a model without runout takes part of
+    // its pattern), the low-pass found again after, then all refined together.
+    m.lowpass_hz = 0.0;
+    fit_phase(m, false);
     const double R = 0.5 * p_.front().run->cut.diameter_mm;
     auto cost = [&](double x, double y) {
       const double rho = std::hypot(x, y);
@@ -933,10 +976,35 @@ class Identifier {
     if (lam < 0.0) lam += 360.0;
     m.runout = {std::hypot(x[0], x[1]), lam};
     fit_phase(m);
+    if (m.lowpass_hz > 0.0 && any_angle_) {
+      const double fs = p_.front().fs_hz;
+      auto cost4 = [&](const std::vector<double>& v) {
+        const double fc = std::exp(v[3]);
+        if (fc < 0.1 * fs || fc > 3.0 * fs || v[2] < -5.0 || v[2] > 10.0) return 1e300;
+        m.lowpass_hz = fc;
+        m.delay_s = v[2] * 1e-4;
+        return cost(v[0], v[1]);
+      };
+      const double lr = m.runout.lambda_deg * kPi / 180.0;
+      const double st = std::max(0.1 * m.runout.rho_mm, 2e-4);
+      const auto y = nelder_mead(cost4,
+                                 {m.runout.rho_mm * std::cos(lr), m.runout.rho_mm * std::sin(lr), m.delay_s * 1e4,
+                                  std::log(m.lowpass_hz)},
+                                 {st, st, 0.05, 0.1}, 80);
+      double l2 = std::atan2(y[1], y[0]) * 180.0 / kPi;
+      if (l2 < 0.0) l2 += 360.0;
+      m.runout = {std::hypot(y[0], y[1]), l2};
+      m.delay_s = y[2] * 1e-4;
+      m.lowpass_hz = std::exp(y[3]);
+    }
     return m;
   }
 
   ForceModel fit_mode(ForceModel m) {
+    // The mode is searched with the delay alone (a low-pass would take part of its phase), the
+    // low-pass found again after, then all refined together.
+    m.lowpass_hz = 0.0;
+    fit_phase(m, false);
     const Prep& p0 = p_.front();
     const double f_lo = std::max(100.0, 1.5 * p0.f_rev_hz * p0.run->cut.flutes);
     const double f_hi = 0.45 * p0.fs_hz;
@@ -969,6 +1037,20 @@ class Identifier {
     m.mode = SensorMode{std::exp(x[0]), std::exp(x[1])};
     if (any_angle_) m.delay_s = x[2] * 1e-4;
     fit_phase(m);
+    if (m.lowpass_hz > 0.0) {
+      auto cost4 = [&](const std::vector<double>& v) {
+        const double fc = std::exp(v[3]);
+        if (fc < 0.1 * p0.fs_hz || fc > 3.0 * p0.fs_hz) return 1e300;
+        m.lowpass_hz = fc;
+        return cost3(v);
+      };
+      const auto y = nelder_mead(cost4,
+                                 {std::log(m.mode->f_hz), std::log(m.mode->zeta), m.delay_s * 1e4, std::log(m.lowpass_hz)},
+                                 {0.005, 0.1, 0.05, 0.1}, 80);
+      m.mode = SensorMode{std::exp(y[0]), std::exp(y[1])};
+      m.delay_s = y[2] * 1e-4;
+      m.lowpass_hz = std::exp(y[3]);
+    }
     return m;
   }
 
@@ -1507,6 +1589,7 @@ nlohmann::json force_report_json(const ForceCalibration& r) {
     cut["wear_L_ref_mm"] = r.after.wear_L_ref_mm;
   }
   cut["delay_s"] = r.after.delay_s;
+  if (r.after.lowpass_hz > 0.0) cut["sensor_lowpass_hz"] = r.after.lowpass_hz;
   nlohmann::json j;
   j["parameters_identified"] = {{"cut", cut}};
   const char* se_names[6] = {"Ktc", "Krc", "Kac", "Kte", "Kre", "Kae"};

@@ -89,6 +89,7 @@ struct ForceModel {
   Runout runout;
   std::optional<SensorMode> mode;
   double delay_s{0.0};                ///< the logged force lags the spindle angle by this (filters)
+  double lowpass_hz{0.0};             ///< the log's anti-alias filter, 2nd-order Butterworth (0: none)
   double wear_per_mm{0.0};            ///< w: coefficients scale with 1 + w (L - L_ref)
   double wear_L_ref_mm{0.0};
   std::vector<double> phi0_deg;       ///< per run, where spindle_deg is not logged
