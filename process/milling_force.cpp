@@ -1,5 +1,8 @@
 #include "process/milling_force.hpp"
 
+#include <algorithm>
+#include <cmath>
+
 #include <fmt/format.h>
 
 #include "twin/core/error.hpp"
@@ -29,18 +32,40 @@ MillingForceModel::MillingForceModel(const ToolGeometry& tool, const CuttingCoef
   sin_lead_ = std::sin(lead_deg * kRadPerDeg);
   const double R = tool_.radius_mm();
   const double tan_helix = std::tan(tool_.helix_deg * kRadPerDeg);
-  const int n_disks = static_cast<int>(std::ceil(tool_.flute_length_mm / options_.dz_mm));
-  for (int i = 0; i < n_disks; ++i) {
-    const double z0 = i * options_.dz_mm;
-    const double z1 = std::min((i + 1) * options_.dz_mm, tool_.flute_length_mm);
-    const double z = 0.5 * (z0 + z1);
-    const double kappa = tool_.kappa_rad(z);
-    const double sk = std::max(std::sin(kappa), 1e-3);
+  const double r = tool_.corner_radius_mm;
+  const auto add = [&](double z_lo, double z_hi, double k_lo, double k_hi, bool corner) {
+    double z, kappa, db;
+    if (corner) {
+      kappa = 0.5 * (k_lo + k_hi);
+      z = r * (1.0 - std::cos(kappa));
+      db = r * (k_hi - k_lo);
+    } else {
+      kappa = 0.5 * kPi;
+      z = 0.5 * (z_lo + z_hi);
+      db = z_hi - z_lo;
+    }
     const double lag = z * tan_helix / R;
-    disks_.push_back(Disk{z, tool_.edge_radius_mm(z), sk, std::cos(kappa), (z1 - z0) / sk, std::sin(lag), std::cos(lag)});
+    const double radius = corner ? R - r + r * std::sin(kappa) : R;
+    disks_.push_back(Disk{z, z_lo, z_hi, k_lo, k_hi, corner, radius, std::sin(kappa), std::cos(kappa), db,
+                          std::sin(lag), std::cos(lag)});
+  };
+  if (r > 0.0) {
+    // The corner arc in equal steps of kappa (db = r dkappa <= dz).
+    const int n_corner = std::max(1, static_cast<int>(std::ceil(0.5 * kPi * r / options_.dz_mm)));
+    const double dk = 0.5 * kPi / n_corner;
+    for (int i = 0; i < n_corner; ++i) {
+      const double k0 = i * dk;
+      const double k1 = i + 1 == n_corner ? 0.5 * kPi : (i + 1) * dk;
+      add(r * (1.0 - std::cos(k0)), i + 1 == n_corner ? r : r * (1.0 - std::cos(k1)), k0, k1, true);
+    }
   }
+  const double flank = tool_.flute_length_mm - r;
+  const int n_flank = static_cast<int>(std::ceil(flank / options_.dz_mm - 1e-9));
+  for (int i = 0; i < n_flank; ++i)
+    add(r + i * options_.dz_mm, std::min(r + (i + 1) * options_.dz_mm, tool_.flute_length_mm), 0.0, 0.0, false);
+  for (const Disk& d : disks_)
+    for (int j = 0; j < tool_.flutes; ++j) dR_mm_.push_back(tool_.flute_radius_mm(j, d.z_mm) - R);
   for (int j = 0; j < tool_.flutes; ++j) {
-    dR_mm_.push_back(tool_.flute_radius_mm(j) - R);
     const double a = j * kRadPerRev / tool_.flutes;
     flute_dir_.push_back({std::sin(a), std::cos(a)});
   }
@@ -49,6 +74,26 @@ MillingForceModel::MillingForceModel(const ToolGeometry& tool, const CuttingCoef
     const double phi = (i + 0.5) * kRadPerRev / n_arc;
     arc_dirs_.push_back({std::sin(phi), std::cos(phi)});
   }
+}
+
+double MillingForceModel::fraction_below(const Disk& d, double z_top_local_mm) const {
+  if (z_top_local_mm >= d.z_hi_mm) return 1.0;
+  if (z_top_local_mm <= d.z_lo_mm) return 0.0;
+  if (d.corner) {
+    const double r = tool_.corner_radius_mm;
+    const double k_top = std::acos(std::clamp(1.0 - z_top_local_mm / r, -1.0, 1.0));
+    return std::clamp((k_top - d.kappa_lo) / (d.kappa_hi - d.kappa_lo), 0.0, 1.0);
+  }
+  return (z_top_local_mm - d.z_lo_mm) / (d.z_hi_mm - d.z_lo_mm);
+}
+
+double MillingForceModel::edge_length_mm(double depth_mm) const {
+  double L = 0.0;
+  for (const Disk& d : disks_) {
+    if (d.z_lo_mm >= depth_mm) break;
+    L += fraction_below(d, depth_mm) * d.db_mm;
+  }
+  return L;
 }
 
 double MillingForceModel::disk_height_nearest_mm(double z_mm) const {

@@ -2,19 +2,25 @@
 /// The mechanistic milling-force model (Altintas, Manufacturing Automation,
 /// ch. 2; Duan et al. 2025 eqs. (1), (3)-(7)).
 ///
-/// The flutes are cut into axial disks of height dz at heights z_i above the
-/// tip. Flute j's immersion at z, phi measured clockwise from +y, spindle
+/// The cutting edge is cut into elements: the corner arc (0 <= z <= r) in
+/// equal steps of its angle kappa, r dkappa <= dz, so each element's chip
+/// width is db = r dkappa exactly; the flank above in axial disks of height
+/// dz (db = dz). The element at the stock top is cut there: it contributes
+/// the part of its width below the top (in kappa on the corner, in z on the
+/// flank), so the engaged edge length is exact for any depth of cut.
+/// Flute j's immersion at z, phi measured clockwise from +y, spindle
 /// clockwise seen from above (M3):
 ///   phi_j(z) = phi + j 2 pi/N - z tan(helix)/R
 /// Its edge point sits at p + R_j(z) (sin phi_j, cos phi_j). Radial chip, with
 /// the feed per tooth as a vector f = v_xy/(N n) from the tool's actual
-/// velocity and runout radii R_j (Kline-DeVor: the chip is left by the
-/// nearest of the previous m flutes):
-///   h_r = min_{m=1..N} ( m f . (sin phi_j, cos phi_j) + R_j - R_{j-m} )
+/// velocity and runout radii R_j(z) = R + rho cos(lambda - j 2 pi/N + z tan(helix)/R)
+/// that follow the flute along z (Kline-DeVor: the chip is left by the
+/// nearest of the previous m flutes, compared at the same height):
+///   h_r = min_{m=1..N} ( m f . (sin phi_j, cos phi_j) + R_j(z) - R_{j-m}(z) )
 /// Chip with lead angle thetaL (Duan eq. (4)), kappa the axial immersion:
 ///   h = h_r cos(thetaL) sin(kappa) - |f| sin(thetaL) cos(kappa)
-/// A disk cuts when h > 0 and its edge point (pushed out by probe_mm, see
-/// below) lies in remaining material. Its forces, chip width db = dz/sin(kappa):
+/// An element cuts when h > 0 and its edge point (pushed out by probe_mm, see
+/// below) lies in remaining material. Its forces, chip width db:
 ///   dFt = (Kt(h) h + Kte) db, dFr = (Kr(h) h + Kre) db, dFa = (Ka(h) h + Kae) db
 /// On the tool, in machine axes:
 ///   Fx = -dFt cos phi - dFr sin kappa sin phi + dFa cos kappa sin phi
@@ -85,9 +91,20 @@ class MillingForceModel {
   /// Height above the tip of the disk nearest to z_mm.
   double disk_height_nearest_mm(double z_mm) const;
 
+  /// Edge length (mm) of one flute below depth_mm above the tip, as the force
+  /// sum weighs it (the element at depth_mm cut there).
+  double edge_length_mm(double depth_mm) const;
+  /// Number of edge elements per flute.
+  std::size_t element_count() const noexcept { return disks_.size(); }
+
  private:
   struct Disk {
-    double z_mm;
+    double z_mm;        ///< evaluation height (middle of the element)
+    double z_lo_mm;     ///< the element spans [z_lo, z_hi] above the tip
+    double z_hi_mm;
+    double kappa_lo;    ///< and [kappa_lo, kappa_hi] (corner elements; 0 on the flank)
+    double kappa_hi;
+    bool corner;
     double radius_mm;
     double sin_kappa;
     double cos_kappa;
@@ -95,13 +112,15 @@ class MillingForceModel {
     double sin_lag;
     double cos_lag;
   };
+  /// Fraction of element d's width below z_top_local_mm (above the tip): 1 when all of it.
+  double fraction_below(const Disk& d, double z_top_local_mm) const;
   ToolGeometry tool_;
   CuttingCoefficients k_;
   ForceModelOptions options_;
   double cos_lead_{1.0};
   double sin_lead_{0.0};
   std::vector<Disk> disks_;
-  std::vector<double> dR_mm_;        ///< runout: R_j - R per flute
+  std::vector<double> dR_mm_;        ///< runout: R_j(z) - R, per element i and flute j at [i N + j]
   std::vector<std::array<double, 2>> flute_dir_;   ///< (sin, cos) of j 2 pi/N
   std::vector<std::array<double, 2>> arc_dirs_;    ///< (sin, cos) of the engagement sample angles
 };
@@ -116,9 +135,16 @@ ForceSample MillingForceModel::sample(double phi_rad, const std::array<double, 3
   double Fx = 0.0, Fy = 0.0, Fz = 0.0, T_Nmm = 0.0;
   const double s0 = std::sin(phi_rad);
   const double c0 = std::cos(phi_rad);
-  for (const Disk& d : disks_) {
-    const double z_abs = p_mm[2] + d.z_mm;
-    if (z_abs >= z_top_mm) break;
+  const double z_top_local = z_top_mm - p_mm[2];
+  for (std::size_t i = 0; i < disks_.size(); ++i) {
+    const Disk& d = disks_[i];
+    if (d.z_lo_mm >= z_top_local) break;
+    const double w = d.z_hi_mm > z_top_local ? fraction_below(d, z_top_local) : 1.0;
+    if (!(w > 0.0)) break;
+    const double db = w * d.db_mm;
+    // A cut element is probed in the middle of its part below the top.
+    const double z_abs = p_mm[2] + (w < 1.0 ? 0.5 * (d.z_lo_mm + z_top_local) : d.z_mm);
+    const double* dR = &dR_mm_[i * static_cast<std::size_t>(N)];
     for (int j = 0; j < N; ++j) {
       // sin, cos of phi + j 2 pi/N - lag by angle addition (no trigonometric call per element).
       const auto& fl = flute_dir_[static_cast<std::size_t>(j)];
@@ -129,18 +155,17 @@ ForceSample MillingForceModel::sample(double phi_rad, const std::array<double, 3
       const double h0 = f_mm[0] * s + f_mm[1] * c;
       double h_r = h0;
       if (tool_.runout_rho_mm > 0.0) {
-        const double Rj = dR_mm_[static_cast<std::size_t>(j)];
+        const double Rj = dR[j];
         h_r = 1e300;
-        for (int m = 1; m <= N; ++m)
-          h_r = std::min(h_r, m * h0 + Rj - dR_mm_[static_cast<std::size_t>(((j - m) % N + N) % N)]);
+        for (int m = 1; m <= N; ++m) h_r = std::min(h_r, m * h0 + Rj - dR[((j - m) % N + N) % N]);
       }
       const double h = h_r * cos_lead_ * d.sin_kappa - f_abs * sin_lead_ * d.cos_kappa;
       if (!(h > 0.0)) continue;
-      const double rj = d.radius_mm + dR_mm_[static_cast<std::size_t>(j)];
+      const double rj = d.radius_mm + dR[j];
       if (!material(p_mm[0] + (rj + probe_mm) * s, p_mm[1] + (rj + probe_mm) * c, z_abs)) continue;
-      const double dFt = (k_.Kt.at(h) * h + k_.Kte_N_per_mm) * d.db_mm;
-      const double dFr = (k_.Kr.at(h) * h + k_.Kre_N_per_mm) * d.db_mm;
-      const double dFa = (k_.Ka.at(h) * h + k_.Kae_N_per_mm) * d.db_mm;
+      const double dFt = (k_.Kt.at(h) * h + k_.Kte_N_per_mm) * db;
+      const double dFr = (k_.Kr.at(h) * h + k_.Kre_N_per_mm) * db;
+      const double dFa = (k_.Ka.at(h) * h + k_.Kae_N_per_mm) * db;
       Fx += -dFt * c - dFr * d.sin_kappa * s + dFa * d.cos_kappa * s;
       Fy += dFt * s - dFr * d.sin_kappa * c + dFa * d.cos_kappa * c;
       Fz += dFr * d.cos_kappa + dFa * d.sin_kappa;

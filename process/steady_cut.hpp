@@ -29,8 +29,18 @@ struct SteadyCutSpec {
   double angle_step_deg{1.0};
   double dz_mm{0.05};
   double cell_mm{0.02};
+  /// A calibrated cut (twin calibrate on force logs): the wear state as a
+  /// factor on every coefficient, K(L) = K(L_ref) (1 + w (L - L_ref)).
+  double coefficient_scale{1.0};
+  /// A sensor mode in the force output, wn^2/(s^2 + 2 zeta wn s + wn^2)
+  /// (unit DC gain; 0 Hz: none). The revolution is a steady periodic force,
+  /// so each of its harmonics k (frequency k n) is multiplied by H(k n).
+  double sensor_f_hz{0.0};
+  double sensor_zeta{0.0};
   /// Throws ConfigError naming the option: rpm <= 0, feed per tooth outside
-  /// (0, 1] mm, ae outside (0, D], ap outside (0, flute length], steps out of range.
+  /// (0, 1] mm, ae outside (0, D], ap outside (0, flute length], steps out of
+  /// range, a coefficient scale outside (0, 10], a sensor mode with f < 0 or
+  /// zeta outside (0, 1].
   void validate() const;
 };
 

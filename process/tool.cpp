@@ -79,9 +79,10 @@ double ToolGeometry::bottom_height_mm(double d_mm) const {
   return r - std::sqrt(std::max(r * r - u * u, 0.0));
 }
 
-double ToolGeometry::flute_radius_mm(int j) const {
+double ToolGeometry::flute_radius_mm(int j, double z_mm) const {
   const double pitch = kRadPerRev / flutes;
-  return radius_mm() + runout_rho_mm * std::cos(j * pitch - runout_lambda_deg * kRadPerDeg);
+  const double lag = z_mm * std::tan(helix_deg * kRadPerDeg) / radius_mm();
+  return radius_mm() + runout_rho_mm * std::cos(runout_lambda_deg * kRadPerDeg - j * pitch + lag);
 }
 
 }  // namespace twin::process

@@ -10,8 +10,10 @@
 /// normal (Altintas, Manufacturing Automation, ch. 2.6; Duan 2025 eq. (4)-(7)).
 /// Helix: flute j lags by z tan(helix)/R (constant lead).
 /// Runout: the tool axis sits rho_mm off the spindle axis in the direction
-/// lambda_deg of the rotating tool frame (flute 0 at angle 0), so flute j cuts
-/// on the radius R_j = R + rho cos(j 2 pi/N - lambda).
+/// lambda_deg of the rotating tool frame (measured from flute 0's tip, in the
+/// direction of rotation). The flute point at height z sits at the frame angle
+/// j 2 pi/N - z tan(helix)/R, so its radius follows the flute along z:
+///   R_j(z) = R + rho cos(lambda - j 2 pi/N + z tan(helix)/R).
 #include <string>
 
 namespace twin::process {
@@ -31,7 +33,7 @@ struct ToolGeometry {
   double corner_radius_mm{0.0};     ///< 0 flat, (0, R) bull-nose, R ball
   double flute_length_mm{20.0};
   double runout_rho_mm{0.0};        ///< radial offset of the tool axis
-  double runout_lambda_deg{0.0};    ///< its direction, from flute 0, against the rotation
+  double runout_lambda_deg{0.0};    ///< its direction in the rotating frame, from flute 0's tip in the sense of phi
 
   /// Throws ConfigError naming `where` and the field when a value is out of range
   /// (diameter > 0, 1 <= flutes <= 16, 0 <= helix < 60 deg, corner radius by shape,
@@ -45,8 +47,9 @@ struct ToolGeometry {
   /// Depth (mm above the tip) the tool bottom reaches at distance d_mm from its axis;
   /// > flute_length_mm outside the tool (d > R).
   double bottom_height_mm(double d_mm) const;
-  /// Radius (mm) of flute j measured from the spindle axis (runout included).
-  double flute_radius_mm(int j) const;
+  /// Radius (mm) of flute j at height z_mm above the tip, measured from the
+  /// spindle axis (runout included), for a flute on the cylinder (radius R).
+  double flute_radius_mm(int j, double z_mm) const;
 };
 
 }  // namespace twin::process

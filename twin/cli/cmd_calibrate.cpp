@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "twin/analysis/calibrate.hpp"
+#include "twin/analysis/force_calibrate.hpp"
 #include "twin/analysis/machine_from_data.hpp"
 #include "twin/analysis/plots.hpp"
 #include "twin/analysis/signal.hpp"
@@ -219,6 +220,11 @@ void register_calibrate(CLI::App& app) {
   cmd->callback([opt]() {
     for (const auto& r : opt->runs) refuse_output_over_input("calibrate", opt->out, r, opt->machine);
     for (const auto& r : opt->validate) refuse_output_over_input("calibrate", opt->out, r, opt->machine);
+    if (opt->runs.size() == 1 && analysis::force::is_force_data(opt->runs.front())) {
+      // A force run or series: meta.json has a `cut`.
+      analysis::force::run_force_calibration(opt->runs.front(), opt->out, opt->no_plots);
+      return;
+    }
     std::vector<analysis::MeasuredRun> fit_runs, validate_runs;
     for (const auto& r : opt->runs) fit_runs.push_back(analysis::load_run(r));
     for (const auto& r : opt->validate) validate_runs.push_back(analysis::load_run(r));

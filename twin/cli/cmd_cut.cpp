@@ -28,6 +28,9 @@ void register_cut(CLI::App& app) {
     double rho_mm{0.0};
     double lambda_deg{0.0};
     double step_deg{1.0};
+    double sensor_f_hz{0.0};
+    double sensor_zeta{0.03};
+    double wear_scale{1.0};
     std::string out;
   };
   auto opt = std::make_shared<Options>();
@@ -44,17 +47,23 @@ void register_cut(CLI::App& app) {
   cmd->add_option("--lead", opt->lead_deg, "lead angle thetaL, deg (Duan 2025 eq. 4; picks the material set)")
       ->capture_default_str();
   cmd->add_option("--tilt", opt->tilt_deg, "tilt angle thetaT, deg (picks the material set)")->capture_default_str();
-  cmd->add_option("--runout-rho", opt->rho_mm, "radial runout offset, mm")->capture_default_str();
-  cmd->add_option("--runout-lambda", opt->lambda_deg, "runout direction from flute 0, deg")->capture_default_str();
+  cmd->add_option("--runout-rho", opt->rho_mm, "radial runout offset, mm (default: the tool file's)");
+  cmd->add_option("--runout-lambda", opt->lambda_deg, "runout direction from flute 0, deg (default: the tool file's)");
   cmd->add_option("--step", opt->step_deg, "spindle angle step, deg")->capture_default_str();
+  cmd->add_option("--sensor-f", opt->sensor_f_hz, "a sensor mode in the force output, Hz (0: none; twin calibrate's "
+                                                   "sensor_f_hz)")->capture_default_str();
+  cmd->add_option("--sensor-zeta", opt->sensor_zeta, "damping ratio of that mode")->capture_default_str();
+  cmd->add_option("--wear-scale", opt->wear_scale, "wear state: factor on every coefficient, 1 + w (L - L_ref) of "
+                                                   "twin calibrate's tool_wear")->capture_default_str();
   cmd->add_option("-o,--out", opt->out, "CSV file for the revolution (angle_deg, fx_N, fy_N, fz_N, torque_Nm, chip_mm)");
-  cmd->callback([opt]() {
+  cmd->callback([opt, cmd]() {
     if (opt->mode != "up" && opt->mode != "down")
       throw ConfigError(fmt::format("cut: --mode = '{}' must be up or down", opt->mode));
     process::SteadyCutSpec spec;
     spec.tool = io::load_tool_file(opt->tool);
-    spec.tool.runout_rho_mm = opt->rho_mm;
-    spec.tool.runout_lambda_deg = opt->lambda_deg;
+    // The tool file's runout (e.g. identified by twin calibrate) unless given here.
+    if (cmd->count("--runout-rho") > 0) spec.tool.runout_rho_mm = opt->rho_mm;
+    if (cmd->count("--runout-lambda") > 0) spec.tool.runout_lambda_deg = opt->lambda_deg;
     spec.coefficients = io::load_material_file(opt->material, opt->lead_deg, opt->tilt_deg);
     spec.lead_deg = opt->lead_deg;
     spec.tilt_deg = opt->tilt_deg;
@@ -64,6 +73,9 @@ void register_cut(CLI::App& app) {
     spec.ap_mm = opt->ap_mm;
     spec.up_milling = opt->mode == "up";
     spec.angle_step_deg = opt->step_deg;
+    spec.sensor_f_hz = opt->sensor_f_hz;
+    spec.sensor_zeta = opt->sensor_zeta;
+    spec.coefficient_scale = opt->wear_scale;
     const process::SteadyCutResult r = process::run_steady_cut(spec);
     if (!opt->out.empty()) {
       std::string csv = "angle_deg,fx_N,fy_N,fz_N,torque_Nm,chip_mm\n";
