@@ -1805,11 +1805,9 @@ std::vector<std::filesystem::path> force_plots(const std::filesystem::path& out,
                          r.spectrum_after_N[1][k], r.spectrum_after_N[2][k]);
     io::write_file_atomic(spec_csv, csv);
   }
-  auto tmp = [](const std::filesystem::path& p) {
-    auto t = p;
-    t += ".tmp.png";
-    return gnuplot_quote(t);
-  };
+  // Files by plain names in `out`, gnuplot's working folder (plots.hpp).
+  auto tmp = [](const std::filesystem::path& p) { return gnuplot_output(p.filename().string()); };
+  std::vector<std::string> output_names;
   std::string g = "set datafile separator ','\nset grid\n";
   const auto rev_png = out / "revolution.png";
   outputs.push_back(rev_png);
@@ -1821,7 +1819,8 @@ std::vector<std::filesystem::path> force_plots(const std::filesystem::path& out,
       g += fmt::format("set title 'feed {} (fz {:.4f} mm): {} over one revolution'\nset xlabel 'spindle angle deg'\n"
                        "set ylabel 'N'\nplot {} index {} every ::1 using 2:{} with points pt 7 ps 0.4 title 'measured', "
                        "'' index {} every ::1 using 2:{} with lines lw 2 title 'model'\n",
-                       i, r.feeds[i].fz_mm, kAxisNames[a], gnuplot_quote(rev_csv), i, 3 + 2 * a, i, 4 + 2 * a);
+                       i, r.feeds[i].fz_mm, kAxisNames[a], gnuplot_file(rev_csv.filename().string()), i, 3 + 2 * a, i,
+                       4 + 2 * a);
   g += "unset multiplot\n";
   if (!r.spectrum_f_hz.empty()) {
     const auto spec_png = out / "residual_spectrum.png";
@@ -1839,11 +1838,12 @@ std::vector<std::filesystem::path> force_plots(const std::filesystem::path& out,
       g += fmt::format("set title 'residual spectrum {} (red dashed: spindle harmonics, blue: tooth harmonics)'\n"
                        "set xlabel 'Hz'\nset ylabel 'N'\nset logscale y\nplot {} every ::1 using 1:{} with lines "
                        "title 'before', '' every ::1 using 1:{} with lines title 'after'\nunset logscale y\n",
-                       kAxisNames[a], gnuplot_quote(spec_csv), 2 + a, 5 + a);
+                       kAxisNames[a], gnuplot_file(spec_csv.filename().string()), 2 + a, 5 + a);
     }
     g += "unset multiplot\n";
   }
-  run_gnuplot(out, g, outputs);
+  for (const auto& o : outputs) output_names.push_back(o.filename().string());
+  run_gnuplot(out, g, output_names);
   return outputs;
 }
 
