@@ -53,13 +53,16 @@ std::string model_to_json(const std::string& scenario_name, const sim::MachineDe
     sim::AxisDefinition c = ax;
     for (const auto& spec : sim::axis_param_specs()) {
       // An effect's parameters are written only when the effect is on:
-      // setting one switches its effect on.
+      // setting one switches its effect on; the other loop law's gains never.
       if (spec.enables != nullptr && !*spec.enables(c)) continue;
+      if (spec.law && *spec.law != ax.loop.law) continue;
       p[std::string(spec.name)] = sim::get_axis_param(ax, spec);
     }
     axes[std::string(axis_name(a))] = p;
   }
   m["axes"] = axes;
+  if (sim::machine_loop_law(machine) != controller::LoopLaw::kFadal)
+    m["controller"] = std::string(controller::loop_law_name(sim::machine_loop_law(machine)));
 
   json j;
   j["format"] = kFormat;
@@ -98,6 +101,13 @@ FmuModel model_from_json(const std::string& text_in, const std::string& where) {
     if (spec == nullptr) throw ConfigError(fmt::format("{}: machine.params: unknown parameter '{}'", where, key));
     spec->ref(machine) = number(v, fmt::format("{}: machine.params.{}", where, key));
   }
+  controller::LoopLaw law = controller::LoopLaw::kFadal;
+  if (m.contains("controller")) {
+    const std::string name = text(m["controller"], where + ": machine.controller");
+    const auto parsed = controller::parse_loop_law(name);
+    if (!parsed) throw ConfigError(fmt::format("{}: machine.controller: unknown law '{}'", where, name));
+    law = *parsed;
+  }
   const json& axes = member(m, "axes", where + ": machine");
   if (!axes.is_object()) throw ConfigError(fmt::format("{}: machine.axes must be a map", where));
   for (const auto& [axis_key, p] : axes.items()) {
@@ -105,6 +115,7 @@ FmuModel model_from_json(const std::string& text_in, const std::string& where) {
     if (!a) throw ConfigError(fmt::format("{}: machine.axes: unknown axis '{}'", where, axis_key));
     sim::AxisDefinition& ax = machine.axes[index(*a)];
     ax.present = true;
+    ax.loop.law = law;
     if (!p.is_object()) throw ConfigError(fmt::format("{}: machine.axes.{} must be a map", where, axis_key));
     for (const auto& [key, v] : p.items()) {
       const sim::AxisParamSpec* spec = sim::find_axis_param(key);

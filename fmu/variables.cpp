@@ -61,7 +61,7 @@ struct UnitAlias {
   std::string_view twin;
   std::string_view fmi;
 };
-constexpr std::array<UnitAlias, 27> kUnitAliases{{
+constexpr std::array<UnitAlias, 31> kUnitAliases{{
     {"A/V", "A/V"},          {"N m/A", "N.m/A"},         {"kg m^2", "kg.m2"},   {"kg m^2/s", "kg.m2/s"},
     {"mm/rad", "mm/rad"},    {"V/mm", "V/mm"},           {"V/(s mm)", "V/(s.mm)"}, {"V s/mm", "V.s/mm"},
     {"V s^2/mm", "V.s2/mm"}, {"N m", "N.m"},             {"V", "V"},            {"mm/s", "mm/s"},
@@ -69,6 +69,9 @@ constexpr std::array<UnitAlias, 27> kUnitAliases{{
     {"1", "1"},              {"rad", "rad"},             {"s", "s"},            {"N m/rad", "N.m/rad"},
     {"N m s/rad", "N.m.s/rad"}, {"A", "A"},              {"mm/min", "mm/min"},  {"rpm", "rev/min"},
     {"deg", "deg"},          {"N", "N"},                 {"W", "W"},
+    // The cascade law's gains (torque in N m on a machine the FMU exports).
+    {"1/s", "1/s"},          {"torque unit", "N.m"},     {"torque unit s/rad", "N.m.s/rad"},
+    {"torque unit s^2/rad", "N.m.s2/rad"},
 }};
 
 }  // namespace
@@ -103,6 +106,8 @@ const std::vector<UnitDefinition>& unit_definitions() {
       {"deg", 0, 0, 0, 0, 1, kPi / 180.0},
       {"N", 1, 1, -2, 0, 0, 1.0},
       {"W", 1, 2, -3, 0, 0, 1.0},
+      {"1/s", 0, 0, -1, 0, 0, 1.0},
+      {"N.m.s2/rad", 1, 2, 0, 0, -1, 1.0},
   };
   return kUnits;
 }
@@ -150,6 +155,7 @@ std::vector<Variable> make_variables(const sim::MachineDefinition& machine) {
   }
   for (Axis a : axes) {
     for (const auto& spec : sim::axis_param_specs()) {
+      if (spec.law && *spec.law != machine.axes[index(a)].loop.law) continue;  // the other loop law's gains
       Variable p;
       p.name = std::string(axis_name(a)) + "." + std::string(spec.name);
       p.causality = Causality::kParameter;
