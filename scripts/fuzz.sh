@@ -31,6 +31,7 @@ for h in "${harnesses[@]}"; do
   log="build-fuzz/findings/$h/fuzz.log"
   # Leaks are not findings here: a reader that throws leaks nothing, and
   # yaml-cpp keeps node memory pools alive by design.
+  start=$SECONDS
   set +e
   ASAN_OPTIONS=detect_leaks=0 UBSAN_OPTIONS=print_stacktrace=1 \
     "build-fuzz/tests/fuzz_$h" -max_total_time="$seconds" -max_len=4096 -timeout=20 -rss_limit_mb=2048 \
@@ -42,5 +43,5 @@ for h in "${harnesses[@]}"; do
   cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | grep -o '[0-9]*' || echo "?")
   corpus=$(find "build-fuzz/corpus/$h" -type f | wc -l)
   findings=$(find "build-fuzz/findings/$h" -type f ! -name fuzz.log | wc -l)
-  echo "fuzz_$h: ${seconds} s, exit $rc, $runs runs, coverage $cov edges, corpus +$corpus, findings $findings"
+  echo "fuzz_$h: $((SECONDS - start)) s, exit $rc, $runs runs, coverage $cov edges, corpus +$corpus, findings $findings"
 done

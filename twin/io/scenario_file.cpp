@@ -71,7 +71,13 @@ Scenario load_scenario(const std::filesystem::path& path, const std::string& mac
   if (machine_name.empty() && machine_override.empty())
     throw ConfigError(fmt::format("{}: missing key 'machine'", where));
   if (s.program_path.empty()) throw ConfigError(fmt::format("{}: missing key 'program'", where));
-  s.machine = load_machine(resolve_machine_path(machine_override.empty() ? machine_name : machine_override, dir));
+  const std::string& machine_ref = machine_override.empty() ? machine_name : machine_override;
+  try {
+    s.machine = load_machine(resolve_machine_path(machine_ref, dir));
+  } catch (const std::filesystem::filesystem_error& e) {
+    // A name the file system cannot look up (too long, a bad path).
+    throw IoError(fmt::format("{}: machine '{}': {}", where, escaped(machine_ref), e.code().message()));
+  }
   s.program_text = read_file(s.program_path, controller::kMaxProgramBytes);
   if (process_node && !process_node.IsNull()) {
     ProcessBinding setup = bind_process(process_node, where + ": process", dir);

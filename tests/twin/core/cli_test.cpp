@@ -383,6 +383,11 @@ TEST(CliHostile, DuplicateAndComplexYamlKeysRefusedWithFileAndLine) {
   const auto s5 = scenario_with("nl_key", "G21 G90\nG1 X1 F100\nM30\n", "\"a\\nb\": 1\n");
   expect_one_line_failure(twin_bounded("run " + s5.string() + " -o " + out.string()),
                           "nl_key/scenario.yaml:4: a key must be a plain name, not 'a\\x0ab'");
+  // A machine name longer than a file name may be (found by the scenario
+  // fuzzer: std::filesystem_error escaped the loader).
+  const auto s7 = file("long_machine/scenario.yaml",
+                       "name: n\nmachine: " + std::string(300, 'm') + ".yaml\nprogram: p.nc\n");
+  expect_one_line_failure(twin_bounded("run " + s7.string() + " -o " + out.string()), "File name too long");
   const auto s6 = file("nl_prog/scenario.yaml", "name: n\nmachine: fadal2216\nprogram: \"p\\n.nc\"\n");
   expect_one_line_failure(twin_bounded("run " + s6.string() + " -o " + out.string()), "single line");
   expect_no_files(out);
