@@ -401,7 +401,7 @@ void FmuInstance::check_state(const SavedState& s) const {
       if (!std::isfinite(u)) refuse("a non-finite delayed command");
   }
   for (const auto& l : c.loops) {
-    if (!finite_all({l.I_mm_s, l.e_prev_mm, l.x_ref_prev_mm, l.v_ref_prev_mm_per_s}))
+    if (!finite_all({l.I_mm_s, l.e_prev_mm, l.x_ref_prev_mm, l.v_ref_prev_mm_per_s, l.Iv_rad, l.T_filtered, l.x_meas_prev_mm}))
       refuse("a non-finite position-loop state");
     if (l.last_k >= c.k || l.last_k < -1) refuse(fmt::format("position-loop tick {} with tick counter {}", l.last_k, c.k));
   }
@@ -566,7 +566,9 @@ std::vector<char> serialize_state(const SavedState& s) {
     }
     w.put<std::uint64_t>(c.loops.size());
     for (const auto& l : c.loops) {
-      for (double v : {l.I_mm_s, l.e_prev_mm, l.x_ref_prev_mm, l.v_ref_prev_mm_per_s}) w.put(v);
+      for (double v : {l.I_mm_s, l.e_prev_mm, l.x_ref_prev_mm, l.v_ref_prev_mm_per_s, l.Iv_rad, l.T_filtered,
+                       l.x_meas_prev_mm})
+        w.put(v);
       w.put(l.last_k);
     }
     put_snapshot(w, c.last);
@@ -617,7 +619,9 @@ SavedState deserialize_state(const char* data, std::size_t size) {
     if (nl > kNumAxes) throw ConfigError(fmt::format("{} position loops", nl));
     c.loops.resize(nl);
     for (auto& l : c.loops) {
-      for (double* v : {&l.I_mm_s, &l.e_prev_mm, &l.x_ref_prev_mm, &l.v_ref_prev_mm_per_s}) *v = r.get<double>();
+      for (double* v : {&l.I_mm_s, &l.e_prev_mm, &l.x_ref_prev_mm, &l.v_ref_prev_mm_per_s, &l.Iv_rad, &l.T_filtered,
+                        &l.x_meas_prev_mm})
+        *v = r.get<double>();
       l.last_k = r.get<std::int64_t>();
     }
     c.last = get_snapshot(r);

@@ -1,0 +1,8 @@
+(FMU test: a short corner at 3000 mm/min)
+G90 G64 P0.01
+S6000 M3
+G1 X101.0 Y100.0 F3000
+G1 X101.0 Y101.0
+G1 X100.5 Y101.0 Z49.8
+M5
+M30
