@@ -413,7 +413,7 @@ ReplayResult replay_segments(const MeasuredRun& run, const sim::MachineDefinitio
       sub.trace.columns.emplace_back(ref.begin() + static_cast<std::ptrdiff_t>(s.begin),
                                      ref.begin() + static_cast<std::ptrdiff_t>(s.end));
     }
-    const ReplayResult r = replay_run(sub, machine);
+    const ReplayResult r = replay_run(sub, machine, 0, {}, ChannelSampling::kMeanOverNeighbours);
     for (Axis a : out.axes) {
       const std::size_t i = index(a);
       for (std::size_t k = 0; k < r.t_s.size(); ++k) {

@@ -1,6 +1,7 @@
 #include "twin/analysis/replay.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <memory>
 
@@ -204,7 +205,7 @@ std::vector<double> upsample_reference(const std::vector<double>& r, std::int64_
 constexpr std::int64_t kMaxUpsampling = 1000;
 
 ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& machine_in, std::size_t rows,
-                        feeddrive::IntegratorOptions options) {
+                        feeddrive::IntegratorOptions options, ChannelSampling sampling) {
   ReplayResult res;
   res.axes = run.axes;
   sim::MachineDefinition machine = machine_in;
@@ -264,8 +265,26 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
     res.Tm[index(a)].reserve(n_rows);
     res.vcmd_mm_per_s[index(a)].reserve(n_rows);
   }
+  // Running sums of the torque-side channels per tick (kMeanOverNeighbours):
+  // the mean over ticks [a, b] is (S[b + 1] - S[a]) / (b - a + 1).
+  const bool window = sampling == ChannelSampling::kMeanOverNeighbours && m > 1;
+  AxisArray<std::array<std::vector<double>, 3>> sums{};
+  if (window)
+    for (Axis a : run.axes)
+      for (auto& v : sums[index(a)]) {
+        v.reserve(static_cast<std::size_t>(n_ticks) + 1);
+        v.push_back(0.0);
+      }
   for (std::int64_t k = 0; k < n_ticks; ++k) {
     const sim::Snapshot& s = cosim.step();
+    if (window)
+      for (Axis a : run.axes) {
+        const auto& x = s.axes[index(a)];
+        auto& S = sums[index(a)];
+        S[0].push_back(S[0].back() + x.u_V);
+        S[1].push_back(S[1].back() + x.i_A);
+        S[2].push_back(S[2].back() + x.Tm_Nm);
+      }
     if (k % m != 0) continue;
     res.t_s.push_back(t[static_cast<std::size_t>(k / m)]);
     for (Axis a : run.axes) {
@@ -276,6 +295,24 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
       res.i_A[index(a)].push_back(x.i_A);
       res.Tm[index(a)].push_back(x.Tm_Nm);
       res.vcmd_mm_per_s[index(a)].push_back(x.vcmd_mm_per_s);
+    }
+  }
+  if (window) {
+    res.notes.push_back(fmt::format("the twin's u, current and torque at a row are their mean over the two sample "
+                                    "periods around it ({} s): where the log samples every {} s, a stop or a change "
+                                    "of speed falls at a time inside them the log does not give",
+                                    2.0 * run.sample_period_s, run.sample_period_s));
+    for (Axis a : run.axes) {
+      const auto& S = sums[index(a)];
+      for (std::size_t r = 0; r < res.t_s.size(); ++r) {
+        const std::int64_t c = static_cast<std::int64_t>(r) * m;
+        const auto lo = static_cast<std::size_t>(std::max<std::int64_t>(c - m, 0));
+        const auto hi = static_cast<std::size_t>(std::min<std::int64_t>(c + m, n_ticks - 1));
+        const double n_in = static_cast<double>(hi - lo + 1);
+        res.u_V[index(a)][r] = (S[0][hi + 1] - S[0][lo]) / n_in;
+        res.i_A[index(a)][r] = (S[1][hi + 1] - S[1][lo]) / n_in;
+        res.Tm[index(a)][r] = (S[2][hi + 1] - S[2][lo]) / n_in;
+      }
     }
   }
   return res;

@@ -75,9 +75,25 @@ std::vector<double> monotone_slopes(const std::vector<double>& r_mm);
 /// the controller period, the reference is rebuilt by upsample_reference at the
 /// controller period and outputs are taken every m ticks (a note says so);
 /// any other sampling is a ConfigError naming the figures.
+/// How the twin's torque-side channels (u, current, torque) are taken at a
+/// row of a log that samples slower than the loop.
+enum class ChannelSampling {
+  /// The value at the row's tick.
+  kInstant,
+  /// The mean over the two sample periods around the row (every tick from
+  /// t[k-1] to t[k+1]). A log sampled every dt fixes the reference only at its
+  /// rows, so the rebuilt reference places a stop or a change of speed
+  /// somewhere inside those two periods, not at a known tick; the value at one
+  /// tick would put a short torque peak at a time the log cannot give. The
+  /// mean is the expected value of the channel over the times the log allows.
+  /// Equal to kInstant where the log samples every tick.
+  kMeanOverNeighbours,
+};
+
 /// `rows` limits the replay to the first rows (0: all).
 ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& machine, std::size_t rows = 0,
-                        feeddrive::IntegratorOptions options = {});
+                        feeddrive::IntegratorOptions options = {},
+                        ChannelSampling sampling = ChannelSampling::kInstant);
 
 /// Writes the replay as trace.csv: t_s and per axis <a>_ref_mm <a>_mm <a>_u_V <a>_i_A.
 void write_replay_trace(const std::filesystem::path& path, const ReplayResult& r);
