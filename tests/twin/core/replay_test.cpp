@@ -12,6 +12,7 @@
 #include <fstream>
 #include <vector>
 
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -133,6 +134,51 @@ TEST(Replay, CoarseSamplingIsInterpolatedAndSaid) {
   EXPECT_THAT(r.notes[0], HasSubstr("10 controller periods"));
   // 10 mm/s ramp: the loop follows it within a few microns.
   EXPECT_NEAR(r.x_mm[0].back(), 1.99, 0.01);
+}
+
+// The mean over the two sample periods around a row (ChannelSampling::
+// kMeanOverNeighbours) checked against its definition: the same reference,
+// rebuilt at the loop's period by upsample_reference and replayed tick by
+// tick (the same trajectory, bit for bit), averaged over ticks c - m .. c + m
+// by hand. A stop inside a sample period (the case the window exists for) is
+// in the reference. Tolerance 1e-9 V: the two replays run the same ticks, so
+// only the order of the summation differs.
+TEST(Replay, ChannelMeanOverNeighboursIsTheMeanOfTheTickValues) {
+  const int m = 10;
+  std::vector<double> coarse;
+  for (int i = 0; i < 40; ++i) coarse.push_back(i < 20 ? 0.05 * i : 0.95);  // 50 mm/s, then a stop
+  std::string csv = "t_s,x_ref_mm\n";
+  for (std::size_t i = 0; i < coarse.size(); ++i)
+    csv += std::to_string(static_cast<double>(i) * 1e-3) + "," + std::to_string(coarse[i]) + "\n";
+  const auto meta = [](double dt) {
+    return std::string(R"({"machine": "fadal2216", "axes": ["x"], "controller_period_s": 0.0001, "sample_period_s": )") +
+           std::to_string(dt) + R"(, "encoder_resolution_mm": 0.001})";
+  };
+  const auto run = analysis::load_run(make_run("window_coarse", meta(1e-3), csv));
+  const std::vector<double> fine = analysis::upsample_reference(run.trace.at("x_ref_mm"), m);
+  std::string csv_fine = "t_s,x_ref_mm\n";
+  for (std::size_t i = 0; i < fine.size(); ++i)
+    csv_fine += fmt::format("{},{:.17g}\n", static_cast<double>(i) * 1e-4, fine[i]);
+  const auto run_fine = analysis::load_run(make_run("window_fine", meta(1e-4), csv_fine));
+  const auto machine = analysis::machine_for_run(run, "", nullptr);
+  const auto r = analysis::replay_run(run, machine, 0, {}, analysis::ChannelSampling::kMeanOverNeighbours);
+  const auto f = analysis::replay_run(run_fine, machine);
+  ASSERT_EQ(f.t_s.size(), fine.size());
+  ASSERT_EQ(r.t_s.size(), coarse.size());
+  double peak_instant = 0.0, peak_mean = 0.0;
+  for (std::size_t row = 0; row < r.t_s.size(); ++row) {
+    const auto c = static_cast<std::ptrdiff_t>(row) * m;
+    const auto lo = std::max<std::ptrdiff_t>(c - m, 0);
+    const auto hi = std::min<std::ptrdiff_t>(c + m, static_cast<std::ptrdiff_t>(fine.size()) - 1);
+    double sum = 0.0;
+    for (auto k = lo; k <= hi; ++k) sum += f.u_V[0][static_cast<std::size_t>(k)];
+    EXPECT_NEAR(r.u_V[0][row], sum / static_cast<double>(hi - lo + 1), 1e-9) << "row " << row;
+    peak_instant = std::max(peak_instant, std::abs(f.u_V[0][static_cast<std::size_t>(c)]));
+    peak_mean = std::max(peak_mean, std::abs(r.u_V[0][row]));
+  }
+  // The stop's short command peak is spread over the window, never raised.
+  EXPECT_LE(peak_mean, peak_instant);
+  EXPECT_THAT(r.notes.back(), HasSubstr("mean over the two sample periods"));
 }
 
 // A run whose own tracking error passes the machine's following-error limit
