@@ -444,9 +444,11 @@ const std::vector<double>* model_channel(const ReplayResult& r, Axis a, const To
 }
 
 /// Adds a model's errors on rows [from, to) where compared to `pools`.
+/// `has_vcmd`: the model's loop is a cascade, so its velocity command compares
+/// with a logged one.
 void add_errors(PoolSet& pools, const MeasuredRun& run, const ReplayResult& model, const std::vector<char>& compared,
                 const std::vector<Axis>& axes, std::size_t from, std::size_t to, bool same_unit_machine,
-                std::map<std::string, std::string>* not_comparable) {
+                bool has_vcmd, std::map<std::string, std::string>* not_comparable) {
   for (Axis a : axes) {
     const std::size_t i = index(a);
     if (model.x_mm[i].empty()) continue;
@@ -455,6 +457,15 @@ void add_errors(PoolSet& pools, const MeasuredRun& run, const ReplayResult& mode
       Pool& p = pools[col(a, "_err_mm")];
       for (std::size_t k = from; k < to; ++k)
         if (compared[k]) p.add(ref[k] - (*x)[k], ref[k] - model.x_mm[i][k]);
+    }
+    if (const auto* vc = run.trace.find(col(a, "_vcmd_mm_s"))) {
+      if (has_vcmd) {
+        Pool& p = pools[col(a, "_vcmd_mm_s")];
+        for (std::size_t k = from; k < to; ++k)
+          if (compared[k]) p.add((*vc)[k], model.vcmd_mm_per_s[i][k]);
+      } else if (not_comparable) {
+        (*not_comparable)[col(a, "_vcmd_mm_s")] = "the machine's loop (FADAL) has no velocity command";
+      }
     }
     const TorqueChannel ch = torque_channel(run, a);
     if (!ch.present()) continue;
@@ -485,7 +496,6 @@ ChannelErrors errors_from(const PoolSet& pools) {
 }
 
 struct Fitter {
-  const std::vector<Axis>& axes;
   const std::vector<RunData>& runs;
 
   /// Rows of the fitting part (interior rows of segments), per run.
@@ -544,7 +554,7 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
 
   std::vector<RunData> runs;
   for (const auto& r : fit) runs.push_back(prepare_run(r, out.axes, out.rounding, options.fit_fraction, out.notes));
-  const Fitter fitter{out.axes, runs};
+  const Fitter fitter{runs};
 
   // The machine: cascade, drives in the channel's unit.
   sim::MachineDefinition m;
@@ -815,7 +825,8 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
       ++out.replays;
       for (std::size_t k = 0; k < cmp.size(); ++k) cmp[k] = static_cast<char>(cmp[k] && rd.interior[k]);
       std::map<std::string, std::string> nc;
-      add_errors(pools, *rd.run, rr, cmp, out.axes, from, to, same_unit, &nc);
+      add_errors(pools, *rd.run, rr, cmp, out.axes, from, to, same_unit,
+                 sim::machine_loop_law(machine) == controller::LoopLaw::kCascade, &nc);
       dst = errors_from(pools);
       for (auto& [k, why] : nc) dst.not_computed[k] = why;
       if (keep) *keep = std::move(rr);
@@ -930,6 +941,11 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
           pg1.add(e, ref[k] - out.rounding.round(ref_smooth - reg[i].lag_s * kin.v_mm_per_s[k]));
         }
       }
+      if (const auto* vc = t.find(col(ax.axis, "_vcmd_mm_s"))) {
+        Pool& pz3 = z[col(ax.axis, "_vcmd_mm_s")];
+        for (std::size_t k = from; k < to; ++k)
+          if (rd.interior[k]) pz3.add((*vc)[k], 0.0);
+      }
       const TorqueChannel ch = torque_channel(*rd.run, ax.axis);
       if (!ch.present()) continue;
       const auto& meas = t.at(ch.column);
@@ -956,6 +972,25 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
   // The model and the baselines are compared on the same rows: the interior
   // rows of the replayed segments.
   PoolSet pool_nom, pool_id, pool_zero, pool_reg;
+  auto pooled_errors = [](const PoolSet& pools, const std::vector<RunErrors>& list, ChannelErrors RunErrors::*which) {
+    ChannelErrors e = errors_from(pools);
+    for (const RunErrors& re : list)
+      for (const auto& [k, why] : (re.*which).not_computed)
+        if (!e.nrms.count(k)) e.not_computed[k] = fmt::format("{}: {}", re.run, why);
+    return e;
+  };
+  auto pool_runs = [&](const std::vector<RunErrors>& list, RunErrors& dst) {
+    dst.run = "pooled";
+    for (const RunErrors& re : list) {
+      dst.rows += re.rows;
+      dst.rows_compared += re.rows_compared;
+    }
+    dst.identified = pooled_errors(pool_id, list, &RunErrors::identified);
+    dst.calibrated = pooled_errors(pool_id, list, &RunErrors::calibrated);
+    dst.nominal = pooled_errors(pool_nom, list, &RunErrors::nominal);
+    dst.zero = pooled_errors(pool_zero, list, &RunErrors::zero);
+    dst.regression = pooled_errors(pool_reg, list, &RunErrors::regression);
+  };
   for (std::size_t r = 0; r < runs.size(); ++r) {
     RunErrors re;
     re.run = runs[r].run->dir.string();
@@ -969,7 +1004,9 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
     out.fit_runs.push_back(std::move(re));
   }
   out.replay_after = out.replay_before;
+  pool_runs(out.fit_runs, out.pooled_fit);
 
+  for (auto* p : {&pool_nom, &pool_id, &pool_zero, &pool_reg}) p->clear();
   for (const MeasuredRun& v : validate) {
     std::vector<std::string> vnotes;
     RunData rd = prepare_run(v, out.axes, out.rounding, 0.0, vnotes);
@@ -978,12 +1015,13 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
     re.run = v.dir.string();
     re.rows = rd.n;
     for (std::size_t k = 0; k < rd.n; ++k) re.rows_compared += rd.interior[k] ? 1 : 0;
-    errors_on(out.final_machine, rd, 0, rd.n, true, nullptr, re.calibrated, nullptr);
+    errors_on(out.final_machine, rd, 0, rd.n, true, nullptr, re.calibrated, &pool_id);
     re.identified = re.calibrated;
-    errors_on(nominal, rd, 0, rd.n, false, nullptr, re.nominal, nullptr);
-    baselines(rd, 0, rd.n, re.zero, re.regression, nullptr, nullptr);
+    errors_on(nominal, rd, 0, rd.n, false, nullptr, re.nominal, &pool_nom);
+    baselines(rd, 0, rd.n, re.zero, re.regression, &pool_zero, &pool_reg);
     out.validation_runs.push_back(std::move(re));
   }
+  if (!out.validation_runs.empty()) pool_runs(out.validation_runs, out.pooled_validation);
   return out;
 }
 
@@ -1006,8 +1044,9 @@ RunErrors evaluate_machine_on_run(const MeasuredRun& run, const sim::MachineDefi
   for (std::size_t k = 0; k < cmp.size(); ++k) cmp[k] = static_cast<char>(cmp[k] && rd.interior[k]);
   for (std::size_t k = 0; k < rd.n; ++k) re.rows_compared += rd.interior[k] ? 1 : 0;
   PoolSet pools, zero;
-  add_errors(pools, run, rr, cmp, axes, 0, rd.n, true, nullptr);
-  add_errors(zero, run, rr, cmp, axes, 0, rd.n, true, nullptr);
+  const bool has_vcmd = sim::machine_loop_law(machine) == controller::LoopLaw::kCascade;
+  add_errors(pools, run, rr, cmp, axes, 0, rd.n, true, has_vcmd, nullptr);
+  add_errors(zero, run, rr, cmp, axes, 0, rd.n, true, has_vcmd, nullptr);
   for (auto& [k, p] : zero) p.res2 = p.meas2;
   re.calibrated = errors_from(pools);
   re.identified = re.calibrated;
@@ -1065,18 +1104,6 @@ nlohmann::json run_errors_json(const RunErrors& e) {
 /// Pooled over the fitting runs' held-out rows, from the per-run figures and
 /// their compared rows (an approximation only where runs differ in level; the
 /// per-run figures are exact and listed too).
-ChannelErrors pooled(const std::vector<RunErrors>& runs, const ChannelErrors RunErrors::*which) {
-  if (runs.size() == 1) return runs.front().*which;
-  ChannelErrors out;
-  std::map<std::string, std::pair<double, double>> acc;
-  for (const auto& r : runs)
-    for (const auto& [k, v] : (r.*which).nrms) {
-      acc[k].first += v * v * static_cast<double>(r.rows_compared);
-      acc[k].second += static_cast<double>(r.rows_compared);
-    }
-  for (const auto& [k, p] : acc) out.nrms[k] = p.second > 0 ? std::sqrt(p.first / p.second) : 0.0;
-  return out;
-}
 
 }  // namespace
 
@@ -1116,19 +1143,20 @@ nlohmann::json data_calibration_report_json(const DataCalibration& r) {
     if (e.kept)
       j["effects_added"].push_back(
           {{"effect", e.effect}, {"axis", axis_name(e.axis)}, {"params", e.params}, {"evidence", e.evidence}});
-  j["error_before"] = pooled(r.fit_runs, &RunErrors::identified).to_json();
-  j["error_after"] = pooled(r.fit_runs, &RunErrors::calibrated).to_json();
+  j["error_before"] = r.pooled_fit.identified.to_json();
+  j["error_after"] = r.pooled_fit.calibrated.to_json();
   j["validation"] = fmt::format(
       "normalised RMS on the last {:.0f} % of the rows of each fitting run (not used for fitting), interior rows of "
       "each stitched segment only; currents and torques unfiltered in their own unit (the log's rate is below 400 Hz "
       "or the channel is not u), positions of the twin rounded as the log's",
       100.0 * (1.0 - r.fit_fraction));
-  j["baseline"] = {{"zero", pooled(r.fit_runs, &RunErrors::zero).to_json()},
-                   {"rigid_body_regression", pooled(r.fit_runs, &RunErrors::regression).to_json()}};
+  j["baseline"] = {{"zero", r.pooled_fit.zero.to_json()},
+                   {"rigid_body_regression", r.pooled_fit.regression.to_json()}};
   j["fit_runs"] = nlohmann::json::array();
   for (const auto& e : r.fit_runs) j["fit_runs"].push_back(run_errors_json(e));
   j["validation_runs"] = nlohmann::json::array();
   for (const auto& e : r.validation_runs) j["validation_runs"].push_back(run_errors_json(e));
+  if (!r.validation_runs.empty()) j["validation_pooled"] = run_errors_json(r.pooled_validation);
   j["effects_skipped"] = nlohmann::json::object();
   for (const auto& [e, why] : r.skipped) j["effects_skipped"][e] = why;
   j["effects_tried"] = nlohmann::json::array();

@@ -136,6 +136,10 @@ struct DataCalibration {
   std::vector<std::pair<std::string, std::string>> skipped;  ///< effect, why the data cannot show it
   std::vector<RunErrors> fit_runs;             ///< held-out rows of each fitting run
   std::vector<RunErrors> validation_runs;      ///< whole runs not used for fitting
+  /// The fitting runs' held-out rows and the validation runs' rows, each
+  /// pooled over runs: sqrt(sum of squared residuals / sum of squared
+  /// measurements) over all their compared rows.
+  RunErrors pooled_fit, pooled_validation;
   ReplayResult replay_before, replay_after;    ///< of the first fitting run
   std::vector<std::string> notes;
   double fit_fraction{0.6};

@@ -184,6 +184,15 @@ TEST(RealLogs, CascadeAtOneKilohertzWithRawTorque) {
   // And its torque better than the rigid-body regression fitted on the same rows.
   ASSERT_TRUE(e.count("x_torque_raw"));
   EXPECT_LT(e.at("x_torque_raw"), r.validation_runs[0].regression.nrms.at("x_torque_raw"));
+  // The logged velocity command is a channel too (spec/interfaces.md): the
+  // twin's, from the same P law on its own following error, within 2 % NRMS
+  // (the velocity feedforward carries most of it; the rest is Kv times an
+  // error known to 1 %), against 1 for the zero model.
+  ASSERT_TRUE(e.count("x_vcmd_mm_s"));
+  EXPECT_LT(e.at("x_vcmd_mm_s"), 0.02);
+  EXPECT_DOUBLE_EQ(r.validation_runs[0].zero.nrms.at("x_vcmd_mm_s"), 1.0);
+  // One validation run: its pooled errors are its own.
+  for (const auto& [k, v] : e) EXPECT_NEAR(r.pooled_validation.calibrated.nrms.at(k), v, 1e-12) << k;
   // The machine as written to machine.yaml and read back (what `twin replay
   // OTHER --machine OUT/machine.yaml` loads) gives the same numbers.
   const auto yaml_dir = work("cascade_yaml");
