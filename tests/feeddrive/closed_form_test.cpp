@@ -288,6 +288,35 @@ TEST(ClosedFormEvents, NearStopTickGoesToSundials) {
   }
 }
 
+// Oracle: the one-tick solution of J dw/dt = F - B w from w0 with
+// w_inf = F/B and d = w0 - w_inf: w(h) = w_inf + d e^{-z}, z = B h/J,
+// theta(h) = w_inf h + d (J/B)(1 - e^{-z}),
+// int w^2 = w_inf^2 h + 2 w_inf d (J/B)(1 - e^{-z}) + d^2 (J/2B)(1 - e^{-2z}).
+// The bank sums power series for z < 1 and uses closed forms above; both
+// sides of the switch (z = 0.5, 0.999, 1.001, 3) must match to 1e-12 relative
+// (the formulas have no cancellation for z >= 0.5).
+TEST(ClosedFormEvents, CoefficientsOnBothSidesOfTheSeriesSwitch) {
+  for (const double z : {0.5, 0.999, 1.001, 3.0}) {
+    DriveParams p = fadal_y();
+    p.B_kg_m2_per_s = z * p.J_kg_m2 / kTs_s;
+    const double B = p.B_kg_m2_per_s, J = p.J_kg_m2, h = kTs_s;
+    const double w0 = 2.0;
+    const double T_motor = 0.5 * B * w0 + p.Tc_pos_Nm;  // w_inf = w0 / 2: stays positive
+    DriveBank bank = bank_sliding(p, 0.0, w0, IntegratorOptions{});
+    bank.advance(0.0, h, {{T_motor / (p.Ka_A_per_V * p.Kt_Nm_per_A), 0.0}});
+    ASSERT_EQ(bank.num_closed_form_ticks(), 1) << "z = " << z;
+    const double w_inf = (T_motor - p.Tc_pos_Nm) / B, d = w0 - w_inf;
+    const double w = w_inf + d * std::exp(-z);
+    const double theta = w_inf * h + d * J / B * (-std::expm1(-z));
+    const double int_w2 = w_inf * w_inf * h + 2.0 * w_inf * d * J / B * (-std::expm1(-z)) +
+                          d * d * J / (2.0 * B) * (-std::expm1(-2.0 * z));
+    EXPECT_NEAR(bank.state(0).w_rad_per_s, w, 1e-12 * w) << "z = " << z;
+    EXPECT_NEAR(bank.output(0).x_mm, p.rg_mm_per_rad * theta, 1e-12 * p.rg_mm_per_rad * theta) << "z = " << z;
+    EXPECT_NEAR(bank.state(0).work_damping_J, B * int_w2, 1e-12 * B * int_w2) << "z = " << z;
+    EXPECT_NEAR(bank.state(0).work_friction_J, p.Tc_pos_Nm * theta, 1e-12 * p.Tc_pos_Nm * theta) << "z = " << z;
+  }
+}
+
 // Nonlinear effects keep every tick on SUNDIALS; linear ones (constant load,
 // backlash, delay, screw error) keep the shortcut and agree to 1e-9 mm; a
 // current limit sends exactly its clamped ticks to SUNDIALS.
