@@ -28,6 +28,64 @@ constexpr std::size_t kCompliantSize = 6;
 constexpr std::size_t kRootsPerAxis = 4;
 constexpr int kMaxEventsPerTick = 1000;
 
+// Exact zero-order-hold advance of the linear sliding drive
+//   dtheta/dt = w,  dw/dt = -a w + c,  a = B/J, c = F/J held over h,
+// i.e. the matrix exponential of [[0, 1, 0], [0, -a, 1], [0, 0, 0]] h:
+//   w(h)     = e w0 + f1 c,          e = exp(-a h), f1 = int_0^h exp(-a s) ds
+//   theta(h) = f1 w0 + g1 c,         g1 = int_0^h f1(s) ds
+//   int w^2  = Iee w0^2 + 2 Ief w0 c + Iff c^2
+// with Iee = int e(s)^2, Ief = int e(s) f1(s), Iff = int f1(s)^2 ds. With
+// z = a h each is h^n times a power series in z, summed directly for z < 1
+// (no cancellation as a -> 0, B = 0 included) and in closed form above.
+struct LinearTick {
+  double e{1.0};
+  double f1_s{0.0};
+  double g1_s2{0.0};
+  double Iee_s{0.0};
+  double Ief_s2{0.0};
+  double Iff_s3{0.0};
+};
+
+LinearTick linear_tick(double a_per_s, double h_s) {
+  const double z = a_per_s * h_s;
+  double phi1 = 0.0, phi2 = 0.0, phi1_2z = 0.0, psi_ef = 0.0, psi_ff = 0.0;
+  if (z < 1.0) {
+    // Terms (-z)^k/(k+1)!, (-z)^k/(k+2)!, (-2z)^k/(k+1)!, and the two
+    // combinations below; 40 terms leave < 1e-30 for z < 1.
+    double zk = 1.0;    // z^k
+    double two_k = 1.0; // 2^k
+    double fact = 1.0;  // (k+1)!
+    for (int k = 0; k < 40; ++k) {
+      fact *= (k + 1);
+      const double sign = (k % 2 == 0) ? 1.0 : -1.0;
+      phi1 += sign * zk / fact;
+      phi2 += sign * zk / (fact * (k + 2));
+      phi1_2z += sign * two_k * zk / fact;
+      // psi_ef = sum_{k>=1} (-1)^(k+1) (2^k - 1) z^(k-1)/(k+1)!  (term k+1 uses z^k)
+      const double f_next = fact * (k + 2);
+      psi_ef += sign * (2.0 * two_k - 1.0) * zk / f_next;
+      // psi_ff = sum_{k>=2} (-1)^k (2^k - 2) z^(k-2)/(k+1)!  (term k+2 uses z^k)
+      psi_ff += sign * (4.0 * two_k - 2.0) * zk / (f_next * (k + 3));
+      zk *= z;
+      two_k *= 2.0;
+    }
+  } else {
+    phi1 = -std::expm1(-z) / z;
+    phi2 = (z + std::expm1(-z)) / (z * z);
+    phi1_2z = -std::expm1(-2.0 * z) / (2.0 * z);
+    psi_ef = (phi1 - phi1_2z) / z;
+    psi_ff = (1.0 - 2.0 * phi1 + phi1_2z) / (z * z);
+  }
+  LinearTick t;
+  t.e = std::exp(-z);
+  t.f1_s = h_s * phi1;
+  t.g1_s2 = h_s * h_s * phi2;
+  t.Iee_s = h_s * phi1_2z;
+  t.Ief_s2 = h_s * h_s * psi_ef;
+  t.Iff_s3 = h_s * h_s * h_s * psi_ff;
+  return t;
+}
+
 // Everything about one axis that is fixed for its life in the bank.
 struct AxisConst {
   DriveParams p;
@@ -35,6 +93,10 @@ struct AxisConst {
   double Jm_kg_m2{0.0};  // motor side inertia (all of J when rigid)
   double Jl_kg_m2{0.0};  // load side inertia (compliance only)
   std::size_t delay_ticks{0};
+  // Closed-form tick (rigid, no nonlinear effect): coefficients of the exact
+  // solution of J dw/dt = F - B w, dtheta/dt = w over h = Ts with F held.
+  bool linear{false};
+  LinearTick tick;
 };
 
 // Per-tick and per-segment values of one axis, set by the bank.
@@ -49,8 +111,11 @@ struct AxisRun {
   double friction_base_J{0.0};
   int mode{0};           // friction-side sliding direction: +1, -1, 0 = held
   bool frozen{true};     // rigid axis held for the rest of the tick: not integrated
+  bool exact{false};     // advanced in closed form this tick: not integrated
+  bool clamped{false};   // the current limit clamps this tick's command
   int prev_mode{2};      // mode at the previous tick start (2 = unknown)
   bool prev_frozen{false};
+  bool prev_exact{false};
 };
 
 double position_friction_Nm(const DriveParams& p, double x_mm) {
@@ -135,7 +200,7 @@ int rest_decision(const AxisConst& a, double net_Nm, double x_friction_mm) {
 void axis_rhs(const AxisConst& a, const AxisRun& r, const double* y, double* yd) {
   const DriveParams& p = a.p;
   if (!a.compliant) {
-    if (r.frozen) {
+    if (r.frozen || r.exact) {
       std::fill(yd, yd + kRigidSize, 0.0);
       return;
     }
@@ -171,7 +236,7 @@ void axis_rhs(const AxisConst& a, const AxisRun& r, const double* y, double* yd)
 
 void axis_roots(const AxisConst& a, const AxisRun& r, const double* y, double* g) {
   g[0] = g[1] = g[2] = g[3] = 1.0;
-  if (r.frozen) return;
+  if (r.frozen || r.exact) return;
   const auto& pf = a.p.effects.position_dependent_friction;
   double x_friction_mm = 0.0;
   if (!a.compliant) {
@@ -241,8 +306,13 @@ struct DriveBank::Impl {
   std::vector<AxisRun> runs;
   std::vector<DriveState> states;
   std::vector<std::unique_ptr<Group>> groups;
+  std::vector<std::array<double, 2>> tick_start;  // x motor, x load at the tick start
+  long closed_form_ticks{0};
+  long sundials_ticks{0};
 
   void build_groups();
+  void finish_axis(std::size_t i, double t_s);
+  bool try_closed_form(std::size_t i);
   void pack(Group& g);
   void unpack(Group& g, double t_s);
   void start_tick_mode(std::size_t i);
@@ -326,32 +396,72 @@ void DriveBank::Impl::unpack(Group& g, double t_s) {
     const double* y = g.y.data() + g.offset[k];
     s.x_mm = r.x0_mm + y[0];
     s.w_rad_per_s = y[1];
-    double x_drive_mm = s.x_mm;
     if (a.compliant) {
       s.x_load_mm = r.xl0_mm + y[2];
       s.w_load_rad_per_s = y[3];
       s.work_damping_J = r.damping_base_J + y[4];
       s.work_friction_J = r.friction_base_J + y[5];
-      x_drive_mm = s.x_load_mm;
     } else {
       s.x_load_mm = s.x_mm;
       s.w_load_rad_per_s = s.w_rad_per_s;
       s.work_damping_J = r.damping_base_J + y[2];
       s.work_friction_J = r.friction_base_J + y[3];
     }
-    if (a.p.effects.backlash.enabled && !a.compliant) {
-      const double half_mm = 0.5 * a.p.effects.backlash.gap_mm;
-      if (x_drive_mm - s.x_table_mm > half_mm) s.x_table_mm = x_drive_mm - half_mm;
-      if (s.x_table_mm - x_drive_mm > half_mm) s.x_table_mm = x_drive_mm + half_mm;
-    } else {
-      s.x_table_mm = x_drive_mm;
-    }
-    if (!all_finite(s.x_mm, s.w_rad_per_s, s.x_load_mm, s.w_load_rad_per_s, s.work_damping_J,
-                    s.work_friction_J))
-      throw ModelError(fmt::format("feeddrive: axis {} state became non-finite at t = {} s (x = {} mm, w = {} rad/s)",
-                                   i < kNumAxes ? axis_name(i) : std::string_view("?"), t_s, s.x_mm,
-                                   s.w_rad_per_s));
+    finish_axis(i, t_s);
   }
+}
+
+// Table position after the play of a backlash, and the finiteness check.
+void DriveBank::Impl::finish_axis(std::size_t i, double t_s) {
+  const AxisConst& a = consts[i];
+  DriveState& s = states[i];
+  const double x_drive_mm = a.compliant ? s.x_load_mm : s.x_mm;
+  if (a.p.effects.backlash.enabled && !a.compliant) {
+    const double half_mm = 0.5 * a.p.effects.backlash.gap_mm;
+    if (x_drive_mm - s.x_table_mm > half_mm) s.x_table_mm = x_drive_mm - half_mm;
+    if (s.x_table_mm - x_drive_mm > half_mm) s.x_table_mm = x_drive_mm + half_mm;
+  } else {
+    s.x_table_mm = x_drive_mm;
+  }
+  if (!all_finite(s.x_mm, s.w_rad_per_s, s.x_load_mm, s.w_load_rad_per_s, s.work_damping_J, s.work_friction_J))
+    throw ModelError(fmt::format("feeddrive: axis {} state became non-finite at t = {} s (x = {} mm, w = {} rad/s)",
+                                 i < kNumAxes ? axis_name(i) : std::string_view("?"), t_s, s.x_mm, s.w_rad_per_s));
+}
+
+// Closed-form advance of rigid axis i over the whole tick, if the tick is an
+// ordinary one: the axis slides (w != 0 at the start, so its friction side s
+// is known and held), has no nonlinear effect, its current is not clamped,
+// and w keeps its sign to the end of the tick by a clear margin. The solution
+// of J dw/dt = F - B w is monotone in t, so w(h) of the sign of w(0) means no
+// zero of w, hence no stop, reversal or stick inside the tick. The margin
+// (1e-6 of the speed scale of the tick) leaves every tick whose end speed
+// comes anywhere near zero to SUNDIALS and its root finding; returns false
+// then, with the state untouched.
+bool DriveBank::Impl::try_closed_form(std::size_t i) {
+  const AxisConst& a = consts[i];
+  AxisRun& r = runs[i];
+  DriveState& s = states[i];
+  if (!a.linear || r.frozen || r.clamped || s.w_rad_per_s == 0.0) return false;
+  const DriveParams& p = a.p;
+  const LinearTick& k = a.tick;
+  const int dir = s.w_rad_per_s > 0.0 ? +1 : -1;
+  const double Tf_Nm = dir * coulomb_Nm(p, dir, s.x_mm);
+  const double w0 = s.w_rad_per_s;
+  const double c = (r.Tm_Nm - Tf_Nm - r.Tload_Nm) / a.Jm_kg_m2;
+  const double w1 = k.e * w0 + k.f1_s * c;
+  const double margin = 1e-6 * (std::abs(w0) + std::abs(c) * k.f1_s);
+  if (!(dir * w1 > margin)) return false;
+  const double dtheta_rad = k.f1_s * w0 + k.g1_s2 * c;
+  const double int_w2 = k.Iee_s * w0 * w0 + 2.0 * k.Ief_s2 * w0 * c + k.Iff_s3 * c * c;
+  s.x_mm += p.rg_mm_per_rad * dtheta_rad;
+  s.w_rad_per_s = w1;
+  s.x_load_mm = s.x_mm;
+  s.w_load_rad_per_s = w1;
+  s.work_damping_J += p.B_kg_m2_per_s * int_w2;
+  s.work_friction_J += Tf_Nm * dtheta_rad;
+  r.mode = dir;
+  r.exact = true;
+  return true;
 }
 
 // Mode of axis i at the start of a tick, from its state and this tick's inputs.
@@ -415,11 +525,22 @@ void DriveBank::Impl::advance_group(Group& g, double t_from_s, double t_to_s) {
   bool any_moving = false;
   for (std::size_t i : g.axes) {
     AxisRun& r = runs[i];
+    r.exact = false;
     start_tick_mode(i);
-    if (r.mode != r.prev_mode || r.frozen != r.prev_frozen) restart = true;
+    if (options.exact_linear_ticks && try_closed_form(i)) {
+      ++closed_form_ticks;
+      finish_axis(i, t_to_s);
+      // The solver's copy of this axis is stale from here: re-pack if it runs.
+      restart = true;
+    }
+    if (r.mode != r.prev_mode || r.frozen != r.prev_frozen || r.exact != r.prev_exact) restart = true;
     r.prev_mode = r.mode;
     r.prev_frozen = r.frozen;
-    if (!r.frozen) any_moving = true;
+    r.prev_exact = r.exact;
+    if (!r.frozen && !r.exact) {
+      any_moving = true;
+      ++sundials_ticks;
+    }
   }
   if (!any_moving) {
     g.dirty = true;
@@ -439,7 +560,7 @@ void DriveBank::Impl::advance_group(Group& g, double t_from_s, double t_to_s) {
     if (stop == OdeSolver::Stop::kReachedEnd) break;
     handle_roots(g, t_s);
     bool moving = false;
-    for (std::size_t i : g.axes) moving = moving || !runs[i].frozen;
+    for (std::size_t i : g.axes) moving = moving || (!runs[i].frozen && !runs[i].exact);
     if (!moving) {
       g.dirty = true;
       return;
@@ -450,6 +571,7 @@ void DriveBank::Impl::advance_group(Group& g, double t_from_s, double t_to_s) {
     for (std::size_t i : g.axes) {
       runs[i].prev_mode = runs[i].mode;
       runs[i].prev_frozen = runs[i].frozen;
+      runs[i].prev_exact = runs[i].exact;
     }
   }
   g.dirty = false;
@@ -486,11 +608,16 @@ DriveBank::DriveBank(std::vector<DriveParams> axes, double Ts_s, IntegratorOptio
     } else {
       a.Jm_kg_m2 = a.p.J_kg_m2;
     }
+    const DriveEffects& fx = a.p.effects;
+    a.linear = !a.compliant && !fx.stribeck.enabled && !fx.cogging.enabled &&
+               !(fx.position_dependent_friction.enabled && fx.position_dependent_friction.dTc_Nm != 0.0);
+    a.tick = linear_tick(a.p.B_kg_m2_per_s / a.Jm_kg_m2, Ts_s);
     if (a.p.effects.delay.enabled) a.delay_ticks = static_cast<std::size_t>(std::llround(a.p.effects.delay.delay_s / Ts_s));
     m.consts.push_back(a);
   }
   m.runs.resize(m.consts.size());
   m.states.resize(m.consts.size());
+  m.tick_start.resize(m.consts.size());
   m.build_groups();
   reset(std::vector<double>(m.consts.size(), 0.0));
 }
@@ -540,15 +667,17 @@ void DriveBank::advance(double t_from_s, double t_to_s, const std::vector<DriveI
     }
     r.u_applied_V = u_V;
     r.i_A = a.p.Ka_A_per_V * u_V;
+    r.clamped = false;
     if (a.p.effects.current_saturation.enabled) {
       const double lim = a.p.effects.current_saturation.i_max_A;
+      r.clamped = std::abs(r.i_A) >= lim;
       r.i_A = std::clamp(r.i_A, -lim, lim);
     }
     r.Tm_Nm = a.p.Kt_Nm_per_A * r.i_A;
     r.Tload_Nm = inputs[i].Td_Nm + (a.p.effects.constant_load.enabled ? a.p.effects.constant_load.torque_Nm : 0.0);
   }
   // Tick-start positions for the exact electrical and load work.
-  std::vector<std::array<double, 2>> start(m.consts.size());
+  std::vector<std::array<double, 2>>& start = m.tick_start;
   for (std::size_t i = 0; i < m.consts.size(); ++i) start[i] = {m.states[i].x_mm, m.states[i].x_load_mm};
 
   for (auto& g : m.groups) m.advance_group(*g, t_from_s, t_to_s);
@@ -621,6 +750,9 @@ long DriveBank::num_steps() const noexcept {
   for (const auto& g : impl_->groups) n += g->solver->num_steps();
   return n;
 }
+
+long DriveBank::num_closed_form_ticks() const noexcept { return impl_->closed_form_ticks; }
+long DriveBank::num_sundials_ticks() const noexcept { return impl_->sundials_ticks; }
 
 long DriveBank::num_rhs_evals() const noexcept {
   long n = 0;

@@ -65,6 +65,14 @@ struct IntegratorOptions {
   /// of Ts/n, refined further if an axis's fastest rate (compliance, Stribeck
   /// slope) would make Ts/n longer than 0.25 / rate.
   int erk_fixed_steps_per_tick{1};
+  /// Advance a rigid axis that slides through the whole tick with no
+  /// nonlinear effect in closed form (the zero-order-hold matrix exponential
+  /// of its linear drive, precomputed for Ts) instead of handing it to
+  /// SUNDIALS. Ticks with an event (start from rest, a stop or reversal
+  /// anywhere near the tick, a current clamp) and axes with Stribeck,
+  /// cogging, compliance or position-dependent friction always go to SUNDIALS.
+  /// docs/feeddrive.md gives the test that holds both paths to 1e-9 mm.
+  bool exact_linear_ticks{true};
 };
 
 class DriveBank {
@@ -93,6 +101,11 @@ class DriveBank {
   /// Integrator statistics since construction (steps, rhs evaluations).
   long num_steps() const noexcept;
   long num_rhs_evals() const noexcept;
+  /// Axis-ticks advanced in closed form (IntegratorOptions::exact_linear_ticks)
+  /// and axis-ticks handed to SUNDIALS, since construction. Axes stuck for a
+  /// whole tick count in neither.
+  long num_closed_form_ticks() const noexcept;
+  long num_sundials_ticks() const noexcept;
 
  private:
   struct Impl;

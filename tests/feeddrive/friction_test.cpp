@@ -24,14 +24,17 @@ constexpr double kTs_s = 1e-4;
 constexpr double kCount_mm = 1e-3;
 
 std::vector<IntegratorOptions> all_methods() {
-  IntegratorOptions adams;
+  // The default (ordinary ticks in closed form), then SUNDIALS on every tick.
+  IntegratorOptions erk_every_tick;
+  erk_every_tick.exact_linear_ticks = false;
+  IntegratorOptions adams = erk_every_tick;
   adams.method = IntegratorOptions::Method::kCvodeAdams;
   adams.one_instance_for_all_axes = false;
   IntegratorOptions adams_shared = adams;
   adams_shared.one_instance_for_all_axes = true;
-  IntegratorOptions erk_per_axis;
+  IntegratorOptions erk_per_axis = erk_every_tick;
   erk_per_axis.one_instance_for_all_axes = false;
-  return {IntegratorOptions{}, adams, adams_shared, erk_per_axis};
+  return {IntegratorOptions{}, erk_every_tick, adams, adams_shared, erk_per_axis};
 }
 
 // Oracle: Karnopp stick. A motor torque 1% below breakaway (with or without a
