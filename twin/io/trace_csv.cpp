@@ -1,9 +1,11 @@
 #include "twin/io/trace_csv.hpp"
 
 #include <charconv>
+#include <algorithm>
 #include <cmath>
 
 #include <fmt/format.h>
+#include <zlib.h>
 
 #include "twin/core/error.hpp"
 
@@ -95,39 +97,122 @@ TraceTable read_trace_csv(const std::filesystem::path& path) {
   return t;
 }
 
+namespace {
+// Room a row of n fields may take: "%.10g" of a finite double is at most 17
+// characters ("-1.234567891e-308"), plus the comma or newline.
+constexpr std::size_t kMaxFieldChars = 24;
+constexpr std::size_t kBufferBytes = std::size_t{1} << 18;
+// zlib level 1: the trace is written as fast as the simulation makes it, and
+// level 6 saves little more on numeric text (docs/performance.md).
+constexpr int kGzipLevel = 1;
+}  // namespace
+
+struct TraceWriter::Deflater {
+  z_stream stream{};
+  std::vector<unsigned char> out;
+  bool initialised{false};
+  ~Deflater() {
+    if (initialised) deflateEnd(&stream);
+  }
+};
+
 TraceWriter::TraceWriter(const std::filesystem::path& path, std::vector<std::string> names)
     : file_(path), names_(std::move(names)) {
-  std::string header;
-  for (std::size_t i = 0; i < names_.size(); ++i) {
-    if (i) header += ',';
-    header += names_[i];
+  if (path.extension() == ".gz") {
+    deflater_ = std::make_unique<Deflater>();
+    // windowBits 15 + 16: a gzip header and trailer around the deflate stream.
+    if (deflateInit2(&deflater_->stream, kGzipLevel, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) != Z_OK)
+      throw IoError(fmt::format("{}: cannot start the gzip stream", path.string()));
+    deflater_->initialised = true;
+    deflater_->out.resize(kBufferBytes);
   }
-  header += '\n';
-  file_.write(header);
-  buffer_.reserve(1 << 16);
+  std::size_t header_chars = 1;
+  for (const auto& n : names_) header_chars += n.size() + 1;
+  buffer_.resize(std::max(kBufferBytes, 2 * (header_chars + names_.size() * kMaxFieldChars)));
+  for (std::size_t i = 0; i < names_.size(); ++i) {
+    if (i) buffer_[used_++] = ',';
+    std::copy(names_[i].begin(), names_[i].end(), buffer_.begin() + static_cast<std::ptrdiff_t>(used_));
+    used_ += names_[i].size();
+  }
+  buffer_[used_++] = '\n';
+}
+
+TraceWriter::~TraceWriter() = default;
+
+void TraceWriter::drain(bool finish) {
+  if (!deflater_) {
+    file_.write(std::string_view(buffer_.data(), used_));
+    used_ = 0;
+    return;
+  }
+  z_stream& z = deflater_->stream;
+  z.next_in = reinterpret_cast<Bytef*>(buffer_.data());
+  z.avail_in = static_cast<uInt>(used_);
+  const int flush = finish ? Z_FINISH : Z_NO_FLUSH;
+  int rc = Z_OK;
+  do {
+    z.next_out = deflater_->out.data();
+    z.avail_out = static_cast<uInt>(deflater_->out.size());
+    rc = deflate(&z, flush);
+    if (rc == Z_STREAM_ERROR)
+      throw IoError(fmt::format("cannot write {}: gzip stream error", file_.final_path().string()));
+    const std::size_t have = deflater_->out.size() - z.avail_out;
+    file_.write(std::string_view(reinterpret_cast<const char*>(deflater_->out.data()), have));
+  } while (z.avail_out == 0 || (finish && rc != Z_STREAM_END));
+  used_ = 0;
 }
 
 void TraceWriter::write_row(const double* values, std::size_t n) {
   if (n != names_.size())
     throw IoError(fmt::format("{}: row of {} values for {} columns", file_.final_path().string(), n, names_.size()));
+  if (used_ + n * kMaxFieldChars > buffer_.size()) drain(false);
+  char* p = buffer_.data() + used_;
+  char* const end = buffer_.data() + buffer_.size();
   for (std::size_t i = 0; i < n; ++i) {
-    if (i) buffer_ += ',';
     const double v = values[i] == 0.0 ? 0.0 : values[i];  // no "-0"
     if (!std::isfinite(v))
       throw ModelError(fmt::format("{}: non-finite value in column {}", file_.final_path().string(), names_[i]));
-    fmt::format_to(std::back_inserter(buffer_), "{:.10g}", v);
+    const auto r = std::to_chars(p, end, v, std::chars_format::general, 10);
+    p = r.ptr;
+    *p++ = i + 1 < n ? ',' : '\n';
   }
-  buffer_ += '\n';
-  if (buffer_.size() > (1 << 15)) {
-    file_.write(buffer_);
-    buffer_.clear();
-  }
+  used_ = static_cast<std::size_t>(p - buffer_.data());
+  ++rows_;
 }
 
 void TraceWriter::commit() {
-  file_.write(buffer_);
-  buffer_.clear();
+  drain(true);
   file_.commit();
+}
+
+TraceFormat parse_trace_format(std::string_view text) {
+  if (text == "csv") return TraceFormat::kCsv;
+  if (text == "csv.gz") return TraceFormat::kCsvGz;
+  throw ConfigError(fmt::format("--trace-format: '{}' is not a trace format (csv or csv.gz)", text));
+}
+
+void gunzip_file(const std::filesystem::path& gz, const std::filesystem::path& plain) {
+  gzFile in = gzopen(gz.c_str(), "rb");
+  if (in == nullptr) throw IoError(fmt::format("cannot read {}: cannot open", gz.string()));
+  AtomicFile out(plain);
+  std::vector<char> buf(kBufferBytes);
+  for (;;) {
+    const int n = gzread(in, buf.data(), static_cast<unsigned>(buf.size()));
+    if (n < 0) {
+      int err = 0;
+      const std::string msg = gzerror(in, &err);
+      gzclose(in);
+      throw IoError(fmt::format("cannot read {}: {}", gz.string(), msg));
+    }
+    if (n == 0) break;
+    out.write(std::string_view(buf.data(), static_cast<std::size_t>(n)));
+  }
+  gzclose(in);
+  out.commit();
+}
+
+const char* trace_file_name(TraceFormat format) noexcept {
+  return format == TraceFormat::kCsvGz ? "trace.csv.gz" : "trace.csv";
 }
 
 }  // namespace twin::io
