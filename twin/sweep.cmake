@@ -19,3 +19,9 @@ add_library(twin::sweep ALIAS twin_sweep)
 
 target_sources(twin PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/cli/cmd_sweep.cpp)
 target_link_libraries(twin PRIVATE twin_sweep)
+# Tests run the MPI path only when the build has it.
+if(TWIN_WITH_MPI AND MPI_C_FOUND)
+  set_property(GLOBAL PROPERTY TWIN_SWEEP_MPIEXEC "${MPIEXEC_EXECUTABLE}")
+else()
+  set_property(GLOBAL PROPERTY TWIN_SWEEP_MPIEXEC "")
+endif()
