@@ -3,6 +3,10 @@
 #include <charconv>
 #include <algorithm>
 #include <cmath>
+#include <condition_variable>
+#include <exception>
+#include <mutex>
+#include <thread>
 
 #include <fmt/format.h>
 #include <zlib.h>
@@ -116,6 +120,17 @@ struct TraceWriter::Deflater {
   }
 };
 
+struct TraceWriter::Pipeline {
+  std::mutex mutex;
+  std::condition_variable cv;
+  std::vector<double> pending;  ///< the block the formatting thread owns while has_pending
+  std::size_t pending_rows{0};
+  bool has_pending{false};
+  bool stop{false};
+  std::exception_ptr error;
+  std::thread thread;
+};
+
 TraceWriter::TraceWriter(const std::filesystem::path& path, std::vector<std::string> names)
     : file_(path), names_(std::move(names)) {
   if (path.extension() == ".gz") {
@@ -135,9 +150,22 @@ TraceWriter::TraceWriter(const std::filesystem::path& path, std::vector<std::str
     used_ += names_[i].size();
   }
   buffer_[used_++] = '\n';
+  block_.resize(kRowsPerBlock * std::max<std::size_t>(1, names_.size()));
+  pipeline_ = std::make_unique<Pipeline>();
+  pipeline_->pending.resize(block_.size());
+  pipeline_->thread = std::thread([this] { work(); });
 }
 
-TraceWriter::~TraceWriter() = default;
+TraceWriter::~TraceWriter() {
+  if (pipeline_ && pipeline_->thread.joinable()) {
+    {
+      std::lock_guard lock(pipeline_->mutex);
+      pipeline_->stop = true;
+      pipeline_->cv.notify_all();
+    }
+    pipeline_->thread.join();
+  }
+}
 
 void TraceWriter::drain(bool finish) {
   if (!deflater_) {
@@ -162,25 +190,78 @@ void TraceWriter::drain(bool finish) {
   used_ = 0;
 }
 
+void TraceWriter::work() {
+  Pipeline& q = *pipeline_;
+  for (;;) {
+    std::unique_lock lock(q.mutex);
+    q.cv.wait(lock, [&] { return q.has_pending || q.stop; });
+    if (!q.has_pending) return;
+    lock.unlock();
+    try {
+      format_rows(q.pending.data(), q.pending_rows);
+    } catch (...) {
+      lock.lock();
+      q.error = std::current_exception();
+      q.has_pending = false;
+      q.cv.notify_all();
+      return;
+    }
+    lock.lock();
+    q.has_pending = false;
+    q.cv.notify_all();
+  }
+}
+
+void TraceWriter::hand_off() {
+  Pipeline& q = *pipeline_;
+  std::unique_lock lock(q.mutex);
+  q.cv.wait(lock, [&] { return !q.has_pending; });
+  if (q.error) std::rethrow_exception(q.error);
+  std::swap(block_, q.pending);
+  q.pending_rows = block_rows_;
+  q.has_pending = true;
+  block_rows_ = 0;
+  q.cv.notify_all();
+}
+
+void TraceWriter::format_rows(const double* values, std::size_t rows) {
+  const std::size_t n = names_.size();
+  for (std::size_t row = 0; row < rows; ++row, values += n) {
+    if (used_ + n * kMaxFieldChars + 1 > buffer_.size()) drain(false);
+    char* p = buffer_.data() + used_;
+    char* const end = buffer_.data() + buffer_.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      p = std::to_chars(p, end, values[i], std::chars_format::general, 10).ptr;
+      *p++ = i + 1 < n ? ',' : '\n';
+    }
+    used_ = static_cast<std::size_t>(p - buffer_.data());
+  }
+}
+
 void TraceWriter::write_row(const double* values, std::size_t n) {
   if (n != names_.size())
     throw IoError(fmt::format("{}: row of {} values for {} columns", file_.final_path().string(), n, names_.size()));
-  if (used_ + n * kMaxFieldChars > buffer_.size()) drain(false);
-  char* p = buffer_.data() + used_;
-  char* const end = buffer_.data() + buffer_.size();
+  double* out = block_.data() + block_rows_ * n;
   for (std::size_t i = 0; i < n; ++i) {
     const double v = values[i] == 0.0 ? 0.0 : values[i];  // no "-0"
     if (!std::isfinite(v))
       throw ModelError(fmt::format("{}: non-finite value in column {}", file_.final_path().string(), names_[i]));
-    const auto r = std::to_chars(p, end, v, std::chars_format::general, 10);
-    p = r.ptr;
-    *p++ = i + 1 < n ? ',' : '\n';
+    out[i] = v;
   }
-  used_ = static_cast<std::size_t>(p - buffer_.data());
   ++rows_;
+  if (++block_rows_ == kRowsPerBlock) hand_off();
 }
 
 void TraceWriter::commit() {
+  if (!pipeline_->thread.joinable()) throw IoError(fmt::format("{}: committed twice", file_.final_path().string()));
+  if (block_rows_ > 0) hand_off();
+  {
+    std::lock_guard lock(pipeline_->mutex);
+    pipeline_->stop = true;
+    pipeline_->cv.notify_all();
+  }
+  pipeline_->thread.join();
+  if (pipeline_->error) std::rethrow_exception(pipeline_->error);
   drain(true);
   file_.commit();
 }
