@@ -49,7 +49,7 @@ void register_run(CLI::App& app) {
     RunSize size = plan_run_size(scenario);
     // The estimate is of a full-rate plain trace: decimation divides it, and
     // gzip keeps about kGzipShare of it (docs/performance.md).
-    constexpr double kGzipShare = 0.40;
+    constexpr double kGzipShare = 0.30;
     size.rows = (size.rows + opt->log_every - 1) / opt->log_every;
     size.trace_mb /= static_cast<double>(opt->log_every);
     if (format == io::TraceFormat::kCsvGz) size.trace_mb *= kGzipShare;
