@@ -6,6 +6,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -95,6 +96,20 @@ TEST(RunTrace, LogEveryKeepsEveryNthRowAndTheWholeSummary) {
   a.erase("trace");
   b.erase("trace");
   EXPECT_EQ(a, b);
+}
+
+// gnuplot reads no gzip: the plots of a csv.gz run come from a plain copy
+// that must not be left in OUT (the manifest lists exactly the result's files).
+TEST(RunTrace, GzipRunWithPlotsLeavesOnlyItsResults) {
+  const auto d = work();
+  const auto sc = short_scenario(d);
+  const Result r = sh(d, twin() + " run " + sc.string() + " -o " + (d / "out").string() + " --trace-format csv.gz");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::vector<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(d / "out")) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{"errors.png", "feedrate.png", "manifest.json", "summary.json",
+                                             "trace.csv.gz"}));
 }
 
 TEST(RunTrace, BadTraceOptionsAreOneLineErrors) {
