@@ -9,6 +9,7 @@ packages=(
   libzip-dev zipcmp zipmerge ziptool zip unzip
   libgtest-dev libgmock-dev libbenchmark-dev
   libnlopt-cxx-dev libnlopt-dev
+  openmpi-bin libopenmpi-dev
   gnuplot-nox libxml2-utils python3
 )
 missing=()

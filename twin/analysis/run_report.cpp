@@ -295,14 +295,20 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
   // OUT with the others, the manifest last (io::ResultSet).
   io::ResultSet results(options.out_dir, "run");
   RunOutputs out;
-  io::TraceWriter writer(results.path("trace.csv"), run_trace_columns(axes));
+  if (options.log_every < 1)
+    throw ConfigError(fmt::format("--log-every: {} is not a whole number of ticks >= 1", options.log_every));
+  const std::string trace_name = io::trace_file_name(options.trace_format);
+  io::TraceWriter writer(results.path(trace_name), run_trace_columns(axes));
   RunStatistics stats(program, traj, axes, scenario.machine.encoder_resolution_mm);
   std::vector<double> row;
-  for (std::int64_t k = 0; k < total; ++k) {
+  for (std::int64_t k = 0, next_log = 0; k < total; ++k) {
     const sim::Snapshot& s = cosim.step();
     stats.add(s);
-    fill_run_trace_row(s, axes, row);
-    writer.write_row(row);
+    if (k == next_log) {
+      fill_run_trace_row(s, axes, row);
+      writer.write_row(row);
+      next_log += options.log_every;
+    }
     if (options.progress && (k & 4095) == 0) options.progress(k, total);
   }
   nlohmann::json summary;
@@ -313,20 +319,38 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
   summary["Ts_s"] = scenario.machine.Ts_s;
   const nlohmann::json st = stats.summary();
   summary.update(st);
+  summary["trace"] = {{"file", trace_name}, {"log_every_ticks", options.log_every}, {"rows", writer.num_rows()}};
   writer.commit();
   io::write_file_atomic(results.path("summary.json"), summary.dump(2) + "\n");
   out.summary = summary;
   std::vector<std::filesystem::path> plots;
   if (options.plots) {
     try {
-      plots = plot_run(results, "trace.csv", axes, stats.corners(), scenario.make_process != nullptr);
+      if (options.trace_format == io::TraceFormat::kCsv) {
+        plots = plot_run(results, trace_name, axes, stats.corners(), scenario.make_process != nullptr);
+      } else {
+        // gnuplot reads no gzip (and no shell pipe is opened): the plots are drawn
+        // from a plain copy in the staging folder, which is not part of the result.
+        const auto plain = results.staging_dir() / "plot-trace.csv";
+        io::gunzip_file(results.path(trace_name), plain);
+        try {
+          plots = plot_run(results, plain.filename().string(), axes, stats.corners(),
+                           scenario.make_process != nullptr);
+        } catch (const Error&) {
+          std::error_code ec;
+          std::filesystem::remove(plain, ec);
+          throw;
+        }
+        std::error_code ec;
+        std::filesystem::remove(plain, ec);
+      }
     } catch (const Error&) {
       results.commit();  // the trace and the summary stand without the plots
       throw;
     }
   }
   results.commit();
-  out.trace_path = results.final_path("trace.csv");
+  out.trace_path = results.final_path(trace_name);
   out.summary_path = results.final_path("summary.json");
   for (const auto& p : plots) out.plots.push_back(results.final_path(p.filename().string()));
   return out;

@@ -13,6 +13,7 @@
 
 #include "controller/interpolator.hpp"
 #include "twin/io/scenario_file.hpp"
+#include "twin/io/trace_csv.hpp"
 #include "twin/sim/cosimulation.hpp"
 
 namespace twin::analysis {
@@ -100,6 +101,11 @@ struct RunOutputs {
 struct RunOptions {
   std::filesystem::path out_dir;
   bool plots{true};
+  /// Write every log_every-th tick to the trace (ticks 0, N, 2N, ...); the
+  /// summary still takes in every tick. At least 1.
+  std::int64_t log_every{1};
+  /// trace.csv or trace.csv.gz.
+  io::TraceFormat trace_format{io::TraceFormat::kCsv};
   /// Called every few thousand ticks with (ticks done, ticks in all); may be empty.
   std::function<void(std::int64_t, std::int64_t)> progress;
 };

@@ -1,4 +1,6 @@
+#include <cstdint>
 #include <cstdio>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -10,6 +12,7 @@
 #include "twin/cli/commands.hpp"
 #include "twin/cli/common.hpp"
 #include "twin/io/scenario_file.hpp"
+#include "twin/io/trace_csv.hpp"
 
 namespace twin::cli {
 
@@ -20,6 +23,8 @@ void register_run(CLI::App& app) {
     std::string machine;
     std::vector<std::string> sets;
     bool no_plots{false};
+    std::int64_t log_every{1};
+    std::string trace_format{"csv"};
     RunBudget budget;
   };
   auto opt = std::make_shared<Options>();
@@ -30,15 +35,30 @@ void register_run(CLI::App& app) {
   cmd->add_option("--machine", opt->machine, "machine definition (name or YAML file) replacing the scenario's");
   cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.Kp=600")->take_all();
   cmd->add_flag("--no-plots", opt->no_plots, "do not draw the PNG plots");
+  cmd->add_option("--log-every", opt->log_every,
+                  "write every N-th tick to the trace (the summary still takes in every tick)")
+      ->check(CLI::Range(std::int64_t{1}, std::numeric_limits<std::int64_t>::max()));
+  cmd->add_option("--trace-format", opt->trace_format, "trace file: csv (trace.csv) or csv.gz (trace.csv.gz)")
+      ->check(CLI::IsMember({"csv", "csv.gz"}));
   add_budget_options(*cmd, opt->budget);
   cmd->callback([opt]() {
     const auto path = opt->scenario.empty() ? io::default_scenario_path() : io::resolve_scenario_path(opt->scenario);
     io::Scenario scenario = io::load_scenario(path, opt->machine);
     apply_sets(scenario.machine, opt->sets);
-    check_run_budget(scenario, plan_run_size(scenario), opt->budget);
+    const io::TraceFormat format = io::parse_trace_format(opt->trace_format);
+    RunSize size = plan_run_size(scenario);
+    // The estimate is of a full-rate plain trace: decimation divides it, and
+    // gzip keeps about kGzipShare of it (docs/performance.md).
+    constexpr double kGzipShare = 0.30;
+    size.rows = (size.rows + opt->log_every - 1) / opt->log_every;
+    size.trace_mb /= static_cast<double>(opt->log_every);
+    if (format == io::TraceFormat::kCsvGz) size.trace_mb *= kGzipShare;
+    check_run_budget(scenario, size, opt->budget);
     analysis::RunOptions ro;
     ro.out_dir = opt->out;
     ro.plots = !opt->no_plots;
+    ro.log_every = opt->log_every;
+    ro.trace_format = format;
     analysis::RunOutputs out;
     {
       TerminalProgress progress("twin run " + scenario.name);  // erased at the end of this block

@@ -12,6 +12,7 @@ void register_replay(CLI::App& app);
 void register_bench(CLI::App& app);
 void register_cut(CLI::App& app);
 void register_export_fmu(CLI::App& app);
+void register_sweep(CLI::App& app);
 void register_tune(CLI::App& app);
 void register_calibrate(CLI::App& app);
 }  // namespace twin::cli

@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   twin::cli::register_tune(app);
   twin::cli::register_calibrate(app);
   twin::cli::register_export_fmu(app);
+  twin::cli::register_sweep(app);
   if (argc > 1 && argv[1][0] != '-') {
     bool known = false;
     std::string names;

@@ -2,7 +2,12 @@
 // precision; every malformed input is an IoError naming line and column; a
 // writer that is not committed leaves nothing at the final name.
 #include <filesystem>
+#include <cmath>
+#include <cstdio>
 #include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -74,6 +79,86 @@ TEST(TraceCsv, MalformedInputsNameTheLine) {
   expect_error("notime.csv", "x_mm\n1\n", "missing column t_s");
   expect_error("back.csv", "t_s,x_mm\n0,1\n0.2,1\n0.1,1\n", "not increasing");
   expect_error("dup.csv", "t_s,t_s\n0,1\n", "appears twice");
+}
+
+std::string slurp(const std::filesystem::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+// The writer formats numbers itself (std::to_chars into a fixed buffer); the
+// oracle is the C library's printf "%.10g", which the trace format has always
+// used. Exact string equality: both are specified to give the same digits.
+TEST(TraceCsv, NumbersAreWrittenAsPrintf10g) {
+  const std::vector<double> values{0.1,     1.0 / 3.0, -2.5e-7,  123456789012.0, 1e-300, -1.5e200,
+                                   5e-324,  9.999999999e9, 1e10, 0.00012345678912, -0.0, 42.0};
+  const auto p = dir() / "fmt.csv";
+  {
+    io::TraceWriter w(p, {"t_s", "v"});
+    for (std::size_t i = 0; i < values.size(); ++i) w.write_row({static_cast<double>(i), values[i]});
+    w.commit();
+  }
+  std::string expected = "t_s,v\n";
+  char buf[64];
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    const double v = values[i] == 0.0 ? 0.0 : values[i];  // the trace never says "-0"
+    std::snprintf(buf, sizeof buf, "%.10g,%.10g\n", static_cast<double>(i), v);
+    expected += buf;
+  }
+  EXPECT_EQ(slurp(p), expected);
+}
+
+// A trace written as .gz is the plain one compressed: the same bytes once
+// gunzipped (oracle: the plain writer's output), read back to the same table.
+// 200000 rows cross the writer's buffer and the deflate output buffer many times.
+TEST(TraceCsv, GzipTraceIsThePlainTraceCompressed) {
+  const auto plain = dir() / "big.csv";
+  const auto gz = dir() / "big.csv.gz";
+  {
+    io::TraceWriter a(plain, {"t_s", "x_mm", "y_mm"});
+    io::TraceWriter b(gz, {"t_s", "x_mm", "y_mm"});
+    EXPECT_FALSE(a.compressed());
+    EXPECT_TRUE(b.compressed());
+    for (int k = 0; k < 200000; ++k) {
+      const double row[3] = {k * 1e-4, std::sin(k * 1e-3), 1e-3 * (k % 977)};
+      a.write_row(row, 3);
+      b.write_row(row, 3);
+    }
+    EXPECT_EQ(b.num_rows(), 200000u);
+    a.commit();
+    b.commit();
+  }
+  EXPECT_LT(std::filesystem::file_size(gz), std::filesystem::file_size(plain) / 2);
+  const auto back = dir() / "big_back.csv";
+  io::gunzip_file(gz, back);
+  EXPECT_EQ(slurp(back), slurp(plain));
+  const io::TraceTable tp = io::read_trace_csv(plain);
+  const io::TraceTable tg = io::read_trace_csv(gz);
+  ASSERT_EQ(tg.num_rows(), 200000u);
+  EXPECT_EQ(tg.columns, tp.columns);
+}
+
+TEST(TraceCsv, NonFiniteValueIsAnErrorNamingTheColumn) {
+  const auto p = dir() / "nan_out.csv.gz";
+  io::TraceWriter w(p, {"t_s", "x_mm"});
+  const double row[2] = {0.0, std::nan("")};
+  try {
+    w.write_row(row, 2);
+    ADD_FAILURE() << "no error";
+  } catch (const ModelError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("x_mm"));
+  }
+  const double wrong[1] = {0.0};
+  EXPECT_THROW(w.write_row(wrong, 1), IoError);
+}
+
+TEST(TraceCsv, TraceFormatNames) {
+  EXPECT_EQ(io::parse_trace_format("csv"), io::TraceFormat::kCsv);
+  EXPECT_EQ(io::parse_trace_format("csv.gz"), io::TraceFormat::kCsvGz);
+  EXPECT_STREQ(io::trace_file_name(io::TraceFormat::kCsvGz), "trace.csv.gz");
+  EXPECT_THROW(io::parse_trace_format("parquet"), ConfigError);
 }
 
 }  // namespace
