@@ -224,9 +224,17 @@ class Parser {
         case 210: mm_per_unit_ = 1.0; break;
         case 900: incremental_ = false; break;
         case 910: incremental_ = true; break;
-        case 610: exact_stop_ = true; break;
+        case 610:  // exact path (LinuxCNC): no blending, tangent junctions pass
+          exact_path_ = true;
+          exact_stop_ = false;
+          break;
+        case 611:  // exact stop (LinuxCNC G61.1, Fanuc G61): stop after every block
+          exact_stop_ = true;
+          exact_path_ = false;
+          break;
         case 640:
           exact_stop_ = false;
+          exact_path_ = false;
           set_g64 = true;
           break;
         case 400:  // cutter compensation off: it is never on
@@ -300,6 +308,7 @@ class Parser {
     base.center_mm = pos_mm_;
     base.spindle_rpm = spindle_rpm();
     base.exact_stop = exact_stop_;
+    base.exact_path = exact_path_;
     base.blend_tolerance_mm = blend_tolerance_mm_;
 
     if (dwell) {
@@ -384,6 +393,7 @@ class Parser {
   double mm_per_unit_{1.0};
   bool incremental_{false};
   bool exact_stop_{false};
+  bool exact_path_{false};
   double blend_tolerance_mm_{0.0};
   double feed_mm_per_min_{0.0};
   double spindle_speed_rpm_{0.0};

@@ -1,6 +1,7 @@
 #pragma once
 /// The part-program subset a 3-axis pocket program uses: G0 G1 G2 G3 (I J K
-/// and R), G4 (dwell, P seconds), G17, G20 G21, G90 G91, G61 and G64 (with P),
+/// and R), G4 (dwell, P seconds), G17, G20 G21, G90 G91, G61 (exact path), G61.1
+/// (exact stop) and G64 (with P),
 /// F, S, M3 M4 M5 M30 (and M2), comments ( ... ) and ;, N numbers, % lines.
 /// Every unknown word or malformed line is a ConfigError "file:line: ..."
 /// quoting at most a short escaped excerpt of the line. G and M codes beyond
@@ -30,7 +31,8 @@ struct Block {
   AxisArray<double> center_mm{};       ///< arcs: centre (XY plane, G17); z of center unused
   double feed_mm_per_min{0.0};         ///< programmed feed (rapid: the machine's rapid rate)
   double spindle_rpm{0.0};             ///< signed: M3 > 0, M4 < 0, M5 0
-  bool exact_stop{false};              ///< G61 in force: stop at the end of this block
+  bool exact_stop{false};              ///< G61.1 in force: stop at the end of this block
+  bool exact_path{false};              ///< G61 in force: no blend at the end of this block (stop at a corner)
   double blend_tolerance_mm{0.0};      ///< G64 P in force (0: the machine's default)
   double dwell_s{0.0};                 ///< G4
 };

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 
 #include <fmt/format.h>
@@ -13,17 +14,30 @@
 namespace twin::controller {
 namespace {
 
-/// Junctions that involve an arc and turn by at most this much are passed
-/// without stopping; the velocity step v*theta is kept below 0.5 a_max Ts.
+/// Junctions that cannot be blended (a helix, a move out of the XY plane
+/// next to an arc) and turn by at most this much are passed without
+/// stopping; the velocity step v*theta is kept below 0.5 a_max Ts.
 constexpr double kTangentAngle_rad = 0.5 * kRadPerDeg;
-/// Straight-on line junctions below this turn need no blend at all.
+/// Junctions below this turn are passed with the same velocity-step cap
+/// instead of a blend (a blend arc of radius L/(2 tan(theta/2)) would be
+/// needlessly large); at a = 2000 mm/s^2 and Ts = 1e-4 s the cap is
+/// 1000 mm/s.
+constexpr double kKinkAngle_rad = 1e-4;
+/// Turns beyond this are reversals: no blend, the moves stop.
+constexpr double kMaxBlendTurn_rad = kPi - 1e-3;
+/// Straight-on junctions below this turn need no cap at all.
 constexpr double kCollinearAngle_rad = 1e-9;
+/// Blend arcs smaller than this are not planned (the moves stop).
+constexpr double kMinBlendRadius_mm = 1e-6;
 /// Corners reported by Trajectory::corners().
 constexpr double kCornerReportAngle_deg = 1.0;
-/// On arcs the centripetal part may use this share of the acceleration
-/// limit, the tangential part the rest; the jerk is split in three
-/// (tangential, centripetal rotation v^3 k^2, coupling 3 v a_t k).
-constexpr double kArcAccelShare = 0.5;
+/// On arcs (programmed and blend) the centripetal part may use this share of
+/// the acceleration limit and the tangential part kArcTangentShare: with
+/// sqrt(3)/2 and 1/2 the two add up to exactly a (LinuxCNC's ratio,
+/// 0.866 / 0.5). The jerk is split in three (tangential, centripetal
+/// rotation v^3 k^2, coupling 3 v a_t k).
+constexpr double kArcNormalShare = 0.86602540378443865;
+constexpr double kArcTangentShare = 0.5;
 constexpr double kArcJerkShare = 1.0 / 3.0;
 constexpr double kArcRadiusTolerance_mm = 0.002;
 constexpr double kArcRadiusTolerance_rel = 1e-3;
@@ -51,28 +65,6 @@ Transition transition(double dv, double a, double j) {
 /// symmetric, so the mean speed is (v0 + v1) / 2.
 double transition_distance(double v0, double v1, double a, double j) {
   return 0.5 * (v0 + v1) * transition(v1 - v0, a, j).total_s();
-}
-
-/// The tail of a stop from speed v (or, mirrored, the head of a start): the
-/// time before rest over which its shape does not depend on v,
-/// v/a (trapezoidal acceleration) or sqrt(v/j) (triangular).
-double symmetric_tail_s(double v, double a, double j) {
-  return v * j >= a * a ? v / a : std::sqrt(v / j);
-}
-
-/// Speed and distance to go at time tau before rest, inside the tail:
-/// v = j tau^2/2, d = j tau^3/6 in the jerk phase (tau <= a/j), then the
-/// constant-deceleration phase.
-void tail_at(double tau, double a, double j, double& v, double& d) {
-  const double Tj = a / j;
-  if (tau <= Tj) {
-    v = 0.5 * j * tau * tau;
-    d = j * tau * tau * tau / 6.0;
-    return;
-  }
-  const double u = tau - Tj;
-  v = 0.5 * a * Tj + a * u;
-  d = a * Tj * Tj / 6.0 + 0.5 * a * Tj * u + 0.5 * a * u * u;
 }
 
 /// Largest x in [lo, hi] with ok(x), for ok monotone (true up to a point).
@@ -143,10 +135,25 @@ struct Junction {
   JunctionKind kind{JunctionKind::kStop};
   double v_mm_per_s{0.0};  // upper bound, then the planned speed
   double turn_rad{0.0};
-  double a_blend{0.0}, j_blend{0.0};  // limits of the overlapping stop/start ramps
-  double tolerance_mm{0.0};
-  double overlap_s{0.0};              // time the two moves run together
 };
+
+/// Path limits of an arc of curvature k and torsion tau whose axis-speed cap
+/// is v_axes, with acceleration a and jerk j shared between its tangential
+/// and normal parts (docs/interpolator.md, section 1).
+PathLimits arc_limits(double kappa, double torsion, double v_axes, double a, double j) {
+  PathLimits pl;
+  pl.v_cap = std::min({v_axes, std::sqrt(kArcNormalShare * a / kappa),
+                       std::cbrt(kArcJerkShare * j / (kappa * (kappa + torsion)))});
+  pl.a = std::min(kArcTangentShare * a, kArcJerkShare * j / (3.0 * pl.v_cap * kappa));
+  pl.j = kArcJerkShare * j;
+  return pl;
+}
+
+/// Smallest radius of a plane arc whose arc_limits let speed v through:
+/// v^2 / R <= (sqrt(3)/2) a and v^3 / R^2 <= j/3.
+double radius_for_speed(double v, double a, double j) {
+  return std::max(v * v / (kArcNormalShare * a), std::sqrt(v * v * v / (kArcJerkShare * j)));
+}
 
 double min_over_axes(const AxisArray<double>& lim, const AxisArray<double>& comp) {
   double r = std::numeric_limits<double>::infinity();
@@ -179,8 +186,184 @@ AxisArray<double> arc_tangent(const Segment& s, double lambda) {
                      dr * std::sin(phi) + r * s.dphi_rad * std::cos(phi), s.end_mm[2] - s.start_mm[2]});
 }
 
-AxisArray<double> entry_tangent(const Segment& s) { return s.kind == SegmentKind::kLine ? s.u : arc_tangent(s, 0.0); }
-AxisArray<double> exit_tangent(const Segment& s) { return s.kind == SegmentKind::kLine ? s.u : arc_tangent(s, 1.0); }
+AxisArray<double> blend_tangent(const Segment& s, double phi) {
+  const double c = std::cos(phi), sn = std::sin(phi);
+  return {-sn * s.e1[0] + c * s.e2[0], -sn * s.e1[1] + c * s.e2[1], -sn * s.e1[2] + c * s.e2[2]};
+}
+AxisArray<double> entry_tangent(const Segment& s) {
+  if (s.kind == SegmentKind::kBlend) return blend_tangent(s, s.phi0_rad);
+  return s.kind == SegmentKind::kLine ? s.u : arc_tangent(s, 0.0);
+}
+AxisArray<double> exit_tangent(const Segment& s) {
+  if (s.kind == SegmentKind::kBlend) return blend_tangent(s, s.phi0_rad + s.dphi_rad);
+  return s.kind == SegmentKind::kLine ? s.u : arc_tangent(s, 1.0);
+}
+
+AxisArray<double> operator-(const AxisArray<double>& a, const AxisArray<double>& b) {
+  return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+}
+AxisArray<double> axpy(const AxisArray<double>& x, double s, const AxisArray<double>& d) {
+  return {x[0] + s * d[0], x[1] + s * d[1], x[2] + s * d[2]};
+}
+double dot3(const AxisArray<double>& a, const AxisArray<double>& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+double norm3(const AxisArray<double>& a) { return std::sqrt(dot3(a, a)); }
+
+/// A blend arc between the move before and the move after a corner point C:
+/// tangent to both, of radius R, taking d0 of arc length from the end of the
+/// move before and d1 from the start of the move after. The arc is
+/// x = c + R (cos phi e1 + sin phi e2), phi in [0, sweep].
+struct Fillet {
+  bool valid{false};
+  double R_mm{0.0};
+  double d0_mm{0.0};
+  double d1_mm{0.0};
+  AxisArray<double> c_mm{}, e1{}, e2{};
+  double sweep_rad{0.0};
+  double deviation_mm{0.0};  ///< distance from C to the arc
+  double split_rad{0.0};     ///< angle of the arc's point closest to C
+};
+
+/// Between two lines (any plane): tangent length d = R tan(theta/2), the
+/// centre on the bisector at R / cos(theta/2) from C, deviation
+/// R (1 / cos(theta/2) - 1).
+Fillet line_line_fillet(const AxisArray<double>& C, const AxisArray<double>& u0, const AxisArray<double>& u1,
+                        double turn_rad, double R) {
+  Fillet f;
+  const double d = R * std::tan(0.5 * turn_rad);
+  const double h = R / std::cos(0.5 * turn_rad);
+  const AxisArray<double> b = normalized(u1 - u0);
+  f.c_mm = axpy(C, h, b);
+  AxisArray<double> e1 = axpy(C, -d, u0) - f.c_mm;
+  e1 = axpy(e1, -dot3(e1, u0), u0);  // exactly orthogonal to u0
+  f.e1 = normalized(e1);
+  f.e2 = u0;
+  f.R_mm = R;
+  f.d0_mm = f.d1_mm = d;
+  f.sweep_rad = turn_rad;
+  f.deviation_mm = h - R;
+  f.split_rad = 0.5 * turn_rad;
+  f.valid = true;
+  return f;
+}
+
+/// A move near a corner, in the XY plane: a line (unit direction t) or a
+/// circle (centre o, radius rho, dir +1 counter-clockwise, -1 clockwise).
+struct PlaneCurve {
+  bool line{true};
+  double tx{0.0}, ty{0.0};
+  double ox{0.0}, oy{0.0}, rho{0.0}, dir{1.0};
+};
+
+double cross2(double ax, double ay, double bx, double by) { return ax * by - ay * bx; }
+double signed_angle2(double ax, double ay, double bx, double by) {
+  return std::atan2(cross2(ax, ay, bx, by), ax * bx + ay * by);
+}
+
+/// Points at distance R from both curves on the side sigma (+1 left of the
+/// direction of travel), i.e. the intersections of the two offset curves; the
+/// one nearest to C (cx, cy), or false.
+bool fillet_centre(const PlaneCurve& a, const PlaneCurve& b, double cx, double cy, double sigma, double R,
+                   double& px, double& py) {
+  struct Offset {
+    bool line;
+    double x, y, tx, ty, r;
+  };
+  auto offset = [&](const PlaneCurve& c) {
+    if (c.line) return Offset{true, cx - sigma * R * c.ty, cy + sigma * R * c.tx, c.tx, c.ty, 0.0};
+    return Offset{false, c.ox, c.oy, 0.0, 0.0, c.rho - sigma * c.dir * R};
+  };
+  const Offset A = offset(a), B = offset(b);
+  if ((!A.line && !(A.r > 0.0)) || (!B.line && !(B.r > 0.0))) return false;
+  double best = std::numeric_limits<double>::infinity();
+  auto take = [&](double x, double y) {
+    const double dd = std::hypot(x - cx, y - cy);
+    if (dd < best) {
+      best = dd;
+      px = x;
+      py = y;
+    }
+  };
+  auto line_circle = [&](const Offset& L, const Offset& Cc) {
+    const double fx = L.x - Cc.x, fy = L.y - Cc.y;
+    const double bh = L.tx * fx + L.ty * fy;
+    const double disc = bh * bh - (fx * fx + fy * fy - Cc.r * Cc.r);
+    if (disc < 0.0) return;
+    const double sq = std::sqrt(disc);
+    for (double s : {-bh - sq, -bh + sq}) take(L.x + s * L.tx, L.y + s * L.ty);
+  };
+  if (A.line && B.line) {
+    const double den = cross2(A.tx, A.ty, B.tx, B.ty);
+    if (std::abs(den) < 1e-15) return false;
+    const double s = cross2(B.x - A.x, B.y - A.y, B.tx, B.ty) / den;
+    take(A.x + s * A.tx, A.y + s * A.ty);
+  } else if (A.line) {
+    line_circle(A, B);
+  } else if (B.line) {
+    line_circle(B, A);
+  } else {
+    const double dx = B.x - A.x, dy = B.y - A.y;
+    const double D = std::hypot(dx, dy);
+    if (!(D > 0.0) || D > A.r + B.r || D < std::abs(A.r - B.r)) return false;
+    const double along = (A.r * A.r - B.r * B.r + D * D) / (2.0 * D);
+    const double hh = std::sqrt(std::max(0.0, A.r * A.r - along * along));
+    const double mx = A.x + along * dx / D, my = A.y + along * dy / D;
+    take(mx - hh * dy / D, my + hh * dx / D);
+    take(mx + hh * dy / D, my - hh * dx / D);
+  }
+  return std::isfinite(best);
+}
+
+/// Fillet of radius R between two XY curves meeting at C (height z), turning
+/// to the side sigma; d0 <= d0_max and d1 <= d1_max.
+Fillet plane_fillet(const PlaneCurve& a, const PlaneCurve& b, const AxisArray<double>& C, double sigma, double R,
+                    double d0_max, double d1_max) {
+  Fillet f;
+  double px = 0.0, py = 0.0;
+  if (!fillet_centre(a, b, C[0], C[1], sigma, R, px, py)) return f;
+  // Tangent points, the arc length each takes, and each move's tangent there.
+  auto touch = [&](const PlaneCurve& c, bool before, double& tx_, double& ty_, double& d, double& dirx, double& diry) {
+    if (c.line) {
+      tx_ = px + sigma * R * c.ty;
+      ty_ = py - sigma * R * c.tx;
+      d = before ? (C[0] - tx_) * c.tx + (C[1] - ty_) * c.ty : (tx_ - C[0]) * c.tx + (ty_ - C[1]) * c.ty;
+      dirx = c.tx;
+      diry = c.ty;
+      return;
+    }
+    const double rx = px - c.ox, ry = py - c.oy, rn = std::hypot(rx, ry);
+    tx_ = c.ox + c.rho * rx / rn;
+    ty_ = c.oy + c.rho * ry / rn;
+    const double ang = before ? signed_angle2(tx_ - c.ox, ty_ - c.oy, C[0] - c.ox, C[1] - c.oy)
+                              : signed_angle2(C[0] - c.ox, C[1] - c.oy, tx_ - c.ox, ty_ - c.oy);
+    d = c.rho * c.dir * ang;
+    dirx = -c.dir * (ty_ - c.oy) / c.rho;
+    diry = c.dir * (tx_ - c.ox) / c.rho;
+  };
+  double t0x = 0, t0y = 0, t1x = 0, t1y = 0, g0x = 0, g0y = 0, g1x = 0, g1y = 0;
+  touch(a, true, t0x, t0y, f.d0_mm, g0x, g0y);
+  touch(b, false, t1x, t1y, f.d1_mm, g1x, g1y);
+  if (!(f.d0_mm > 0.0 && f.d0_mm <= d0_max && f.d1_mm > 0.0 && f.d1_mm <= d1_max)) return f;
+  const double e1x = (t0x - px) / R, e1y = (t0y - py) / R;
+  const double e2x = -sigma * e1y, e2y = sigma * e1x;
+  f.sweep_rad = sigma * signed_angle2(t0x - px, t0y - py, t1x - px, t1y - py);
+  // The arc must leave along the move before and arrive along the move after.
+  if (!(f.sweep_rad > 0.0) || e2x * g0x + e2y * g0y < 0.999) return f;
+  const double endx = -std::sin(f.sweep_rad) * e1x + std::cos(f.sweep_rad) * e2x;
+  const double endy = -std::sin(f.sweep_rad) * e1y + std::cos(f.sweep_rad) * e2y;
+  if (endx * g1x + endy * g1y < 0.999) return f;
+  f.c_mm = {px, py, C[2]};
+  f.e1 = {e1x, e1y, 0.0};
+  f.e2 = {e2x, e2y, 0.0};
+  f.R_mm = R;
+  const double alpha = sigma * signed_angle2(e1x, e1y, C[0] - px, C[1] - py);
+  f.split_rad = std::clamp(alpha, 0.1 * f.sweep_rad, 0.9 * f.sweep_rad);
+  f.deviation_mm = alpha >= 0.0 && alpha <= f.sweep_rad
+                       ? std::abs(std::hypot(C[0] - px, C[1] - py) - R)
+                       : std::min(std::hypot(C[0] - t0x, C[1] - t0y), std::hypot(C[0] - t1x, C[1] - t1y));
+  f.valid = true;
+  return f;
+}
+
 
 }  // namespace
 
@@ -218,7 +401,7 @@ void Trajectory::eval_segment(const Segment& seg, double t_s, AxisArray<double>&
     x_mm = seg.end_mm;
     return;
   }
-  if (t_s <= seg.t_start_s || seg.num_pieces == 0) {
+  if (t_s < seg.t_start_s || seg.num_pieces == 0) {
     x_mm = seg.start_mm;
     return;
   }
@@ -236,6 +419,15 @@ void Trajectory::eval_segment(const Segment& seg, double t_s, AxisArray<double>&
     for (std::size_t a = 0; a < kNumAxes; ++a) {
       x_mm[a] = seg.start_mm[a] + seg.u[a] * s;
       v_mm_per_s[a] = seg.u[a] * sdot;
+    }
+    return;
+  }
+  if (seg.kind == SegmentKind::kBlend) {
+    const double phi = seg.phi0_rad + s / seg.r0_mm;
+    const double c = std::cos(phi), sn = std::sin(phi);
+    for (std::size_t a = 0; a < kNumAxes; ++a) {
+      x_mm[a] = seg.c_mm[a] + seg.r0_mm * (c * seg.e1[a] + sn * seg.e2[a]);
+      v_mm_per_s[a] = (c * seg.e2[a] - sn * seg.e1[a]) * sdot;
     }
     return;
   }
@@ -270,21 +462,8 @@ ReferenceSample Trajectory::at_time(double t_s) const {
     return out;
   }
   --it;
-  const Segment* current = &*it;
-  eval_segment(*current, t_s, out.x_mm, out.v_mm_per_s);
-  const Segment* reported = current;
-  if (it != segments_.begin()) {
-    const Segment& prev = *(it - 1);
-    if (prev.kind == SegmentKind::kLine && t_s < prev.t_end_s) {
-      AxisArray<double> xp{}, vp{};
-      eval_segment(prev, t_s, xp, vp);
-      for (std::size_t a = 0; a < kNumAxes; ++a) {
-        out.x_mm[a] += xp[a] - prev.end_mm[a];
-        out.v_mm_per_s[a] += vp[a];
-      }
-      if (t_s < current->t_switch_s) reported = &prev;
-    }
-  }
+  const Segment* reported = &*it;
+  eval_segment(*reported, t_s, out.x_mm, out.v_mm_per_s);
   const auto& v = out.v_mm_per_s;
   out.path_speed_mm_per_s = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
   out.feed_programmed_mm_per_s = reported->feed_mm_per_s;
@@ -356,9 +535,10 @@ Trajectory plan_trajectory(const Program& program, const MotionLimits& limits, d
   const double a_min = min_of(limits.a_max_mm_per_s2);
   const double j_min = min_of(limits.j_max_mm_per_s3);
 
-  // 1. Geometry and path limits of every move (zero-length moves are dropped).
-  std::vector<Segment> segs;
-  std::vector<PathLimits> lims;
+  // 1. Geometry and path limits of every programmed move (zero-length moves
+  // are dropped).
+  std::vector<Segment> moves;
+  std::vector<PathLimits> move_lims;
   for (std::size_t bi = 0; bi < blocks.size(); ++bi) {
     const Block& b = blocks[bi];
     auto where = [&](const std::string& what, const std::string& value) {
@@ -380,8 +560,8 @@ Trajectory plan_trajectory(const Program& program, const MotionLimits& limits, d
       s.kind = SegmentKind::kDwell;
       s.feed_mm_per_s = 0.0;
       s.end_mm = s.start_mm;
-      segs.push_back(s);
-      lims.push_back(pl);
+      moves.push_back(s);
+      move_lims.push_back(pl);
       continue;
     }
     if (!(b.feed_mm_per_min > 0.0) || !std::isfinite(b.feed_mm_per_min))
@@ -426,173 +606,283 @@ Trajectory plan_trajectory(const Program& program, const MotionLimits& limits, d
       // Helix: pitch per radian h, curvature k = R/(R^2+h^2), torsion tau = h/(R^2+h^2).
       const double h = dz / std::abs(d);
       const double ell2 = R * R + h * h;
-      const double kappa = R / ell2;
-      const double torsion = std::abs(h) / ell2;
       const double c_xy = R / std::sqrt(ell2);
       const double c_z = std::abs(h) / std::sqrt(ell2);
-      double v_cap = std::min({s.feed_mm_per_s, limits.v_max_mm_per_s[0] / c_xy, limits.v_max_mm_per_s[1] / c_xy});
-      if (c_z > 1e-15) v_cap = std::min(v_cap, limits.v_max_mm_per_s[2] / c_z);
-      v_cap = std::min(v_cap, std::sqrt(kArcAccelShare * a_min / kappa));
-      v_cap = std::min(v_cap, std::cbrt(kArcJerkShare * j_min / (kappa * (kappa + torsion))));
-      pl.v_cap = v_cap;
-      pl.a = std::min((1.0 - kArcAccelShare) * a_min, kArcJerkShare * j_min / (3.0 * v_cap * kappa));
-      pl.j = kArcJerkShare * j_min;
+      double v_axes = std::min({s.feed_mm_per_s, limits.v_max_mm_per_s[0] / c_xy, limits.v_max_mm_per_s[1] / c_xy});
+      if (c_z > 1e-15) v_axes = std::min(v_axes, limits.v_max_mm_per_s[2] / c_z);
+      pl = arc_limits(R / ell2, std::abs(h) / ell2, v_axes, a_min, j_min);
     }
-    segs.push_back(s);
-    lims.push_back(pl);
+    moves.push_back(s);
+    move_lims.push_back(pl);
   }
-  const std::size_t n = segs.size();
+  const std::size_t nm = moves.size();
 
-  // 2. Junctions: stop, tangent pass-through, or blended corner (G64, lines).
-  std::vector<Junction> junc(n > 0 ? n - 1 : 0);
-  for (std::size_t i = 0; i + 1 < n; ++i) {
-    Junction& J = junc[i];
-    const Segment& s0 = segs[i];
-    const Segment& s1 = segs[i + 1];
+  // 2. Junctions between programmed moves: stop, pass-through, or blend.
+  std::vector<Junction> mj(nm > 0 ? nm - 1 : 0);
+  std::vector<Fillet> fillets(mj.size());
+  for (std::size_t i = 0; i + 1 < nm; ++i) {
+    Junction& J = mj[i];
+    const Segment& s0 = moves[i];
+    const Segment& s1 = moves[i + 1];
     const Block& b0 = blocks[static_cast<std::size_t>(s0.block)];
     const Block& b1 = blocks[static_cast<std::size_t>(s1.block)];
     if (s0.kind == SegmentKind::kDwell || s1.kind == SegmentKind::kDwell) continue;
-    J.turn_rad = angle_between(exit_tangent(s0), entry_tangent(s1));
+    const AxisArray<double> t0 = exit_tangent(s0), t1 = entry_tangent(s1);
+    J.turn_rad = angle_between(t0, t1);
     if (b0.kind == MotionKind::kRapid || b1.kind == MotionKind::kRapid || b0.exact_stop) continue;
-    const double v_both = std::min(lims[i].v_cap, lims[i + 1].v_cap);
-    if (J.turn_rad <= kCollinearAngle_rad) {
+    const double v_both = std::min(move_lims[i].v_cap, move_lims[i + 1].v_cap);
+    const bool lines = s0.kind == SegmentKind::kLine && s1.kind == SegmentKind::kLine;
+    auto planar = [](const Segment& s) {
+      return s.kind == SegmentKind::kLine ? std::abs(s.u[2]) < 1e-12 : s.end_mm[2] == s.start_mm[2];
+    };
+    const bool blendable = lines || (planar(s0) && planar(s1));
+    const double kink_limit_rad = blendable ? kKinkAngle_rad : kTangentAngle_rad;
+    if (J.turn_rad <= kink_limit_rad) {
       J.kind = JunctionKind::kTangent;
-      J.v_mm_per_s = v_both;
-    } else if (s0.kind == SegmentKind::kLine && s1.kind == SegmentKind::kLine) {
-      // Both moves stop/start here; their ramps overlap in time. While both
-      // run, axis a sees at most a_r (|u0_a| + |u1_a|).
-      J.kind = JunctionKind::kBlend;
-      AxisArray<double> sum{};
-      for (std::size_t a = 0; a < kNumAxes; ++a) sum[a] = std::abs(s1.u[a]) + std::abs(s0.u[a]);
-      J.a_blend = min_over_axes(limits.a_max_mm_per_s2, sum);
-      J.j_blend = min_over_axes(limits.j_max_mm_per_s3, sum);
-      J.tolerance_mm = b0.blend_tolerance_mm > 0.0 ? b0.blend_tolerance_mm : limits.default_blend_tolerance_mm;
-    } else if (J.turn_rad <= kTangentAngle_rad) {
-      J.kind = JunctionKind::kTangent;
-      J.v_mm_per_s = std::min(v_both, 0.5 * a_min * Ts_s / J.turn_rad);
+      J.v_mm_per_s = J.turn_rad <= kCollinearAngle_rad ? v_both : std::min(v_both, 0.5 * a_min * Ts_s / J.turn_rad);
+      continue;
     }
+    if (!blendable || b0.exact_path || J.turn_rad > kMaxBlendTurn_rad) continue;
+    const double P = b0.blend_tolerance_mm > 0.0 ? b0.blend_tolerance_mm : limits.default_blend_tolerance_mm;
+    if (!(P > 0.0)) continue;
+    // Axes the blend arc moves: its acceleration, jerk and speed limits.
+    AxisArray<double> a_lim{}, j_lim{}, v_lim{};
+    for (std::size_t a = 0; a < kNumAxes; ++a) {
+      const bool used = std::abs(t0[a]) > 1e-12 || std::abs(t1[a]) > 1e-12;
+      const double inf = std::numeric_limits<double>::infinity();
+      a_lim[a] = used ? limits.a_max_mm_per_s2[a] : inf;
+      j_lim[a] = used ? limits.j_max_mm_per_s3[a] : inf;
+      v_lim[a] = used ? limits.v_max_mm_per_s[a] : inf;
+    }
+    const double a_plane = min_of(a_lim), j_plane = min_of(j_lim);
+    const double d0_max = 0.5 * s0.length_mm, d1_max = 0.5 * s1.length_mm;
+    const AxisArray<double> C = s0.end_mm;
+    std::function<Fillet(double)> make;
+    double R_max = 0.0;
+    const double R_tol = P * std::cos(0.5 * J.turn_rad) / (1.0 - std::cos(0.5 * J.turn_rad));
+    if (lines) {
+      make = [&](double R) { return line_line_fillet(C, s0.u, s1.u, J.turn_rad, R); };
+      R_max = std::min(R_tol, std::min(d0_max, d1_max) / std::tan(0.5 * J.turn_rad));
+    } else {
+      auto curve = [](const Segment& s, bool at_end) {
+        PlaneCurve c;
+        c.line = s.kind == SegmentKind::kLine;
+        c.tx = s.u[0];
+        c.ty = s.u[1];
+        c.ox = s.cx_mm;
+        c.oy = s.cy_mm;
+        c.rho = at_end ? s.r1_mm : s.r0_mm;
+        c.dir = s.dphi_rad >= 0.0 ? 1.0 : -1.0;
+        return c;
+      };
+      const PlaneCurve c0 = curve(s0, true), c1 = curve(s1, false);
+      const double sigma = cross2(t0[0], t0[1], t1[0], t1[1]) >= 0.0 ? 1.0 : -1.0;
+      make = [&, c0, c1, sigma](double R) { return plane_fillet(c0, c1, C, sigma, R, d0_max, d1_max); };
+      R_max = bisect_max(0.0, 4.0 * R_tol, [&](double R) {
+        const Fillet f = make(R);
+        return f.valid && f.deviation_mm <= P;
+      });
+    }
+    // The smallest arc that lets the slower neighbour's speed through (a
+    // larger one would only deviate more).
+    const double R = std::min(R_max, radius_for_speed(v_both, a_plane, j_plane));
+    if (!(R >= kMinBlendRadius_mm)) continue;
+    fillets[i] = make(R);
+    if (!fillets[i].valid) continue;
+    J.kind = JunctionKind::kBlend;
+    const PathLimits bl = arc_limits(1.0 / R, 0.0, std::min(v_both, min_of(v_lim)), a_plane, j_plane);
+    J.v_mm_per_s = bl.v_cap;
   }
 
-  // 3. Look-ahead: backward and forward passes over the junction speeds.
-  // A move's end next to a blend uses the blend limits; the passes use the
-  // smaller of those and the move's own, which keeps every law feasible.
-  auto end_limits = [&](std::size_t i, const Junction* J) {
-    if (J && J->kind == JunctionKind::kBlend) return PathLimits{lims[i].v_cap, J->a_blend, J->j_blend};
-    return lims[i];
-  };
-  std::vector<PathLimits> pass_lims(lims);
-  for (std::size_t i = 0; i < n; ++i) {
-    for (const Junction* J : {i > 0 ? &junc[i - 1] : nullptr, i + 1 < n ? &junc[i] : nullptr}) {
-      if (!J || J->kind != JunctionKind::kBlend) continue;
-      pass_lims[i].a = std::min(pass_lims[i].a, J->a_blend);
-      pass_lims[i].j = std::min(pass_lims[i].j, J->j_blend);
+  // 3. The planned moves: each programmed move trimmed by the blends at its
+  // ends, each blend arc split in two halves (the first reports the block
+  // before, the second the block after), and the junctions between them.
+  std::vector<Segment> segs;
+  std::vector<PathLimits> lims;
+  std::vector<Junction> junc;
+  std::vector<std::size_t> corner_seg(mj.size(), 0);  // blends: the second half; others: first segment after
+  JunctionKind pending = JunctionKind::kStop;
+  double pending_v = 0.0, pending_turn = 0.0;
+  auto push = [&](const Segment& s, const PathLimits& pl) {
+    if (!segs.empty()) {
+      Junction J;
+      J.kind = pending;
+      J.turn_rad = pending_turn;
+      J.v_mm_per_s = pending == JunctionKind::kStop ? 0.0 : pending_v;  // capped by both neighbours below
+      junc.push_back(J);
     }
+    segs.push_back(s);
+    lims.push_back(pl);
+    pending = JunctionKind::kTangent;
+    pending_v = std::numeric_limits<double>::infinity();
+    pending_turn = 0.0;
+  };
+  auto blend_half = [&](std::size_t i, bool second) {
+    const Fillet& f = fillets[i];
+    const Segment& owner = moves[second ? i + 1 : i];
+    Segment h = owner;
+    h.kind = SegmentKind::kBlend;
+    h.c_mm = f.c_mm;
+    h.e1 = f.e1;
+    h.e2 = f.e2;
+    h.r0_mm = h.r1_mm = f.R_mm;
+    h.phi0_rad = second ? f.split_rad : 0.0;
+    h.dphi_rad = second ? f.sweep_rad - f.split_rad : f.split_rad;
+    h.length_mm = f.R_mm * h.dphi_rad;
+    for (std::size_t a = 0; a < kNumAxes; ++a) {
+      h.start_mm[a] = f.c_mm[a] + f.R_mm * (std::cos(h.phi0_rad) * f.e1[a] + std::sin(h.phi0_rad) * f.e2[a]);
+      const double p1 = h.phi0_rad + h.dphi_rad;
+      h.end_mm[a] = f.c_mm[a] + f.R_mm * (std::cos(p1) * f.e1[a] + std::sin(p1) * f.e2[a]);
+    }
+    return h;
+  };
+  for (std::size_t i = 0; i < nm; ++i) {
+    const bool blend_in = i > 0 && mj[i - 1].kind == JunctionKind::kBlend;
+    const bool blend_out = i + 1 < nm && mj[i].kind == JunctionKind::kBlend;
+    if (i > 0) {
+      pending = mj[i - 1].kind == JunctionKind::kBlend ? JunctionKind::kTangent : mj[i - 1].kind;
+      pending_v = mj[i - 1].kind == JunctionKind::kTangent ? mj[i - 1].v_mm_per_s
+                                                             : std::numeric_limits<double>::infinity();
+      pending_turn = mj[i - 1].kind == JunctionKind::kTangent ? mj[i - 1].turn_rad : 0.0;
+      corner_seg[i - 1] = segs.size();
+    }
+    Segment m = moves[i];
+    const double d_in = blend_in ? fillets[i - 1].d1_mm : 0.0;
+    const double d_out = blend_out ? fillets[i].d0_mm : 0.0;
+    const PathLimits pl = move_lims[i];
+    if (blend_in) {
+      Segment h = blend_half(i - 1, true);
+      push(h, PathLimits{});
+    }
+    if (m.kind == SegmentKind::kLine) {
+      m.start_mm = axpy(m.start_mm, d_in, m.u);
+      if (blend_out) m.end_mm = axpy(m.end_mm, -d_out, m.u);
+      m.length_mm -= d_in + d_out;
+    } else if (m.kind == SegmentKind::kArc && (d_in > 0.0 || d_out > 0.0)) {
+      // Planar arc: trim by angle, keeping the radius law r(lambda).
+      const double L = m.length_mm;
+      const double l0 = d_in / L, l1 = 1.0 - d_out / L;
+      const double r0 = m.r0_mm + (m.r1_mm - m.r0_mm) * l0, r1 = m.r0_mm + (m.r1_mm - m.r0_mm) * l1;
+      m.phi0_rad += m.dphi_rad * l0;
+      m.dphi_rad *= (l1 - l0);
+      m.r0_mm = r0;
+      m.r1_mm = r1;
+      m.length_mm = 0.5 * (r0 + r1) * std::abs(m.dphi_rad);
+      m.start_mm = {m.cx_mm + r0 * std::cos(m.phi0_rad), m.cy_mm + r0 * std::sin(m.phi0_rad), m.start_mm[2]};
+      if (blend_out) {
+        const double p1 = m.phi0_rad + m.dphi_rad;
+        m.end_mm = {m.cx_mm + r1 * std::cos(p1), m.cy_mm + r1 * std::sin(p1), m.end_mm[2]};
+      }
+    }
+    if (m.kind == SegmentKind::kDwell || m.length_mm >= kMinLength_mm) push(m, pl);
+    if (blend_out) push(blend_half(i, false), PathLimits{});
   }
+  const std::size_t n = segs.size();
+  // Blend halves: the limits of their arc.
+  for (std::size_t k = 0; k < n; ++k) {
+    if (segs[k].kind != SegmentKind::kBlend) continue;
+    AxisArray<double> a_lim{}, j_lim{}, v_lim{};
+    for (std::size_t a = 0; a < kNumAxes; ++a) {
+      // The axes of the arc's plane (spanned by e1 and e2).
+      const bool used = std::abs(segs[k].e1[a]) > 1e-12 || std::abs(segs[k].e2[a]) > 1e-12;
+      const double inf = std::numeric_limits<double>::infinity();
+      a_lim[a] = used ? limits.a_max_mm_per_s2[a] : inf;
+      j_lim[a] = used ? limits.j_max_mm_per_s3[a] : inf;
+      v_lim[a] = used ? limits.v_max_mm_per_s[a] : inf;
+    }
+    lims[k] = arc_limits(1.0 / segs[k].r0_mm, 0.0, std::min(segs[k].feed_mm_per_s, min_of(v_lim)), min_of(a_lim),
+                         min_of(j_lim));
+  }
+  // Junction caps: both neighbours' speed caps.
+  for (std::size_t k = 0; k + 1 < n; ++k) {
+    if (junc[k].kind == JunctionKind::kStop) continue;
+    junc[k].v_mm_per_s = std::min({junc[k].v_mm_per_s, lims[k].v_cap, lims[k + 1].v_cap});
+  }
+
+  // 4. Look-ahead over the whole program: a backward and a forward pass over
+  // the pass-through junction speeds.
   auto v_in = [&](std::size_t i) { return i == 0 ? 0.0 : junc[i - 1].v_mm_per_s; };
   auto v_out = [&](std::size_t i) { return i + 1 == n ? 0.0 : junc[i].v_mm_per_s; };
   for (std::size_t i = n - 1; n > 1 && i-- > 0;) {
-    if (junc[i].kind != JunctionKind::kTangent) continue;
-    const PathLimits& pl = pass_lims[i + 1];
+    if (junc[i].kind == JunctionKind::kStop) continue;
+    const PathLimits& pl = lims[i + 1];
     junc[i].v_mm_per_s =
         std::min(junc[i].v_mm_per_s, reachable_speed(v_out(i + 1), segs[i + 1].length_mm, pl.a, pl.j, pl.v_cap));
   }
   for (std::size_t i = 0; i + 1 < n; ++i) {
-    if (junc[i].kind != JunctionKind::kTangent) continue;
-    const PathLimits& pl = pass_lims[i];
+    if (junc[i].kind == JunctionKind::kStop) continue;
+    const PathLimits& pl = lims[i];
     junc[i].v_mm_per_s = std::min(junc[i].v_mm_per_s, reachable_speed(v_in(i), segs[i].length_mm, pl.a, pl.j, pl.v_cap));
   }
 
-  // 4. Time laws, first each on its own clock starting at 0.
-  std::vector<double> peak(n, 0.0), own_duration(n, 0.0);
-  for (std::size_t i = 0; i < n; ++i) {
-    Segment& s = segs[i];
-    s.first_piece = traj.pieces_.size();
-    if (s.kind == SegmentKind::kDwell) {
-      own_duration[i] = blocks[static_cast<std::size_t>(s.block)].dwell_s;
-      continue;
-    }
-    const PathLimits first = end_limits(i, i > 0 ? &junc[i - 1] : nullptr);
-    const PathLimits last = end_limits(i, i + 1 < n ? &junc[i] : nullptr);
-    const double L = s.length_mm;
-    const double v0 = v_in(i), v1 = v_out(i);
-    const double v_top = std::max({v0, v1, lims[i].v_cap});
-    auto needed = [&](double v) {
-      return transition_distance(v0, v, first.a, first.j) + transition_distance(v, v1, last.a, last.j);
-    };
-    TWIN_DEMAND(needed(std::max(v0, v1)) <= L + 1e-9 * std::max(1.0, L));
-    peak[i] = bisect_max(std::max(v0, v1), v_top, [&](double v) { return needed(v) <= L; });
-    LawBuilder law(traj.pieces_, 0.0, v0);
-    law.transition_to(peak[i], first.a, first.j);
-    law.cruise(L - needed(peak[i]));
-    law.transition_to(v1, last.a, last.j);
-    own_duration[i] = law.t_s();
-  }
-  // Overlap of blended corners: the largest T_b within the tolerance,
-  // 2 sin(theta/2) d(T_b/2) <= T, and within the symmetric tails of both.
-  for (std::size_t i = 0; i + 1 < n; ++i) {
-    Junction& J = junc[i];
-    if (J.kind != JunctionKind::kBlend) continue;
-    const double T_max = std::min(symmetric_tail_s(peak[i], J.a_blend, J.j_blend),
-                                  symmetric_tail_s(peak[i + 1], J.a_blend, J.j_blend));
-    const double dev_per_d = 2.0 * std::sin(0.5 * J.turn_rad);
-    J.overlap_s = bisect_max(0.0, T_max, [&](double T_b) {
-      double v = 0.0, d = 0.0;
-      tail_at(0.5 * T_b, J.a_blend, J.j_blend, v, d);
-      return dev_per_d * d <= J.tolerance_mm;
-    });
-  }
-  // Absolute times.
+  // 5. Time laws, one after the other.
   double t_s = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
     Segment& s = segs[i];
-    const double T_in = (i > 0 && junc[i - 1].kind == JunctionKind::kBlend) ? junc[i - 1].overlap_s : 0.0;
-    s.t_start_s = std::max(0.0, t_s - T_in);
-    s.t_switch_s = s.t_start_s + 0.5 * T_in;
-    s.t_end_s = s.t_start_s + own_duration[i];
+    s.first_piece = traj.pieces_.size();
+    s.t_start_s = t_s;
+    double duration_s = 0.0;
+    if (s.kind == SegmentKind::kDwell) {
+      duration_s = blocks[static_cast<std::size_t>(s.block)].dwell_s;
+    } else {
+      const PathLimits& pl = lims[i];
+      const double L = s.length_mm;
+      const double v0 = v_in(i), v1 = v_out(i);
+      const double v_top = std::max({v0, v1, pl.v_cap});
+      auto needed = [&](double v) { return transition_distance(v0, v, pl.a, pl.j) + transition_distance(v, v1, pl.a, pl.j); };
+      TWIN_DEMAND(needed(std::max(v0, v1)) <= L + 1e-9 * std::max(1.0, L));
+      const double peak = bisect_max(std::max(v0, v1), v_top, [&](double v) { return needed(v) <= L; });
+      LawBuilder law(traj.pieces_, t_s, v0);
+      law.transition_to(peak, pl.a, pl.j);
+      law.cruise(L - needed(peak));
+      law.transition_to(v1, pl.a, pl.j);
+      duration_s = law.t_s() - t_s;
+    }
+    s.t_end_s = t_s + duration_s;
     const int line = blocks[static_cast<std::size_t>(s.block)].line;
-    if (!std::isfinite(own_duration[i]))
+    if (!std::isfinite(duration_s))
       throw ConfigError(fmt::format("{}:{}: the planned duration of this move is not finite ({} s)",
-                                    program.source_name, line, own_duration[i]));
+                                    program.source_name, line, duration_s));
     if (!(s.t_end_s / Ts_s < kMaxTicks))
       throw ConfigError(fmt::format("{}:{}: the program's planned duration reaches {:.6g} s here, {:.3g} ticks of "
                                     "{} s: more than a run can count",
                                     program.source_name, line, s.t_end_s, s.t_end_s / Ts_s, Ts_s));
     s.num_pieces = traj.pieces_.size() - s.first_piece;
-    if (i + 1 < n) s.num_pieces = segs[i + 1].first_piece - s.first_piece;
-    for (std::size_t p = s.first_piece; p < s.first_piece + s.num_pieces; ++p) traj.pieces_[p].t0_s += s.t_start_s;
     t_s = s.t_end_s;
   }
   traj.duration_s_ = t_s;
   traj.segments_ = std::move(segs);
+  const auto& S = traj.segments_;
 
-  // 5. Block timings and corners.
+  // 6. Block timings and corners.
   traj.block_timings_.resize(blocks.size());
   double cursor_s = 0.0;
   std::size_t next_seg = 0;
   for (std::size_t bi = 0; bi < blocks.size(); ++bi) {
     BlockTiming& bt = traj.block_timings_[bi];
     bt.feed_programmed_mm_per_s = blocks[bi].kind == MotionKind::kDwell ? 0.0 : blocks[bi].feed_mm_per_min / kSPerMin;
-    if (next_seg < n && traj.segments_[next_seg].block == static_cast<int>(bi)) {
-      const Segment& s = traj.segments_[next_seg++];
-      bt.t_start_s = s.t_start_s;
+    bt.t_start_s = bt.t_end_s = cursor_s;
+    bool first = true;
+    while (next_seg < n && S[next_seg].block == static_cast<int>(bi)) {
+      const Segment& s = S[next_seg++];
+      if (first) bt.t_start_s = s.t_start_s;
+      first = false;
       bt.t_end_s = s.t_end_s;
-      bt.length_mm = s.length_mm;
+      bt.length_mm += s.length_mm;
       cursor_s = s.t_end_s;
-    } else {
-      bt.t_start_s = bt.t_end_s = cursor_s;
     }
   }
-  for (std::size_t i = 0; i + 1 < n; ++i) {
-    const Segment& s0 = traj.segments_[i];
+  for (std::size_t i = 0; i + 1 < nm; ++i) {
+    const Segment& s0 = moves[i];
     if (s0.kind == SegmentKind::kDwell) continue;
     std::size_t k = i + 1;
     bool dwell_between = false;
-    while (k < n && traj.segments_[k].kind == SegmentKind::kDwell) {
+    while (k < nm && moves[k].kind == SegmentKind::kDwell) {
       dwell_between = true;
       ++k;
     }
-    if (k >= n) break;
-    const Segment& s1 = traj.segments_[k];
+    if (k >= nm) break;
+    const Segment& s1 = moves[k];
     const double turn = angle_between(exit_tangent(s0), entry_tangent(s1));
     if (turn * kDegPerRad <= kCornerReportAngle_deg) continue;
     Corner c;
@@ -600,16 +890,22 @@ Trajectory plan_trajectory(const Program& program, const MotionLimits& limits, d
     c.block_after = s1.block;
     c.turn_angle_deg = turn * kDegPerRad;
     c.p_mm = s0.end_mm;
-    const Junction& J = junc[i];
+    const Junction& J = mj[i];
     c.exact_stop = dwell_between || J.kind == JunctionKind::kStop;
+    const std::size_t at = corner_seg[i];
+    c.t_s = at < n ? S[at].t_start_s : traj.duration_s_;
+    c.t_blend_begin_s = c.t_blend_end_s = c.t_s;
     if (!dwell_between && J.kind == JunctionKind::kBlend) {
-      c.t_s = s1.t_switch_s;
-      c.v_ref_mm_per_s = traj.at_time(c.t_s).path_speed_mm_per_s;
-      c.exact_stop = J.overlap_s == 0.0;
-    } else {
-      c.t_s = s0.t_end_s;
-      c.v_ref_mm_per_s = dwell_between ? 0.0 : J.v_mm_per_s;
+      c.blend_radius_mm = fillets[i].R_mm;
+      c.t_blend_begin_s = S[at - 1].t_start_s;
+      c.t_blend_end_s = S[at].t_end_s;
+    } else if (dwell_between) {
+      c.t_s = S[at - 1].t_end_s;  // before the dwell
+      c.t_blend_begin_s = c.t_blend_end_s = c.t_s;
     }
+    const ReferenceSample r = traj.at_time(c.t_s);
+    c.v_ref_mm_per_s = dwell_between ? 0.0 : r.path_speed_mm_per_s;
+    c.deviation_mm = J.kind == JunctionKind::kBlend && !dwell_between ? fillets[i].deviation_mm : norm3(r.x_mm - c.p_mm);
     traj.corners_.push_back(c);
   }
   return traj;

@@ -2,8 +2,9 @@
 /// The CNC interpolator: turns a Program into the reference every axis
 /// follows, sampled at the position-loop period Ts. Path feed with per-axis
 /// velocity, acceleration and jerk limits (jerk-limited profiles), look-ahead
-/// over the following blocks, exact stop (G61) and corners blended within a
-/// tolerance (G64 P). See controller/README.md and docs/interpolator.md.
+/// over the whole program, exact stop (G61.1), exact path (G61) and corners
+/// rounded by blend arcs within a tolerance (G64 P). See controller/README.md
+/// and docs/interpolator.md.
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -43,6 +44,10 @@ struct Corner {
   double t_s{0.0};                   ///< time the reference passes closest to it
   double v_ref_mm_per_s{0.0};        ///< reference path speed there
   bool exact_stop{false};
+  double blend_radius_mm{0.0};       ///< radius of the blend arc (0: no blend)
+  double deviation_mm{0.0};          ///< distance from p_mm to the planned path
+  double t_blend_begin_s{0.0};       ///< the blend arc runs over [begin, end]
+  double t_blend_end_s{0.0};         ///< (both t_s when there is no blend)
 };
 
 struct BlockTiming {
@@ -65,11 +70,11 @@ struct LawPiece {
 /// The planned motion: a compact list of moves and their time laws
 /// (memory grows with the number of blocks, not with the number of ticks).
 ///
-/// Every move (a line, an arc or helix, or a dwell) carries its own
-/// jerk-limited scalar law s(t) along its geometry. A G64 corner between two
-/// lines is a time overlap: the first move's law ends with a ramp v_b -> 0
-/// while the second starts with the mirrored ramp 0 -> v_b, and the reference
-/// is the sum of both displacements (see docs/interpolator.md).
+/// Every move (a line, an arc or helix, a blend arc, or a dwell) carries its
+/// own jerk-limited scalar law s(t) along its geometry; the moves follow one
+/// another in time. A G64 corner is a blend arc tangent to both moves, split
+/// in two halves that report the block before and the block after
+/// (see docs/interpolator.md).
 class Trajectory {
  public:
   Trajectory() = default;
@@ -85,7 +90,7 @@ class Trajectory {
   const std::vector<Corner>& corners() const noexcept { return corners_; }
   const std::vector<BlockTiming>& block_timings() const noexcept { return block_timings_; }
 
-  enum class SegmentKind { kLine, kArc, kDwell };
+  enum class SegmentKind { kLine, kArc, kBlend, kDwell };
   /// One move: geometry plus a time law [t_start_s, t_end_s].
   struct Segment {
     SegmentKind kind{SegmentKind::kLine};
@@ -98,14 +103,17 @@ class Trajectory {
     AxisArray<double> u{};            ///< line: unit direction
     double cx_mm{0.0}, cy_mm{0.0};    ///< arc: centre
     double r0_mm{0.0}, r1_mm{0.0};    ///< arc: start and end radius
-    double phi0_rad{0.0}, dphi_rad{0.0};  ///< arc: start angle and signed sweep
-    double t_switch_s{0.0};           ///< from here on samples report this block
+    double phi0_rad{0.0}, dphi_rad{0.0};  ///< arc: start angle and signed sweep; blend: start angle and sweep > 0
+    AxisArray<double> c_mm{};         ///< blend: centre; x = c + r0 (cos phi e1 + sin phi e2)
+    AxisArray<double> e1{}, e2{};     ///< blend: orthonormal basis of its plane
     std::size_t first_piece{0};
     std::size_t num_pieces{0};
     double feed_mm_per_s{0.0};
     double spindle_rpm{0.0};
     bool cutting{false};
   };
+  /// The planned moves in time order (blend arcs included).
+  const std::vector<Segment>& segments() const noexcept { return segments_; }
 
  private:
   friend Trajectory plan_trajectory(const Program&, const MotionLimits&, double);
@@ -138,11 +146,16 @@ void check_travel(const Program& program, const AxisArray<double>& travel_min_mm
 
 /// Plans the program.
 ///  - line path limits: v <= min(F, min_a v_max,a/|u_a|), a_p = min_a a_max,a/|u_a|,
-///    j_p likewise; arcs: v^2 k <= a/2, v^3 k (k + tau) <= j/3 (k curvature, tau torsion);
+///    j_p likewise; arcs (programmed and blend): v^2 k <= (sqrt(3)/2) a,
+///    tangential a/2, v^3 k (k + tau) <= j/3 (k curvature, tau torsion);
 ///  - S-curve speed changes dv: T = 2 Tj + Ta, Tj = min(a/j, sqrt(dv/j)), Ta = dv/a - a/j (>= 0);
-///  - look-ahead over pass-through junctions (collinear lines, near-tangent arcs);
-///  - G64 corners between lines: stop and start ramps overlap by T_b with
-///    2 sin(theta/2) d(T_b/2) <= P; corner speed 2 w cos(theta/2) (docs/interpolator.md).
+///  - look-ahead over the whole program (backward and forward passes);
+///  - G64 corners (line-line, line-arc, arc-line, arc-arc in XY): a blend arc
+///    tangent to both moves, passing at most P from the corner point, taking
+///    at most half of either move, of the smallest radius that lets the
+///    slower neighbour's speed through (docs/interpolator.md);
+///  - G61 (exact path) stops at corners, passes tangent junctions; G61.1
+///    (exact stop) stops at the end of every block.
 /// @throws ConfigError for limits or geometry that cannot be followed (an arc
 ///   whose end is not on its circle, a feed <= 0), a move whose length or
 ///   duration is not finite, or a plan longer than 2^53 ticks, naming file:line.

@@ -50,7 +50,7 @@ TEST(GcodeParser, ReadsEverySupportedWordAndModalMotion) {
       "G1 Z-1 F600\n"
       "X20 (modal G1 and F)\n"
       "G61 Y15\n"
-      "G4 P0.5\n"
+      "G61.1 G4 P0.5\n"
       "M4 S500\n"
       "g2 x30 y5 i0 j-10\n"
       "M5\n"
@@ -79,7 +79,11 @@ TEST(GcodeParser, ReadsEverySupportedWordAndModalMotion) {
   expect_xyz(modal.end_mm, 20, 5, -1);
   EXPECT_DOUBLE_EQ(modal.feed_mm_per_min, 600.0);
 
-  EXPECT_TRUE(p.blocks[3].exact_stop);
+  // G61 is LinuxCNC's exact path, G61.1 its exact stop (Fanuc's G61).
+  EXPECT_TRUE(p.blocks[3].exact_path);
+  EXPECT_FALSE(p.blocks[3].exact_stop);
+  EXPECT_TRUE(p.blocks[4].exact_stop);
+  EXPECT_FALSE(p.blocks[4].exact_path);
   expect_xyz(p.blocks[3].end_mm, 20, 15, -1);
 
   EXPECT_EQ(p.blocks[4].kind, MotionKind::kDwell);

@@ -173,11 +173,88 @@ void run_gnuplot(const std::filesystem::path& work_dir, const std::string& scrip
   remove_temporaries();
 }
 
+namespace {
+/// corner_path.png: the XY path through a corner and the force along it.
+/// Every number in the script is formatted here; the only file is T.
+std::string corner_path_script(const std::string& T, const controller::Trajectory& traj, const CornerWindow& w,
+                               bool cutting) {
+  const controller::Corner& c = w.corner;
+  const double px = c.p_mm[0], py = c.p_mm[1];
+  // Half-width of the XY view: the blend and a little of the lines around it.
+  const double half_mm = std::max({0.1, 4.0 * c.deviation_mm, 2.0 * c.blend_radius_mm});
+  // Time span shown: the blend and long enough on either side to leave the view.
+  const double v = std::max(c.v_ref_mm_per_s, 1e-3);
+  const double t0 = std::min(c.t_blend_begin_s, c.t_s - 3.0 * half_mm / v) - 0.05;
+  const double t1 = std::max(c.t_blend_end_s, c.t_s + 3.0 * half_mm / v) + 0.05;
+  // Force along the path: within +-3 mm of the corner.
+  const double tf0 = c.t_s - 0.5, tf1 = c.t_s + 0.5;
+  std::ostringstream g;
+  // The programmed corner: the reference where the blend starts and ends lies
+  // on the programmed moves; the corner point between them.
+  const auto a = traj.at_time(std::max(0.0, c.t_s - 3.0 * half_mm / v)).x_mm;
+  const auto b = traj.at_time(c.t_s + 3.0 * half_mm / v).x_mm;
+  g << "$programmed << EOD\n"
+    << fmt::format("{:.9f},{:.9f}\n{:.9f},{:.9f}\n{:.9f},{:.9f}\n", a[0], a[1], px, py, b[0], b[1]) << "EOD\n";
+  g << "$blend << EOD\n";
+  const double tb0 = c.t_blend_begin_s, tb1 = c.t_blend_end_s;
+  for (int i = 0; i <= 200 && tb1 > tb0; ++i) {
+    const auto x = traj.at_time(tb0 + (tb1 - tb0) * i / 200.0).x_mm;
+    g << fmt::format("{:.9f},{:.9f}\n", x[0], x[1]);
+  }
+  g << "EOD\n";
+  const std::string in_view = fmt::format("(column('t_s') >= {:.6f} && column('t_s') <= {:.6f})", t0, t1);
+  const std::string force = "sqrt(column('fx_avg_N')**2 + column('fy_avg_N')**2 + column('fz_avg_N')**2)";
+  // (Datablocks use the trace's comma separator.)
+  g << "set output " << gnuplot_output("corner_path.png") << "\n"
+    << "unset arrow\nunset label\n"
+    << "set multiplot layout 1,2\n"
+    << "set title " << gnuplot_text(fmt::format("Corner 1, line {}: blend R {:.4f} mm, {:.4f} mm off, {:.0f} mm/min",
+                                                w.line_after, c.blend_radius_mm, c.deviation_mm,
+                                                c.v_ref_mm_per_s * 60.0))
+    << "\n"
+    << "set size ratio -1\nset xlabel 'x [mm]'\nset ylabel 'y [mm]'\n"
+    << fmt::format("set xrange [{:.9f}:{:.9f}]\nset yrange [{:.9f}:{:.9f}]\n", px - half_mm, px + half_mm,
+                   py - half_mm, py + half_mm)
+    << (cutting ? "set cblabel 'force (tick mean) [N]'\nset palette rgb 33,13,10\n" : "unset colorbox\n")
+    << "plot $programmed using 1:2 with linespoints lw 1 dt 2 lc rgb '#999999' title 'programmed', "
+    << "$blend using 1:2 with lines lw 3 lc rgb '#1f77b4' title 'planned blend', " << T << " using ("
+    << in_view << " ? column('x_ref_mm') : NaN):'y_ref_mm' with lines lw 1 lc rgb '#000000' title 'reference', ''"
+    << " using (" << in_view << " ? column('x_true_mm') : NaN):'y_true_mm'"
+    << (cutting ? ":(" + force + ") with lines lw 2 lc palette title 'real (drives), colour: force'"
+                : " with lines lw 2 lc rgb '#d62728' title 'real (drives)'")
+    << "\n"
+    << "set size noratio\nset autoscale x\nset autoscale y\nunset colorbox\n"
+    << "set title " << gnuplot_text("Along the path (negative: before the corner)") << "\n"
+    << "set xlabel 'distance from the corner point [mm]'\n";
+  const std::string dist = fmt::format(
+      "(column('t_s') >= {:.6f} && column('t_s') <= {:.6f} ? sgn(column('t_s') - {:.6f}) * "
+      "sqrt((column('x_true_mm') - {:.9f})**2 + (column('y_true_mm') - {:.9f})**2) : NaN)",
+      tf0, tf1, c.t_s, px, py);
+  if (cutting) {
+    g << "set ylabel 'force [N]'\nset y2label 'engagement [deg]'\nset y2tics\nset ytics nomirror\n"
+      << "set y2range [0:*]\n"
+      << "plot " << T << " using " << dist << ":(" << force
+      << ") with lines lc rgb '#d62728' title 'force (tick mean)', '' using " << dist
+      << ":'engagement_deg' axes x1y2 with lines lc rgb '#ff7f0e' title 'engagement'\n";
+  } else {
+    g << "set ylabel 'feed [mm/min]'\n"
+      << "plot " << T << " using " << dist << ":'feed_ref_mm_per_min' with lines lc rgb '#1f77b4' title 'reference', "
+      << "'' using " << dist << ":'feed_mm_per_min' with lines lc rgb '#d62728' title 'real (drives)'\n";
+  }
+  g << "unset multiplot\nunset y2tics\nunset y2label\nset ytics mirror\nset autoscale\n";
+  return g.str();
+}
+}  // namespace
+
 std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::string& trace_name,
                                             const std::vector<Axis>& axes, const std::vector<CornerWindow>& corners,
-                                            bool cutting) {
+                                            bool cutting, const controller::Trajectory* trajectory) {
   std::vector<std::string> outputs{"feedrate.png", "errors.png"};
   if (cutting) outputs.push_back("forces.png");
+  const bool has_xy = std::find(axes.begin(), axes.end(), Axis::kX) != axes.end() &&
+                      std::find(axes.begin(), axes.end(), Axis::kY) != axes.end();
+  const bool path_view = trajectory != nullptr && !corners.empty() && has_xy;
+  if (path_view) outputs.push_back("corner_path.png");
   const std::string T = gnuplot_file(trace_name);
   std::ostringstream g;
   g << "set datafile separator ','\n"
@@ -246,9 +323,12 @@ std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::s
              " using 't_s':'engagement_deg' axes x1y2 with lines lc rgb '#ff7f0e' title 'engagement'";
     };
     figure(outputs[2], "Cutting force on the workpiece and engagement",
-           "set ylabel 'force [N]'\nset y2label 'engagement [deg]'\nset y2tics\nset ytics nomirror\n",
+           "set ylabel 'force [N]'\nset y2label 'engagement [deg]'\nset y2tics\nset ytics nomirror\n"
+           "set y2range [0:*]\n",
            force_plot(" every every_n"), force_plot(""));
+    g << "set autoscale y2\n";
   }
+  if (path_view) g << corner_path_script(T, *trajectory, corners.front(), cutting);
   g << "unset output\n";
   std::vector<std::filesystem::path> written;
   for (const auto& o : outputs) written.push_back(results.path(o));

@@ -105,6 +105,63 @@ std::vector<CornerWindow> corner_windows(const controller::Trajectory& traj, con
   return out;
 }
 
+namespace {
+/// How far back the corner statistics look (ring buffer of ticks).
+constexpr double kRecent_s = 4.0;
+/// Whole revolutions that make the straight-cut mean.
+constexpr int kStraightRevolutions = 4;
+/// Ticks in one spindle revolution (0 when the spindle stands).
+std::size_t revolution_ticks(double rpm, double Ts_s) {
+  if (!(std::abs(rpm) > 0.0)) return 0;
+  return static_cast<std::size_t>(std::max(1.0, std::round(60.0 / std::abs(rpm) / Ts_s)));
+}
+/// Engagement still counted as the straight cut's: within max(2 deg, 5 %).
+double engagement_band_deg(double straight_deg) { return straight_deg + std::max(2.0, 0.05 * straight_deg); }
+}  // namespace
+
+void RunStatistics::open_corner_zone(std::size_t c) {
+  CornerStats& cs = corner_stats_[c];
+  const std::size_t cap = recent_.size();
+  const std::size_t n = recent_count_;
+  if (n == 0) return;
+  auto at = [&](std::size_t back) -> const Recent& { return recent_[(recent_head_ + cap - 1 - back) % cap]; };
+  // The straight cut's engagement: the median over the older half of the
+  // recent past, where the tool cut (a corner's ramp is far shorter).
+  std::vector<double> older;
+  for (std::size_t b = n / 2; b < n; ++b)
+    if (at(b).engagement_deg > 0.0) older.push_back(at(b).engagement_deg);
+  if (older.empty()) return;
+  std::nth_element(older.begin(), older.begin() + static_cast<std::ptrdiff_t>(older.size() / 2), older.end());
+  cs.engagement_straight_deg = older[older.size() / 2];
+  const double band = engagement_band_deg(cs.engagement_straight_deg);
+  // The ramp starts after the last tick before the corner whose engagement
+  // is within the straight cut's band.
+  std::size_t b = 0;
+  while (b < n && at(b).engagement_deg > band) ++b;
+  if (b >= n || at(b).engagement_deg <= 0.0) return;
+  const std::size_t n_rev = revolution_ticks(at(b).spindle_rpm, Ts_s_);
+  const std::size_t n_win = n_rev > 0 ? kStraightRevolutions * n_rev : static_cast<std::size_t>(std::llround(0.2 / Ts_s_));
+  if (b + n_win > n) return;
+  double sum = 0.0;
+  for (std::size_t q = b; q < b + n_win; ++q) {
+    if (at(q).engagement_deg <= 0.0) return;  // the straight cut must be a cut all along
+    sum += at(q).F_avg_N;
+    cs.straight_peak_N = std::max(cs.straight_peak_N, at(q).F_N);
+  }
+  cs.straight_mean_N = sum / static_cast<double>(n_win);
+  cs.straight_t0_s = at(b + n_win - 1).t_s;
+  cs.straight_t1_s = at(b).t_s;
+  cs.ramp_t0_s = b > 0 ? at(b - 1).t_s : at(0).t_s;
+  cs.ramp_t1_s = at(0).t_s;
+  for (std::size_t q = 0; q < b; ++q) {
+    cs.ramp_peak_N = std::max(cs.ramp_peak_N, at(q).F_N);
+    cs.ramp_rev_mean_peak_N = std::max(cs.ramp_rev_mean_peak_N, at(q).rev_mean_N);
+  }
+  cs.found = true;
+  cs.zone_open = true;
+  cs.above_seen = b > 0;
+}
+
 RunStatistics::RunStatistics(const controller::Program& program, const controller::Trajectory& trajectory,
                              std::vector<Axis> axes, double encoder_resolution_mm)
     : program_(program),
@@ -114,7 +171,10 @@ RunStatistics::RunStatistics(const controller::Program& program, const controlle
       windows_(corner_windows(trajectory, program)),
       blocks_(program.blocks.size()),
       corner_stats_(windows_.size()),
-      Ts_s_(trajectory.Ts_s()) {}
+      Ts_s_(trajectory.Ts_s()) {
+  if (!windows_.empty())
+    recent_.resize(static_cast<std::size_t>(std::max<double>(1.0, std::ceil(kRecent_s / Ts_s_))));
+}
 
 void RunStatistics::add(const sim::Snapshot& s) {
   ++ticks_;
@@ -156,14 +216,54 @@ void RunStatistics::add(const sim::Snapshot& s) {
     b.max_contour_mm = std::max(b.max_contour_mm, s.contour_error_mm);
     b.peak_force_N = std::max(b.peak_force_N, F);
   }
-  // The steady cut before each corner: the tick-mean force over the 0.2 s
-  // before its window, to compare the corner's peak with.
-  const double F_avg = std::sqrt(s.F_avg_N[0] * s.F_avg_N[0] + s.F_avg_N[1] * s.F_avg_N[1] + s.F_avg_N[2] * s.F_avg_N[2]);
-  const auto approach = static_cast<std::int64_t>(std::llround(0.2 / Ts_s_));
-  for (std::size_t c = next_corner_; c < windows_.size() && windows_[c].k_begin - approach <= s.k; ++c) {
-    if (s.k >= windows_[c].k_begin) continue;
-    corner_stats_[c].approach_force_sum_N += F_avg;
-    corner_stats_[c].approach_ticks += 1;
+  // Recent ticks: |F|, |F_avg|, its one-revolution trailing mean, engagement
+  // (kept only when the program has corners to judge).
+  if (!recent_.empty()) {
+    const double F_avg =
+        std::sqrt(s.F_avg_N[0] * s.F_avg_N[0] + s.F_avg_N[1] * s.F_avg_N[1] + s.F_avg_N[2] * s.F_avg_N[2]);
+    cum_F_avg_N_ += F_avg;
+    Recent r;
+    r.t_s = s.t_s;
+    r.F_N = F;
+    r.F_avg_N = F_avg;
+    r.cum_F_avg_N = cum_F_avg_N_;
+    r.engagement_deg = s.engagement_deg;
+    r.spindle_rpm = s.spindle_rpm;
+    const std::size_t cap = recent_.size();
+    const std::size_t n_rev = revolution_ticks(s.spindle_rpm, Ts_s_);
+    if (n_rev > 0 && n_rev <= recent_count_) {
+      const Recent& first = recent_[(recent_head_ + cap - n_rev) % cap];
+      r.rev_mean_N = (cum_F_avg_N_ - first.cum_F_avg_N) / static_cast<double>(n_rev);
+    } else {
+      r.rev_mean_N = F_avg;
+    }
+    recent_[recent_head_] = r;
+    recent_head_ = (recent_head_ + 1) % cap;
+    recent_count_ = std::min(recent_count_ + 1, cap);
+    // Corners reached this tick: find the straight cut and the ramp in the past.
+    while (next_zone_corner_ < windows_.size() &&
+           static_cast<std::int64_t>(std::llround(windows_[next_zone_corner_].corner.t_s / Ts_s_)) <= s.k)
+      open_corner_zone(next_zone_corner_++);
+    // Open ramps: extend them until the engagement is back to the straight
+    // cut's; the revolution means count one revolution longer (a revolution
+    // ending there still holds the ramp).
+    for (std::size_t c = 0; c < next_zone_corner_; ++c) {
+      CornerStats& cs = corner_stats_[c];
+      if (cs.tail_left > 0) {
+        cs.ramp_rev_mean_peak_N = std::max(cs.ramp_rev_mean_peak_N, r.rev_mean_N);
+        --cs.tail_left;
+      }
+      if (!cs.zone_open) continue;
+      cs.ramp_t1_s = s.t_s;
+      cs.ramp_peak_N = std::max(cs.ramp_peak_N, r.F_N);
+      cs.ramp_rev_mean_peak_N = std::max(cs.ramp_rev_mean_peak_N, r.rev_mean_N);
+      const bool in_band = r.engagement_deg <= engagement_band_deg(cs.engagement_straight_deg);
+      cs.above_seen = cs.above_seen || !in_band;
+      if ((in_band && cs.above_seen) || r.engagement_deg <= 0.0 || s.t_s - windows_[c].corner.t_s >= kRecent_s / 2.0) {
+        cs.zone_open = false;
+        cs.tail_left = r.engagement_deg > 0.0 ? n_rev : 0;
+      }
+    }
   }
   while (next_corner_ < windows_.size() && windows_[next_corner_].k_end <= s.k) ++next_corner_;
   for (std::size_t c = next_corner_; c < windows_.size() && windows_[c].k_begin <= s.k; ++c) {
@@ -249,10 +349,23 @@ nlohmann::json RunStatistics::summary() const {
     jc["time_lost_s"] = w.time_lost_s;
     jc["max_contour_error_mm"] = cs.max_contour_mm;
     jc["peak_force_N"] = cs.peak_force_N;
-    jc["mean_force_before_corner_N"] =
-        cs.approach_ticks > 0 ? cs.approach_force_sum_N / static_cast<double>(cs.approach_ticks) : 0.0;
+    // Revolution means of |F_avg| and peaks of |F|: the straight cut before
+    // the engagement ramp against the ramp through the corner (0 when no
+    // straight cut of kStraightRevolutions whole revolutions precedes it).
+    jc["mean_force_before_corner_N"] = cs.straight_mean_N;
     jc["window_s"] = {w.t_begin_s, w.t_end_s};
     jc["max_engagement_deg"] = cs.max_engagement_deg;
+    jc["blend_radius_mm"] = w.corner.blend_radius_mm;
+    jc["blend_deviation_mm"] = w.corner.deviation_mm;
+    jc["feed_ref_at_corner_mm_per_min"] = w.corner.v_ref_mm_per_s * kSPerMin;
+    jc["straight_cut_window_s"] = {cs.straight_t0_s, cs.straight_t1_s};
+    jc["straight_cut_engagement_deg"] = cs.engagement_straight_deg;
+    jc["straight_cut_peak_force_N"] = cs.straight_peak_N;
+    jc["engagement_ramp_s"] = {cs.ramp_t0_s, cs.ramp_t1_s};
+    jc["corner_revolution_mean_force_N"] = cs.ramp_rev_mean_peak_N;
+    jc["corner_peak_force_N"] = cs.ramp_peak_N;
+    jc["revolution_mean_force_ratio"] = cs.straight_mean_N > 0.0 ? cs.ramp_rev_mean_peak_N / cs.straight_mean_N : 0.0;
+    jc["peak_force_ratio"] = cs.straight_peak_N > 0.0 ? cs.ramp_peak_N / cs.straight_peak_N : 0.0;
     lost_total += w.time_lost_s;
     corners.push_back(jc);
   }
@@ -327,7 +440,7 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
   if (options.plots) {
     try {
       if (options.trace_format == io::TraceFormat::kCsv) {
-        plots = plot_run(results, trace_name, axes, stats.corners(), scenario.make_process != nullptr);
+        plots = plot_run(results, trace_name, axes, stats.corners(), scenario.make_process != nullptr, &traj);
       } else {
         // gnuplot reads no gzip (and no shell pipe is opened): the plots are drawn
         // from a plain copy in the staging folder, which is not part of the result.
@@ -335,7 +448,7 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
         io::gunzip_file(results.path(trace_name), plain);
         try {
           plots = plot_run(results, plain.filename().string(), axes, stats.corners(),
-                           scenario.make_process != nullptr);
+                           scenario.make_process != nullptr, &traj);
         } catch (const Error&) {
           std::error_code ec;
           std::filesystem::remove(plain, ec);

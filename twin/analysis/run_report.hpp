@@ -62,10 +62,32 @@ class RunStatistics {
     double feed_real_min{1e300};
     double max_contour_mm{0.0};
     double peak_force_N{0.0};
-    double approach_force_sum_N{0.0};
-    std::int64_t approach_ticks{0};
     double max_engagement_deg{0.0};
+    // Like for like (docs/interpolator.md, "Corner forces"): the straight cut
+    // before the engagement ramp against the ramp through the corner.
+    bool found{false};                    ///< a straight cut and a ramp were found
+    bool zone_open{false};                ///< the ramp has not yet returned to the straight-cut engagement
+    bool above_seen{false};               ///< the engagement has left the straight cut's band
+    std::size_t tail_left{0};             ///< ticks of revolution means still counted after the ramp
+    double engagement_straight_deg{0.0};
+    double straight_t0_s{0.0}, straight_t1_s{0.0};
+    double straight_mean_N{0.0};          ///< mean |F_avg| over whole revolutions before the ramp
+    double straight_peak_N{0.0};
+    double ramp_t0_s{0.0}, ramp_t1_s{0.0};
+    double ramp_rev_mean_peak_N{0.0};     ///< largest one-revolution mean of |F_avg| in the ramp
+    double ramp_peak_N{0.0};
   };
+  /// One tick of the recent past, for the corner statistics.
+  struct Recent {
+    double t_s{0.0};
+    double F_N{0.0};        ///< |F| instantaneous
+    double F_avg_N{0.0};    ///< |F_avg| (tick average)
+    double cum_F_avg_N{0.0};///< running sum of F_avg_N up to this tick
+    double rev_mean_N{0.0}; ///< mean of F_avg_N over the revolution ending here
+    double engagement_deg{0.0};
+    double spindle_rpm{0.0};
+  };
+  void open_corner_zone(std::size_t c);
   const controller::Program& program_;
   const controller::Trajectory& trajectory_;
   std::vector<Axis> axes_;
@@ -74,6 +96,11 @@ class RunStatistics {
   std::vector<BlockStats> blocks_;
   std::vector<CornerStats> corner_stats_;
   std::size_t next_corner_{0};
+  std::vector<Recent> recent_;     ///< ring buffer of the last kRecent_s of ticks
+  std::size_t recent_head_{0};     ///< next slot to write
+  std::size_t recent_count_{0};
+  double cum_F_avg_N_{0.0};
+  std::size_t next_zone_corner_{0};
   std::int64_t ticks_{0};
   double t_last_s_{0.0};
   double t_done_s_{-1.0};
