@@ -12,6 +12,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cstdlib>
@@ -282,6 +283,60 @@ TEST(CliSafety, ReplayAndCalibrateRefuseAnOutputThatHoldsTheirInput) {
   const Result ok = twin({"replay", plain.string(), "-o", (sandbox / "beside").string()}, sandbox);
   EXPECT_EQ(ok.exit_code, 0) << ok.err;
   EXPECT_TRUE(fs::exists(sandbox / "beside" / "trace.csv"));
+}
+
+// Oracle: the bytes of the input files before and after; a refused command writes
+// nothing (no file appears anywhere in the sandbox) and says why on one line. The
+// issue's case is `twin tune --machine OUT/machine.yaml -o OUT`, which replaced the
+// machine it read with the tuned one.
+TEST(CliSafety, TuneRefusesAnOutputThatHoldsItsInput) {
+  const fs::path sandbox = work() / "sandbox";
+  fs::remove_all(sandbox);
+  const fs::path scen = small_scenario(sandbox / "scen", "small");
+  const fs::path chk = small_scenario(sandbox / "chk", "check");
+  const fs::path out = sandbox / "out";
+  fs::create_directories(out);
+  fs::copy(fs::path(TWIN_SOURCE_DIR) / "scenarios" / "machines" / "fadal2216.yaml", out / "machine.yaml");
+  fs::create_directory_symlink(out, sandbox / "link_to_out");
+  const std::string machine_text = slurp(out / "machine.yaml");
+  const std::string scen_text = slurp(scen);
+  const std::vector<std::string> quick{"--axis", "x", "--max-evals", "2", "--no-plots"};
+  struct Case {
+    std::vector<std::string> args;
+    std::string what;
+  };
+  const std::vector<Case> cases{
+      {{scen.string(), "--machine", (out / "machine.yaml").string(), "--check", "none", "-o", out.string()},
+       "--machine in OUT"},
+      {{scen.string(), "--machine", (sandbox / "link_to_out" / "machine.yaml").string(), "--check", "none", "-o",
+        (sandbox / "x" / ".." / "out").string()},
+       "--machine in OUT through a link and .."},
+      {{scen.string(), "--check", "none", "-o", scen.parent_path().string()}, "the scenario in OUT"},
+      {{scen.string(), "--check", chk.string(), "-o", (chk.parent_path() / ".").string()},
+       "the check scenario in OUT"},
+  };
+  for (const auto& c : cases) {
+    std::vector<std::string> args{"tune"};
+    args.insert(args.end(), c.args.begin(), c.args.end());
+    args.insert(args.end(), quick.begin(), quick.end());
+    const auto before = tree(sandbox);
+    const Result r = twin(args, sandbox);
+    EXPECT_NE(r.exit_code, 0) << c.what;
+    EXPECT_EQ(count_lines(r.err), 1) << c.what << "\n" << r.err;
+    EXPECT_THAT(r.err, HasSubstr("output folder")) << c.what;
+    EXPECT_THAT(r.err, HasSubstr("holds the input")) << c.what;
+    EXPECT_EQ(tree(sandbox), before) << c.what << ": wrote files";
+    EXPECT_EQ(slurp(out / "machine.yaml"), machine_text) << c.what;
+    EXPECT_EQ(slurp(scen), scen_text) << c.what;
+  }
+  // The same machine to a folder beside it is accepted.
+  std::vector<std::string> ok_args{"tune", scen.string(), "--machine", (out / "machine.yaml").string(),
+                                   "--check", "none", "-o", (sandbox / "beside").string()};
+  ok_args.insert(ok_args.end(), quick.begin(), quick.end());
+  const Result ok = twin(ok_args, sandbox);
+  EXPECT_EQ(ok.exit_code, 0) << ok.out << ok.err;
+  EXPECT_TRUE(fs::exists(sandbox / "beside" / "report.json"));
+  EXPECT_EQ(slurp(out / "machine.yaml"), machine_text);
 }
 
 // A scenario long enough that the simulation is still running when the signal comes
