@@ -41,9 +41,10 @@ std::string twin_exe() {
   return o != nullptr ? std::string(o) : std::string(TWIN_BINARY_DIR) + "/bin/twin";
 }
 
-// One folder per test: ctest runs the tests of this file in parallel.
+// One folder per test and build folder: ctest runs the tests of this file in
+// parallel, and the suites of two builds (build/, build-san/) may run at once.
 fs::path work() {
-  const auto d = fs::temp_directory_path() / "twin_cli_safety_test" /
+  const auto d = fs::temp_directory_path() / "twin_cli_safety_test" / fs::path(TWIN_BINARY_DIR).filename() /
                  ::testing::UnitTest::GetInstance()->current_test_info()->name();
   fs::create_directories(d);
   return d;
