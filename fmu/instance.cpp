@@ -80,10 +80,8 @@ void FmuInstance::build_cosim() {
     if (!model_.has_program())
       throw ConfigError(fmt::format("mode = {}: scenario '{}' has no part program; use mode = {} (x_ref_mm inputs)",
                                     kModeProgram, model_.scenario_name, kModeExternal));
-    const controller::Program program =
-        controller::parse_gcode(model_.program_text, model_.program_name, model_.start_mm, machine_.rapid_mm_per_min);
-    reference = std::make_shared<sim::ProgramReference>(
-        controller::plan_trajectory(program, machine_.motion_limits(), machine_.Ts_s));
+    // With the parameters as set now (travel, limits, Ts): checked again.
+    reference = std::make_shared<sim::ProgramReference>(model_.plan_program(machine_));
     external_.reset();
   } else {
     external_ = std::make_shared<sim::ExternalReference>(inputs_.x_ref_mm);

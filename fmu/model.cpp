@@ -132,10 +132,21 @@ FmuModel model_from_json(const std::string& text_in, const std::string& where) {
   if (!s.is_array() || s.size() != 3) throw ConfigError(fmt::format("{}: start_mm must be [x, y, z]", where));
   for (std::size_t i = 0; i < 3; ++i) model.start_mm[i] = number(s[i], fmt::format("{}: start_mm[{}]", where, i));
   model.settle_s = number(member(j, "settle_s", where), where + ": settle_s");
+  if (model.settle_s < 0.0 || model.settle_s > 60.0)
+    throw ConfigError(fmt::format("{}: settle_s = {} must be in [0, 60] s", where, model.settle_s));
   const json& proc = member(j, "process", where);
   if (!proc.is_null()) {
     model.process_json = proc.dump();
     make_process_from_json(proc);  // fails here, with the key, rather than at the first step
+  }
+  // A program out of the machine's travel, or one no run could finish, is
+  // refused here (at export and at fmi2Instantiate), not at the first step.
+  if (model.has_program()) {
+    try {
+      static_cast<void>(model.plan_program(machine));
+    } catch (const ConfigError& e) {
+      throw ConfigError(fmt::format("{}: program: {}", where, e.what()));
+    }
   }
   return model;
 }
@@ -145,12 +156,28 @@ std::unique_ptr<process::ProcessModel> FmuModel::make_process() const {
   return make_process_from_json(nlohmann::json::parse(process_json));
 }
 
+controller::Trajectory FmuModel::plan_program(const sim::MachineDefinition& m) const {
+  const controller::Program program = controller::parse_gcode(program_text, program_name, start_mm, m.rapid_mm_per_min);
+  AxisArray<double> lo{}, hi{};
+  for (std::size_t a = 0; a < kNumAxes; ++a) {
+    lo[a] = m.axes[a].travel_min_mm;
+    hi[a] = m.axes[a].travel_max_mm;
+  }
+  controller::check_travel(program, lo, hi);
+  controller::Trajectory t = controller::plan_trajectory(program, m.motion_limits(), m.Ts_s);
+  const double duration_s = t.duration_s() + settle_s;
+  const double ticks = std::ceil(duration_s / m.Ts_s);
+  if (!(duration_s <= kMaxProgramDuration_s) || !(ticks <= kMaxProgramTicks))
+    throw ConfigError(fmt::format(
+        "{}: the program is planned to run {:.6g} s ({:.6g} ticks of Ts = {} s, settle_s included); an FMU runs at "
+        "most {:g} s and {:g} ticks of a program",
+        program_name, duration_s, ticks, m.Ts_s, kMaxProgramDuration_s, kMaxProgramTicks));
+  return t;
+}
+
 double FmuModel::program_duration_s() const {
   if (!has_program()) return 0.0;
-  const controller::Program program =
-      controller::parse_gcode(program_text, program_name, start_mm, machine.rapid_mm_per_min);
-  const controller::Trajectory t = controller::plan_trajectory(program, machine.motion_limits(), machine.Ts_s);
-  return t.duration_s() + settle_s;
+  return plan_program(machine).duration_s() + settle_s;
 }
 
 }  // namespace twin::fmu

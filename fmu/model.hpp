@@ -6,16 +6,26 @@
 /// the FMU reads it back (model_from_json); both build the variable table
 /// and modelDescription.xml from the model read back, so the two agree by
 /// construction.
+#include <cstdint>
 #include <memory>
 #include <string>
 
 #include <nlohmann/json_fwd.hpp>
 
+#include "controller/interpolator.hpp"
 #include "process/process_model.hpp"
 #include "twin/core/axis.hpp"
 #include "twin/sim/machine.hpp"
 
 namespace twin::fmu {
+
+/// The longest part program an FMU accepts: planned motion plus settle_s,
+/// in machine time (one day: no part program runs that long, while a dwell
+/// of G4 P1e9 or a move of 1e6 mm does) and in controller ticks (1e9 ticks
+/// are 1.4 to 14 hours of computing at the 5 to 50 us per tick measured in
+/// docs/fmu.md; 8.64e8 ticks are the day at Ts = 1e-4 s).
+inline constexpr double kMaxProgramDuration_s = 86400.0;
+inline constexpr double kMaxProgramTicks = 1e9;
 
 struct FmuModel {
   std::string scenario_name;
@@ -31,6 +41,12 @@ struct FmuModel {
   bool has_process() const noexcept { return !process_json.empty(); }
   /// Cycle time of the program plus settle_s, s (0 without a program).
   double program_duration_s() const;
+  /// The program parsed for `machine` (its rapid rate, travel, limits and
+  /// Ts) and planned. @throws ConfigError naming the program's file and line
+  /// for a move beyond the machine's travel (controller::check_travel), and
+  /// giving both figures and both limits for a program planned longer than
+  /// kMaxProgramDuration_s or kMaxProgramTicks.
+  controller::Trajectory plan_program(const sim::MachineDefinition& machine) const;
   /// A fresh process model at its initial state (null for an air cut).
   /// @throws ConfigError when the process section cannot be built.
   std::unique_ptr<process::ProcessModel> make_process() const;

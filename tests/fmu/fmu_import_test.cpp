@@ -10,7 +10,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -19,6 +21,10 @@
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include <malloc.h>
+
+#include <nlohmann/json.hpp>
 
 #include "controller/interpolator.hpp"
 #include "fmu_importer.hpp"
@@ -277,6 +283,28 @@ TEST_F(FmuImport, DefaultScenarioWhileCuttingEqualsNativeAndRestoresState) {
   f.fmi2FreeInstance(c);
 }
 
+// ---- unloading ------------------------------------------------------------------
+
+// Oracle: glibc's own count of bytes in use (mallinfo2().uordblks) before and
+// after loading and unloading the FMU ten times. Each load makes the FMU's
+// static libstdc++ allocate its emergency exception pool (72704 bytes); an FMU
+// that does not free it at dlclose leaves 727040 bytes behind. The bound, one
+// pool, is far below that and above what the loader itself may keep (its
+// first-load allocations are made by a load before the count).
+TEST(FmuUnload, LoadingAndUnloadingTenTimesLeavesNoExceptionPoolBehind) {
+#ifdef TWIN_SANITIZER_RUNTIME
+  GTEST_SKIP() << "the sanitizers' allocator replaces glibc's counts; LeakSanitizer checks this in this build";
+#endif
+  REQUIRE_EXPORTED(TWIN_FMU_AIRCUT);
+  { const LoadedFmu warm(TWIN_FMU_AIRCUT); }
+  const auto before = static_cast<long long>(mallinfo2().uordblks);
+  for (int i = 0; i < 10; ++i) {
+    const LoadedFmu fmu(TWIN_FMU_AIRCUT);
+  }
+  const auto after = static_cast<long long>(mallinfo2().uordblks);
+  EXPECT_LT(after - before, 72704) << "bytes still in use after 10 loads and unloads";
+}
+
 // ---- call sequence and misuse ------------------------------------------------
 
 class FmuCalls : public ::testing::Test {
@@ -455,6 +483,138 @@ TEST_F(FmuCalls, UnsupportedFunctionsReturnErrorAndLog) {
   EXPECT_EQ(f.fmi2DoStep(c, 0.0, 10 * Ts_s_, fmi2False), fmi2OK);
   EXPECT_EQ(f.fmi2GetRealStatus(c, fmi2LastSuccessfulTime, &t), fmi2OK);
   EXPECT_DOUBLE_EQ(t, 10 * Ts_s_);
+}
+
+// fmi2CancelStep has nothing to cancel: fmi2DoStep is synchronous and a step
+// that would take long is refused up front (kMaxTicksPerStep,
+// fmu_cosim_test). Oracle: FMI 2.0 section 4.2.2 (CancelStep answers a step
+// that returned fmi2Pending; the FMU never returns it) and docs/fmu.md.
+TEST_F(FmuCalls, CancelStepIsAnErrorWithOneLogLineAndTheInstanceGoesOn) {
+  const auto& f = fmu_->fn();
+  fmi2Component c = initialised();
+  fmu_->clear_log();
+  EXPECT_EQ(f.fmi2CancelStep(c), fmi2Error);
+  ASSERT_EQ(fmu_->log().size(), 1u);
+  EXPECT_NE(fmu_->log()[0].find("logStatusError: fmi2CancelStep: not supported"), std::string::npos)
+      << fmu_->log()[0];
+  EXPECT_NE(fmu_->log()[0].find("fmi2Pending"), std::string::npos) << fmu_->log()[0];
+  EXPECT_EQ(f.fmi2DoStep(c, 0.0, 10 * Ts_s_, fmi2False), fmi2OK);
+}
+
+// ---- programs the FMU cannot run ---------------------------------------------
+
+/// A copy of the FMU's resources with model.json changed by `edit`; returns its file: URI.
+std::string edited_resources(const LoadedFmu& fmu, const std::string& folder,
+                             const std::function<void(nlohmann::json&)>& edit) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::path(fmu.dir()) / folder;
+  fs::remove_all(dir);
+  fs::copy(fs::path(fmu.dir()) / "resources", dir, fs::copy_options::recursive);
+  std::ifstream in(dir / "model.json");
+  nlohmann::json j = nlohmann::json::parse(in);
+  edit(j);
+  std::ofstream(dir / "model.json", std::ios::trunc) << j.dump(1) << "\n";
+  return "file://" + dir.string();
+}
+
+bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+// Oracle: the FADAL 2216's X travel is 559 mm (scenarios/machines/fadal2216.yaml,
+// design.md 4); from the start at X100 the rapid of line 2 to X700 spans 600 mm.
+// The program of line 2 is the issue's `G0 X700 Y-100 Z-300`, which ran with
+// exit 0. No instance, and one log line naming the model file, the program's
+// line and the travel (the GUID would not match the edited model either: the
+// program is refused before the GUID is compared).
+TEST_F(FmuCalls, AProgramBeyondTheTravelIsRefusedAtInstantiateWithItsLine) {
+  const std::string uri = edited_resources(*fmu_, "travel", [](nlohmann::json& j) {
+    j["program"] = "G21 G90\nG0 X700 Y-100 Z-300\nM30\n";
+  });
+  fmu_->clear_log();
+  EXPECT_EQ(fmu_->instantiate("travel", nullptr, false, uri), nullptr);
+  ASSERT_EQ(fmu_->log().size(), 1u);
+  const std::string& line = fmu_->log()[0];
+  EXPECT_TRUE(contains(line, "logStatusError: fmi2Instantiate: ")) << line;
+  EXPECT_TRUE(contains(line, "model.json: program: aircut.nc:2: ")) << line;
+  EXPECT_TRUE(contains(line, "travel of 559 mm")) << line;
+  EXPECT_FALSE(contains(line, "\n")) << line;
+}
+
+// Oracle: a dwell of G4 P100000 alone is 1e5 s (P in seconds: controller/gcode.cpp),
+// more than the FMU's day of machine time (kMaxProgramDuration_s = 86400 s); the
+// issue's `G4 P1e9` is the same case, larger.
+TEST_F(FmuCalls, AProgramPlannedLongerThanADayIsRefusedAtInstantiate) {
+  const std::string uri = edited_resources(*fmu_, "dwell", [](nlohmann::json& j) {
+    j["program"] = "G21 G90\nG1 X101 F3000\nG4 P100000\nM30\n";
+  });
+  fmu_->clear_log();
+  EXPECT_EQ(fmu_->instantiate("dwell", nullptr, false, uri), nullptr);
+  ASSERT_EQ(fmu_->log().size(), 1u);
+  const std::string& line = fmu_->log()[0];
+  EXPECT_TRUE(contains(line, "model.json: program: aircut.nc: the program is planned to run 100000")) << line;
+  EXPECT_TRUE(contains(line, "at most 86400 s and 1e+09 ticks")) << line;
+}
+
+// The parameters in force at fmi2ExitInitializationMode are checked again.
+// Oracles: the program spans X 100 to 101 mm (tests/fmu/aircut/aircut.nc, the
+// first move on line 4), so a travel of [100, 100.5] mm is too short; at
+// Ts = 1e-11 s its planned duration (> 0.01 s, settle_s alone) is more than
+// 1e9 ticks.
+TEST_F(FmuCalls, ParametersThatPutTheProgramBeyondTravelOrTicksFailAtInitialization) {
+  const auto& f = fmu_->fn();
+  {
+    fmi2Component c = fmu_->instantiate("short_travel");
+    ASSERT_NE(c, nullptr);
+    instances_.push_back(c);
+    const std::array<fmi2ValueReference, 2> vr{fmu_->var("x.travel_min").vr, fmu_->var("x.travel_max").vr};
+    const std::array<fmi2Real, 2> v{100.0, 100.5};
+    ASSERT_EQ(f.fmi2SetReal(c, vr.data(), vr.size(), v.data()), fmi2OK);
+    ASSERT_EQ(f.fmi2EnterInitializationMode(c), fmi2OK);
+    fmu_->clear_log();
+    EXPECT_EQ(f.fmi2ExitInitializationMode(c), fmi2Error);
+    ASSERT_EQ(fmu_->log().size(), 1u);
+    EXPECT_TRUE(contains(fmu_->log()[0], "fmi2ExitInitializationMode: aircut.nc:4: ")) << fmu_->log()[0];
+    EXPECT_TRUE(contains(fmu_->log()[0], "travel of 0.5 mm")) << fmu_->log()[0];
+    EXPECT_EQ(f.fmi2DoStep(c, 0.0, 10 * Ts_s_, fmi2False), fmi2Error) << "no co-simulation was built";
+  }
+  {
+    fmi2Component c = fmu_->instantiate("tiny_Ts");
+    ASSERT_NE(c, nullptr);
+    instances_.push_back(c);
+    const fmi2ValueReference vr = fmu_->var("Ts").vr;
+    const fmi2Real v = 1e-11;
+    ASSERT_EQ(f.fmi2SetReal(c, &vr, 1, &v), fmi2OK);
+    ASSERT_EQ(f.fmi2EnterInitializationMode(c), fmi2OK);
+    fmu_->clear_log();
+    EXPECT_EQ(f.fmi2ExitInitializationMode(c), fmi2Error);
+    ASSERT_EQ(fmu_->log().size(), 1u);
+    EXPECT_TRUE(contains(fmu_->log()[0], "ticks of Ts = 1e-11 s")) << fmu_->log()[0];
+  }
+}
+
+// `twin export-fmu` refuses the same program before writing anything.
+// Oracle: as above (559 mm of X travel); the scenario is the aircut's with the
+// issue's program.
+TEST(FmuExport, AProgramBeyondTheTravelIsNotExported) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / "twin_fmu_export_travel";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  std::ofstream(dir / "p.nc") << "G21 G90\nG0 X700 Y-100 Z-300\nM30\n";
+  std::ofstream(dir / "scenario.yaml") << "name: beyond\nmachine: fadal2216\nprogram: p.nc\nstart_mm: [100, 100, 0]\n";
+  const std::string cmd = std::string(TWIN_BINARY_DIR) + "/bin/twin export-fmu --scenario " +
+                          (dir / "scenario.yaml").string() + " -o " + (dir / "out.fmu").string() + " 2>&1";
+  std::FILE* p = ::popen(cmd.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  std::string out;
+  std::array<char, 4096> buf{};
+  while (std::fgets(buf.data(), buf.size(), p) != nullptr) out += buf.data();
+  const int rc = ::pclose(p);
+  EXPECT_NE(rc, 0) << out;
+  EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << out;
+  EXPECT_TRUE(contains(out, "p.nc:2: ")) << out;
+  EXPECT_TRUE(contains(out, "travel of 559 mm")) << out;
+  EXPECT_FALSE(fs::exists(dir / "out.fmu"));
+  fs::remove_all(dir);
 }
 
 TEST_F(FmuCalls, FixedParametersCannotChangeInStepModeTunableOnesCan) {

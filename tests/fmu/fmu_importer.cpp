@@ -130,8 +130,9 @@ std::string LoadedFmu::default_experiment(const std::string& attribute) const {
   return attr(m[0], attribute);
 }
 
-fmi2Component LoadedFmu::instantiate(const std::string& name, const char* guid, bool logging_on) {
-  const std::string uri = resource_uri();
+fmi2Component LoadedFmu::instantiate(const std::string& name, const char* guid, bool logging_on,
+                                     const std::string& resources) {
+  const std::string uri = resources.empty() ? resource_uri() : resources;
   return fn_.fmi2Instantiate(name.c_str(), fmi2CoSimulation, guid ? guid : guid_.c_str(), uri.c_str(), &callbacks_,
                              fmi2False, logging_on ? fmi2True : fmi2False);
 }

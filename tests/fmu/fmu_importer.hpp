@@ -64,8 +64,10 @@ class LoadedFmu {
   /// DefaultExperiment attribute (stopTime, stepSize, ...) as text; empty when absent.
   std::string default_experiment(const std::string& attribute) const;
 
-  /// Instantiates with the file's GUID (or `guid`); messages go to log().
-  fmi2Component instantiate(const std::string& name, const char* guid = nullptr, bool logging_on = false);
+  /// Instantiates with the file's GUID (or `guid`) and its resources (or
+  /// those at the file: URI `resources`); messages go to log().
+  fmi2Component instantiate(const std::string& name, const char* guid = nullptr, bool logging_on = false,
+                            const std::string& resources = {});
   const std::vector<std::string>& log() const { return log_; }
   void clear_log() { log_.clear(); }
 

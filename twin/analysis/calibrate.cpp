@@ -94,7 +94,8 @@ bool choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
   for (int round = 0; round < 2; ++round)
     for (const auto& [name, step0] : c.refine) {
       const double step = round == 0 ? step0 : std::sqrt(step0);
-      const auto it = std::find_if(c.params.begin(), c.params.end(), [&](const auto& p) { return p.first == name; });
+      const auto& key = name;  // a structured binding cannot be captured before clang 16
+      const auto it = std::find_if(c.params.begin(), c.params.end(), [&](const auto& p) { return p.first == key; });
       if (it == c.params.end() || !(step > 1.0)) continue;
       const auto i = static_cast<std::size_t>(it - c.params.begin());
       for (double f : {step, 1.0 / step}) {

@@ -1195,7 +1195,7 @@ class Identifier {
  private:
   std::vector<Prep>& p_;
   SeriesModel sm_;
-  std::vector<std::string>& notes_;
+  [[maybe_unused]] std::vector<std::string>& notes_;
   std::vector<int> all_;
   bool any_angle_{false};
   bool all_angle_{false};
@@ -1543,10 +1543,8 @@ ForceCalibration calibrate_forces(const std::vector<ForceRun>& runs, const Force
       const auto pred = id.sm().predict(static_cast<std::size_t>(h), f.model, f.coef);
       const Prep& p = preps[h];
       std::array<double, 3> mm{}, mp{}, num{}, den{};
-      double cnt = 0.0;
       for (std::size_t k = 0; k < p.theta.size(); ++k) {
         if (p.rev[k] < 0) continue;
-        cnt += 1.0;
         for (int a = 0; a < (p.has_fz ? 3 : 2); ++a) {
           const double g = zeroed(p, a, k);
           mm[a] += g;

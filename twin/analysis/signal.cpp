@@ -116,11 +116,9 @@ LsqResult least_squares(const std::vector<const std::vector<double>*>& columns, 
   Eigen::MatrixXd A = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(p), static_cast<Eigen::Index>(p));
   Eigen::VectorXd b = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(p));
   std::vector<double> row(p);
-  double yy = 0.0;
   for (std::size_t k : rows) {
     for (std::size_t j = 0; j < p; ++j) row[j] = (*columns[j])[k];
     const double yk = y[k];
-    yy += yk * yk;
     for (std::size_t i = 0; i < p; ++i) {
       const auto ii = static_cast<Eigen::Index>(i);
       b(ii) += row[i] * yk;

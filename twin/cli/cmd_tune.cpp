@@ -1,4 +1,5 @@
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <optional>
 #include <string>
@@ -39,6 +40,14 @@ std::vector<Axis> parse_axes(const std::string& text, const sim::MachineDefiniti
 }
 
 void print_line(const std::string& s) { std::printf("%s\n", s.c_str()); }
+
+/// The files a loaded scenario was read from: the scenario, its program and
+/// its machine (`machine_file`: the machine's source before any --set).
+void add_inputs(std::vector<std::filesystem::path>& inputs, const io::Scenario& s, const std::string& machine_file) {
+  inputs.push_back(s.path);
+  inputs.push_back(s.program_path);
+  inputs.emplace_back(machine_file);
+}
 
 }  // namespace
 
@@ -82,6 +91,7 @@ void register_tune(CLI::App& app) {
   cmd->callback([opt]() {
     const auto path = opt->scenario.empty() ? io::default_scenario_path() : io::resolve_scenario_path(opt->scenario);
     io::Scenario scenario = io::load_scenario(path, opt->machine);
+    const std::string machine_file = scenario.machine.source;
     apply_sets(scenario.machine, opt->sets);
     const std::vector<Axis> axes = parse_axes(opt->axes, scenario.machine);
     if (opt->analyse) {
@@ -103,6 +113,17 @@ void register_tune(CLI::App& app) {
     if (opt->out.empty()) throw ConfigError("tune: -o OUT is required (or use --analyse)");
     opt->tune.axes = axes;
     const std::filesystem::path out(opt->out);
+    std::optional<io::Scenario> check_scenario;
+    std::vector<std::filesystem::path> inputs;
+    add_inputs(inputs, scenario, machine_file);
+    if (opt->check != "none" && !opt->check.empty()) {
+      check_scenario = io::load_scenario(io::resolve_scenario_path(opt->check), opt->machine);
+      add_inputs(inputs, *check_scenario, check_scenario->machine.source);
+      apply_sets(check_scenario->machine, opt->sets);
+    }
+    // Before anything is written: OUT/machine.yaml given as --machine (or a
+    // scenario in OUT) would be replaced by the results.
+    refuse_output_holding_inputs("tune", out, inputs);
     io::ResultSet results(out, "tune");  // the files appear in OUT together, manifest.json last
     print_line(fmt::format("tuning axes {} on {} ({} simulations at most) ...", opt->axes, scenario.name,
                            opt->tune.max_evaluations));
@@ -110,9 +131,8 @@ void register_tune(CLI::App& app) {
 
     std::optional<io::Scenario> check;
     std::optional<std::pair<analysis::ScenarioMetrics, analysis::ScenarioMetrics>> check_metrics;
-    if (opt->check != "none" && !opt->check.empty() && !result.axes.empty()) {
-      io::Scenario cs = io::load_scenario(io::resolve_scenario_path(opt->check), opt->machine);
-      apply_sets(cs.machine, opt->sets);
+    if (check_scenario && !result.axes.empty()) {
+      io::Scenario cs = std::move(*check_scenario);
       const analysis::PlannedScenario planned = analysis::plan_scenario(cs);
       sim::MachineDefinition before = cs.machine, after = cs.machine;
       for (const auto& a : result.axes) {

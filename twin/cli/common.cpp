@@ -154,4 +154,18 @@ void refuse_output_over_input(std::string_view command, const std::filesystem::p
   }
 }
 
+void refuse_output_holding_inputs(std::string_view command, const std::filesystem::path& out,
+                                  const std::vector<std::filesystem::path>& inputs) {
+  const auto out_r = resolved(out);
+  std::error_code ec;
+  for (const auto& in : inputs) {
+    if (in.empty() || !std::filesystem::exists(in, ec)) continue;
+    const auto in_r = resolved(in);
+    if (in_r.parent_path() == out_r)
+      throw ConfigError(fmt::format("{}: output folder {} holds the input {} ({}): it would be overwritten or mixed "
+                                    "with the results; choose another OUT",
+                                    command, out.string(), in.string(), in_r.string()));
+  }
+}
+
 }  // namespace twin::cli

@@ -71,5 +71,11 @@ class TerminalProgress {
 /// resolving links, `..` and `.`.
 void refuse_output_over_input(std::string_view command, const std::filesystem::path& out,
                               const std::filesystem::path& run_dir, const std::string& machine_option);
+/// Refuses (ConfigError, one line, before anything is written) an output
+/// folder that holds one of `inputs` (paths compared after resolving links,
+/// `..` and `.`; inputs that do not exist are skipped): the command's files
+/// would replace it or be mixed with it.
+void refuse_output_holding_inputs(std::string_view command, const std::filesystem::path& out,
+                                  const std::vector<std::filesystem::path>& inputs);
 
 }  // namespace twin::cli
