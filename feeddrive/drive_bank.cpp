@@ -206,7 +206,9 @@ void axis_rhs(const AxisConst& a, const AxisRun& r, const double* y, double* yd)
     }
     const double w = y[1];
     const double x_mm = r.x0_mm + y[0];
-    const double Tf = r.mode * sliding_friction_Nm(p, r.mode, w, x_mm);
+    const double Tf = p.effects.smooth_friction.enabled
+                          ? coulomb_Nm(p, w >= 0.0 ? +1 : -1, x_mm) * std::tanh(w / p.effects.smooth_friction.ws_rad_per_s)
+                          : r.mode * sliding_friction_Nm(p, r.mode, w, x_mm);
     yd[0] = p.rg_mm_per_rad * w;
     yd[1] = (r.Tm_Nm - p.B_kg_m2_per_s * w - Tf - r.Tload_Nm - cogging_Nm(p, x_mm)) / a.Jm_kg_m2;
     yd[2] = p.B_kg_m2_per_s * w * w;
@@ -241,7 +243,8 @@ void axis_roots(const AxisConst& a, const AxisRun& r, const double* y, double* g
   double x_friction_mm = 0.0;
   if (!a.compliant) {
     x_friction_mm = r.x0_mm + y[0];
-    g[0] = r.mode * y[1];
+    // Smooth friction has no stick/slip: no event at w = 0.
+    if (!a.p.effects.smooth_friction.enabled) g[0] = r.mode * y[1];
   } else {
     x_friction_mm = r.xl0_mm + y[2];
     if (r.mode != 0) {
@@ -262,6 +265,8 @@ void axis_roots(const AxisConst& a, const AxisRun& r, const double* y, double* g
 double fastest_rate_per_s(const AxisConst& a) {
   const DriveParams& p = a.p;
   double rate = p.B_kg_m2_per_s / a.Jm_kg_m2;
+  if (p.effects.smooth_friction.enabled)  // max |d/dw Tc tanh(w/ws)| = Tc / ws
+    rate += std::max(p.Tc_pos_Nm, p.Tc_neg_Nm) / p.effects.smooth_friction.ws_rad_per_s / a.Jm_kg_m2;
   if (p.effects.stribeck.enabled) {
     // max |d/dw (Ts - Tc) exp(-(w/ws)^2)| = (Ts - Tc) sqrt(2/e) / ws
     const double slope = (p.effects.stribeck.Ts_static_Nm - std::min(p.Tc_pos_Nm, p.Tc_neg_Nm)) *
@@ -470,7 +475,11 @@ void DriveBank::Impl::start_tick_mode(std::size_t i) {
   AxisRun& r = runs[i];
   DriveState& s = states[i];
   if (!a.compliant) {
-    if (s.w_rad_per_s != 0.0) {
+    if (a.p.effects.smooth_friction.enabled) {
+      // Never held: the smooth characteristic acts at every speed, 0 included.
+      r.mode = +1;
+      r.frozen = false;
+    } else if (s.w_rad_per_s != 0.0) {
       r.mode = s.w_rad_per_s > 0.0 ? +1 : -1;
       r.frozen = false;
     } else {
@@ -609,7 +618,7 @@ DriveBank::DriveBank(std::vector<DriveParams> axes, double Ts_s, IntegratorOptio
       a.Jm_kg_m2 = a.p.J_kg_m2;
     }
     const DriveEffects& fx = a.p.effects;
-    a.linear = !a.compliant && !fx.stribeck.enabled && !fx.cogging.enabled &&
+    a.linear = !a.compliant && !fx.stribeck.enabled && !fx.cogging.enabled && !fx.smooth_friction.enabled &&
                !(fx.position_dependent_friction.enabled && fx.position_dependent_friction.dTc_Nm != 0.0);
     a.tick = linear_tick(a.p.B_kg_m2_per_s / a.Jm_kg_m2, Ts_s);
     if (a.p.effects.delay.enabled) a.delay_ticks = static_cast<std::size_t>(std::llround(a.p.effects.delay.delay_s / Ts_s));

@@ -56,6 +56,14 @@ void DriveParams::validate(std::string_view where) const {
              fmt::format(">= max(Tc_pos_Nm, Tc_neg_Nm) = {}", Tc_max_Nm));
     c.positive("effects.stribeck.ws_rad_per_s", e.stribeck.ws_rad_per_s);
   }
+  if (e.smooth_friction.enabled) {
+    c.positive("effects.smooth_friction.ws_rad_per_s", e.smooth_friction.ws_rad_per_s);
+    if (e.stribeck.enabled)
+      c.fail("effects.smooth_friction.enabled", 1.0,
+             "off with stribeck (both describe the friction at low speed: choose one)");
+    if (e.compliance.enabled)
+      c.fail("effects.smooth_friction.enabled", 1.0, "off with compliance (rigid drives only)");
+  }
   if (e.cogging.enabled) {
     c.non_negative("effects.cogging.amplitude_Nm", e.cogging.amplitude_Nm);
     c.positive("effects.cogging.cycles_per_rev", e.cogging.cycles_per_rev);

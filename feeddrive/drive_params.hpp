@@ -75,6 +75,22 @@ struct CurrentSaturationEffect {
   bool enabled{false};
   double i_max_A{0.0};
 };
+/// Friction that holds no torque at rest: the Coulomb level of the direction
+/// of motion, smoothed below the speed ws,
+///   Tf = Tc_dir(w) tanh(w / ws)        (Tc_dir: Tc_pos for w >= 0, else Tc_neg),
+/// in place of stick/slip. The axis never sticks: under a torque T below the
+/// Coulomb level it creeps at the speed where Tf + B w = T (w = ws atanh(T / Tc)
+/// without B), so a position loop that holds the axis at rest lets its torque
+/// relax towards the load. This is how a real drive's friction behaves under
+/// the dither of its current loop, or in the pre-sliding range (a ball screw's
+/// elastic micro-motion before gross sliding): the torque a stopped axis holds
+/// in a real log is spread about zero, not pinned at the breakaway level.
+/// Rigid drives only, and not with stribeck (which describes the same
+/// low-speed range the other way).
+struct SmoothFrictionEffect {
+  bool enabled{false};
+  double ws_rad_per_s{1.0};
+};
 
 struct DriveEffects {
   StribeckEffect stribeck;
@@ -86,6 +102,7 @@ struct DriveEffects {
   DelayEffect delay;
   ComplianceEffect compliance;
   CurrentSaturationEffect current_saturation;
+  SmoothFrictionEffect smooth_friction;
 };
 
 struct DriveParams {

@@ -8,6 +8,7 @@
 
 #include "fadal_fixture.hpp"
 #include "feeddrive/drive_bank.hpp"
+#include "twin/core/error.hpp"
 
 namespace twin::feeddrive {
 namespace {
@@ -327,6 +328,46 @@ TEST(Energy, BalanceClosesWithComplianceCoggingAndLoad) {
                      spring_energy_J(p, s);
   EXPECT_GT(s.work_friction_J, 0.0);
   EXPECT_NEAR(s.work_electrical_J, rhs, 1e-6 * std::abs(s.work_electrical_J));
+}
+
+
+// Oracle: with smooth friction a torque below the Coulomb level does not hold
+// the axis; it creeps at the speed w where Ka Kt u = B w + Tc_dir tanh(w / ws)
+// (solved here by bisection), in each direction with that direction's level,
+// while the same drive with stick/slip stays at rest. Tolerance 1e-7
+// relative: after 2 s the transient (time constant J / (B + Tc / ws) at most
+// 5 ms on these figures) is gone to far below that.
+TEST(SmoothFriction, TorqueBelowCoulombCreepsAtTheBalanceSpeed) {
+  DriveParams p = fadal_x();
+  p.effects.smooth_friction.ws_rad_per_s = 0.5;
+  for (const double frac : {0.5, -0.8}) {
+    const double Tc = frac > 0 ? p.Tc_pos_Nm : p.Tc_neg_Nm;
+    const double u_V = frac * Tc / (p.Ka_A_per_V * p.Kt_Nm_per_A);
+    const double T = p.Ka_A_per_V * p.Kt_Nm_per_A * u_V;
+    double lo = frac > 0 ? 0.0 : -100.0, hi = frac > 0 ? 100.0 : 0.0;
+    for (int k = 0; k < 200; ++k) {
+      const double w = 0.5 * (lo + hi);
+      const double net = T - p.B_kg_m2_per_s * w - Tc * std::tanh(w / p.effects.smooth_friction.ws_rad_per_s);
+      (net > 0.0 ? lo : hi) = w;
+    }
+    DriveParams smooth = p;
+    smooth.effects.smooth_friction.enabled = true;
+    DriveBank bank({smooth}, kTs_s);
+    bank.reset({0.0});
+    run_constant(bank, u_V, 20000);
+    EXPECT_NEAR(bank.output(0).w_rad_per_s, lo, 1e-7 * std::abs(lo)) << "u = " << u_V;
+    EXPECT_GT(std::abs(bank.output(0).w_rad_per_s), 0.1 * p.effects.smooth_friction.ws_rad_per_s);
+    DriveBank sticky({p}, kTs_s);
+    sticky.reset({0.0});
+    run_constant(sticky, u_V, 20000);
+    EXPECT_EQ(sticky.output(0).w_rad_per_s, 0.0);
+  }
+  // With stribeck or compliance it is refused in one line naming the field.
+  DriveParams both = p;
+  both.effects.smooth_friction.enabled = true;
+  both.effects.stribeck.enabled = true;
+  both.effects.stribeck.Ts_static_Nm = 2.0 * std::max(p.Tc_pos_Nm, p.Tc_neg_Nm);
+  EXPECT_THROW(both.validate("x"), ConfigError);
 }
 
 }  // namespace

@@ -67,6 +67,7 @@ std::vector<AxisParamSpec> make_axis_specs() {
       TWIN_EFFECT_PARAM("compliance.C_Nm_s_per_rad", "N m s/rad", "torsional damping motor-load", compliance, C_Nm_s_per_rad),
       TWIN_EFFECT_PARAM("compliance.load_fraction", "1", "share of J on the load side", compliance, load_fraction),
       TWIN_EFFECT_PARAM("current_saturation.i_max_A", "A", "current limit", current_saturation, i_max_A),
+      TWIN_EFFECT_PARAM("smooth_friction.ws", "rad/s", "speed below which Coulomb friction is smoothed (no stiction)", smooth_friction, ws_rad_per_s),
   };
 }
 #undef TWIN_AXIS_PARAM
