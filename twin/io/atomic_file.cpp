@@ -258,7 +258,7 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view text)
   f.commit();
 }
 
-std::string read_file(const std::filesystem::path& path, std::uintmax_t max_bytes) {
+int open_regular_file(const std::filesystem::path& path, std::uintmax_t max_bytes, std::uintmax_t* size_bytes) {
   auto fail = [&](const std::string& why) {
     return IoError(fmt::format("cannot read {}: {}", path.string(), why));
   };
@@ -275,11 +275,21 @@ std::string read_file(const std::filesystem::path& path, std::uintmax_t max_byte
     ::close(fd);
     throw fail(S_ISDIR(st.st_mode) ? "is a directory" : "not a regular file (a FIFO, device or socket)");
   }
-  const std::string limit = fmt::format("the limit is {:.0f} MB", static_cast<double>(max_bytes) / 1048576.0);
   if (static_cast<std::uintmax_t>(st.st_size) > max_bytes) {
     ::close(fd);
-    throw fail(fmt::format("{} bytes, {}", static_cast<long long>(st.st_size), limit));
+    throw fail(fmt::format("{} bytes, the limit is {:.0f} MB", static_cast<long long>(st.st_size),
+                           static_cast<double>(max_bytes) / 1048576.0));
   }
+  if (size_bytes) *size_bytes = static_cast<std::uintmax_t>(st.st_size);
+  return fd;
+}
+
+std::string read_file(const std::filesystem::path& path, std::uintmax_t max_bytes) {
+  auto fail = [&](const std::string& why) {
+    return IoError(fmt::format("cannot read {}: {}", path.string(), why));
+  };
+  const std::string limit = fmt::format("the limit is {:.0f} MB", static_cast<double>(max_bytes) / 1048576.0);
+  const int fd = open_regular_file(path, max_bytes, nullptr);
   gzFile gz = gzdopen(fd, "rb");
   if (gz == nullptr) {
     ::close(fd);

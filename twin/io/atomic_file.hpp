@@ -114,6 +114,11 @@ inline constexpr const char* kManifestName = "manifest.json";
 
 /// Writes `text` to `path` atomically.
 void write_file_atomic(const std::filesystem::path& path, std::string_view text);
+/// Opens `path` for reading as read_file does: a regular file only (a FIFO is
+/// never waited on), at most `max_bytes` on disk. Returns the descriptor and,
+/// in `size_bytes`, the file's size; throws IoError "cannot read PATH: why".
+int open_regular_file(const std::filesystem::path& path, std::uintmax_t max_bytes, std::uintmax_t* size_bytes);
+
 /// Largest file read_file reads by default (after gunzipping).
 inline constexpr std::uintmax_t kMaxReadBytes = std::uintmax_t{1} << 30;
 /// Reads a whole regular file (transparently gunzipping a .gz) of at most

@@ -50,23 +50,7 @@ namespace {
 class LineReader {
  public:
   explicit LineReader(const std::filesystem::path& path) : path_(path) {
-    const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
-    if (fd < 0) throw fail(errno == ENOENT ? std::string("no such file") : std::string(std::strerror(errno)));
-    struct stat st {};
-    if (::fstat(fd, &st) != 0) {
-      const int e = errno;
-      ::close(fd);
-      throw fail(std::strerror(e));
-    }
-    if (!S_ISREG(st.st_mode)) {
-      ::close(fd);
-      throw fail(S_ISDIR(st.st_mode) ? "is a directory" : "not a regular file (a FIFO, device or socket)");
-    }
-    if (static_cast<std::uintmax_t>(st.st_size) > kMaxReadBytes) {
-      ::close(fd);
-      throw fail(fmt::format("{} bytes, {}", static_cast<long long>(st.st_size), limit()));
-    }
-    file_bytes_ = static_cast<std::uintmax_t>(st.st_size);
+    const int fd = open_regular_file(path, kMaxReadBytes, &file_bytes_);
     gz_ = gzdopen(fd, "rb");
     if (gz_ == nullptr) {
       ::close(fd);
