@@ -15,4 +15,5 @@ void register_export_fmu(CLI::App& app);
 void register_sweep(CLI::App& app);
 void register_tune(CLI::App& app);
 void register_calibrate(CLI::App& app);
+void register_lobes(CLI::App& app);
 }  // namespace twin::cli

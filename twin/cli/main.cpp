@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
   twin::cli::register_calibrate(app);
   twin::cli::register_export_fmu(app);
   twin::cli::register_sweep(app);
+  twin::cli::register_lobes(app);
   if (argc > 1 && argv[1][0] != '-') {
     bool known = false;
     std::string names;

@@ -62,6 +62,38 @@ void parse_effects(const YAML::Node& node, sim::AxisDefinition& axis, const std:
   }
 }
 
+/// `tool_tip:` {source: text, x: [modes], y: [modes]}, a mode {fn_Hz, zeta, k_N_per_m}.
+void parse_tool_tip(const YAML::Node& node, sim::MachineDefinition& m, const std::string& where) {
+  const std::string w = where + ": tool_tip";
+  if (!node.IsMap()) throw ConfigError(fmt::format("{} must be a map with x and/or y mode lists", w));
+  for (const auto& kv : node) {
+    const std::string key = kv.first.as<std::string>();
+    if (key == "source") {
+      m.tool_tip_source = yaml_string(kv.second, w + ".source");
+      continue;
+    }
+    if (key != "x" && key != "y") throw ConfigError(fmt::format("{}: unknown key '{}' (x, y, source)", w, key));
+    if (!kv.second.IsSequence()) throw ConfigError(fmt::format("{}.{} must be a list of modes", w, key));
+    auto& modes = key == "x" ? m.tool_tip.x : m.tool_tip.y;
+    std::size_t i = 0;
+    for (const auto& mode : kv.second) {
+      const std::string mw = fmt::format("{}.{}[{}]", w, key, i++);
+      if (!mode.IsMap()) throw ConfigError(fmt::format("{} must be a map fn_Hz, zeta, k_N_per_m", mw));
+      process::ToolTipMode tm;
+      bool fn = false, z = false, k = false;
+      for (const auto& f : mode) {
+        const std::string fk = f.first.as<std::string>();
+        if (fk == "fn_Hz") tm.fn_Hz = yaml_number(f.second, mw + ".fn_Hz"), fn = true;
+        else if (fk == "zeta") tm.zeta = yaml_number(f.second, mw + ".zeta"), z = true;
+        else if (fk == "k_N_per_m") tm.k_N_per_m = yaml_number(f.second, mw + ".k_N_per_m"), k = true;
+        else throw ConfigError(fmt::format("{}: unknown key '{}' (fn_Hz, zeta, k_N_per_m)", mw, fk));
+      }
+      if (!fn || !z || !k) throw ConfigError(fmt::format("{}: needs fn_Hz, zeta and k_N_per_m", mw));
+      modes.push_back(tm);
+    }
+  }
+}
+
 }  // namespace
 
 sim::MachineDefinition load_machine(const std::filesystem::path& path) {
@@ -85,6 +117,8 @@ sim::MachineDefinition load_machine(const std::filesystem::path& path) {
     if (key == "controller") continue;
     if (key == "name") {
       m.name = yaml_string(kv.second, where + ": name");
+    } else if (key == "tool_tip") {
+      parse_tool_tip(kv.second, m, where);
     } else if (key == "description") {
       static_cast<void>(yaml_string(kv.second, where + ": description"));
     } else if (key == "axes") {
@@ -161,6 +195,21 @@ std::string machine_to_yaml(const sim::MachineDefinition& m, const std::string& 
       eff << "        " << s.name.substr(dot + 1) << ": " << v << "    # " << s.unit << ", " << s.doc << "\n";
     }
     if (!eff.str().empty()) o << "    effects:\n" << eff.str();
+  }
+  if (!m.tool_tip.empty()) {
+    o << "tool_tip:    # tool-tip modes (stability lobes)\n";
+    if (!m.tool_tip_source.empty()) {
+      std::string quoted;  // a YAML single-quoted scalar: a quote is doubled, nothing else is special
+      for (char ch : m.tool_tip_source) quoted += ch == '\'' ? std::string("''") : std::string(1, ch == '\n' ? ' ' : ch);
+      o << "  source: '" << quoted << "'\n";
+    }
+    for (const auto* dir : {"x", "y"}) {
+      const auto& modes = dir[0] == 'x' ? m.tool_tip.x : m.tool_tip.y;
+      if (modes.empty()) continue;
+      o << "  " << dir << ":\n";
+      for (const auto& md : modes)
+        o << "    - {fn_Hz: " << md.fn_Hz << ", zeta: " << md.zeta << ", k_N_per_m: " << md.k_N_per_m << "}\n";
+    }
   }
   return o.str();
 }

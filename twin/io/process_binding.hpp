@@ -8,6 +8,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include "process/milling_process.hpp"
 #include "process/process_model.hpp"
 
 namespace twin::io {
@@ -15,6 +16,7 @@ namespace twin::io {
 struct ProcessBinding {
   std::string summary;
   std::function<std::unique_ptr<process::ProcessModel>()> make;
+  process::ProcessSetup setup;   ///< what `make` builds from
 };
 
 ProcessBinding bind_process(const YAML::Node& node, const std::string& where, const std::filesystem::path& dir);

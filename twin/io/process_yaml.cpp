@@ -250,6 +250,7 @@ ProcessBinding bind_process(const YAML::Node& node, const std::string& where, co
   ProcessBinding b;
   b.summary = setup.summary();
   b.make = [setup]() { return process::make_process(setup); };
+  b.setup = setup;
   return b;
 }
 

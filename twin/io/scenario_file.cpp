@@ -83,6 +83,7 @@ Scenario load_scenario(const std::filesystem::path& path, const std::string& mac
     ProcessBinding setup = bind_process(process_node, where + ": process", dir);
     s.process_summary = setup.summary;
     s.make_process = setup.make;
+    s.process_setup = setup.setup;
   }
   return s;
 }

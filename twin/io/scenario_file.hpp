@@ -4,10 +4,12 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "controller/gcode.hpp"
+#include "process/milling_process.hpp"
 #include "process/process_model.hpp"
 #include "twin/sim/machine.hpp"
 
@@ -27,6 +29,8 @@ struct Scenario {
   std::function<std::unique_ptr<process::ProcessModel>()> make_process;
   /// A one-line description of the process (tool, material, conditions).
   std::string process_summary;
+  /// The process setup `make_process` builds from (set with it).
+  std::optional<process::ProcessSetup> process_setup;
 };
 
 /// The built-in default: the FADAL 2216 pocket-corner scenario.

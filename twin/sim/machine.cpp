@@ -136,6 +136,7 @@ void MachineDefinition::validate() const {
                                   encoder_resolution_mm));
   positive("rapid", rapid_mm_per_min);
   positive("blend_tolerance", blend_tolerance_mm);
+  if (!tool_tip.empty()) tool_tip.validate(where + ": tool_tip");
   bool any = false;
   for (Axis a : kAllAxes) {
     const AxisDefinition& ax = axes[index(a)];

@@ -13,6 +13,7 @@
 #include "controller/interpolator.hpp"
 #include "controller/position_loop.hpp"
 #include "feeddrive/drive_params.hpp"
+#include "process/stability_lobes.hpp"
 #include "twin/core/axis.hpp"
 
 namespace twin::sim {
@@ -39,6 +40,10 @@ struct MachineDefinition {
   double rapid_mm_per_min{10160.0};
   double blend_tolerance_mm{0.01};     ///< G64 without P
   AxisArray<AxisDefinition> axes;
+  /// The tool tip's modes in x and y (`tool_tip:` in a machine file; empty:
+  /// rigid). Used by the stability lobes.
+  process::ToolTipFrf tool_tip;
+  std::string tool_tip_source;         ///< where the modes come from (measured, assumed ...)
 
   /// Throws ConfigError naming the source, the axis, the key and the value.
   void validate() const;
