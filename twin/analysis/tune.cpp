@@ -512,10 +512,14 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
     opt.set_initial_step(0.3);
     std::vector<double> x(nf, 0.0);
     double fval = 0.0;
-    try {
-      opt.optimize(x, fval);
-    } catch (const std::exception&) {
-      // COBYLA's stopping by round-off is not a failure: the point is checked below.
+    // Gains that already meet the constraints are their own nearest point (COBYLA would
+    // end within its tolerance of them, not on them).
+    if (stage_a_constraint(nf, x.data(), nullptr, &data) > 0.0) {
+      try {
+        opt.optimize(x, fval);
+      } catch (const std::exception&) {
+        // COBYLA's stopping by round-off is not a failure: the point is checked below.
+      }
     }
     std::vector<double> full = s.origin();
     std::copy(x.begin(), x.end(), full.begin());
@@ -659,10 +663,17 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
     x0.insert(x0.end(), q0[i].begin(), q0[i].end());
   }
   result.window_before = simulate_window(scenario, planned, m0, window);
+  // An axis that does not move through the corners searched on (its error there is 0)
+  // does not enter the objective: the search's moves of its gains mean nothing, and it
+  // ends at its stage-A point.
+  std::vector<bool> idle;
   {
     sim::MachineDefinition ms = m0;
     for (std::size_t i = 0; i < scales.size(); ++i) ms.axes[index(scales[i].axis)].loop = scales[i].gains(q0[i].data());
     const ScenarioMetrics start = simulate_window(scenario, planned, ms, window);
+    for (const auto& s : scales)
+      idle.push_back(start.completed && start.max_tracking_error_mm[index(s.axis)] == 0.0 &&
+                     start.rms_tracking_error_mm[index(s.axis)] == 0.0);
     const ScenarioMetrics& ref = result.window_before.completed ? result.window_before : start;
     data.norm_contour = std::max(ref.max_contour_error_mm, 1e-6);
     double rms = 0.0, mx = 0.0;
@@ -715,6 +726,8 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
     finish_kept(result.full_before, result.full_after);
     return result;
   }
+  for (std::size_t i = 0; i < scales.size(); ++i)
+    if (idle[i]) std::copy(q0[i].begin(), q0[i].end(), data.best_q.begin() + static_cast<std::ptrdiff_t>(data.offsets[i]));
   result.window_after = data.best_metrics;
   result.objective_after = data.best_objective;
   for (std::size_t i = 0; i < scales.size(); ++i)
@@ -766,10 +779,27 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
   for (const auto& l : limited) changed = changed || l.find("on the full scenario") != std::string::npos;
   if (changed) result.full_after = simulate_window(scenario, planned, result.machine_after, full);
   result.feasible = !tuned.empty();
+  std::size_t changed_axes = 0;
   for (const auto& s : tuned) {
     AxisTuneResult ar =
         axis_result(s, result.machine_after.axes[index(s.axis)].loop, m0, result.full_before, result.full_after, c);
     ar.note = limited[index(s.axis)];
+    bool same = true;
+    for (const LawGain& lg : s.law->gains()) same = same && lg.get(ar.before) == lg.get(ar.after);
+    if (same) {
+      // The search's best point left this axis where it started (its start met every
+      // constraint and nothing it tried on this axis lowered the objective).
+      ar.tuned = false;
+      ar.note = result.window_before.max_tracking_error_mm[index(s.axis)] == 0.0
+                    ? fmt::format("axis {} does not move through the corners searched on (its tracking error there "
+                                  "is 0), so the search cannot judge its gains; the machine's meet every constraint "
+                                  "and are kept",
+                                  axis_name(s.axis))
+                    : std::string("the machine's gains meet every constraint and no change of them lowered the "
+                                  "objective; they are kept");
+    } else {
+      ++changed_axes;
+    }
     if (!ar.constraints_after.violation.empty() && result.feasible) {
       result.feasible = false;
       result.message = fmt::format("tuned gains break a constraint on the full scenario: {}",
@@ -781,7 +811,7 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
   if (result.feasible) {
     result.message = fmt::format(
         "tuned {} axis(es) in {} simulations: max contour error through the corners {:.3f} um -> {:.3f} um",
-        tuned.size(), result.evaluations, 1e3 * result.full_before.max_contour_error_mm,
+        changed_axes, result.evaluations, 1e3 * result.full_before.max_contour_error_mm,
         1e3 * result.full_after.max_contour_error_mm);
     if (!kept.empty()) result.message += "; " + kept_text();
   } else if (result.message.empty()) {
