@@ -108,6 +108,7 @@ class FadalLaw final : public LinearLaw {
   std::span<const LawGain> gains() const noexcept override { return kGains; }
   std::string_view command_name() const noexcept override { return "u"; }
   std::string_view command_unit() const noexcept override { return "V"; }
+  std::string_view command_limit_name() const noexcept override { return "u_max"; }
   double torque_per_command(const LinearPlant& p) const override { return p.Ka_A_per_V * p.Kt_Nm_per_A; }
   double command_limit(const controller::PositionLoopParams& g) const override { return g.u_max_V; }
 
@@ -160,6 +161,7 @@ class CascadeLaw final : public LinearLaw {
   std::span<const LawGain> gains() const noexcept override { return kGains; }
   std::string_view command_name() const noexcept override { return "torque"; }
   std::string_view command_unit() const noexcept override { return "torque unit"; }
+  std::string_view command_limit_name() const noexcept override { return "T_max"; }
   double torque_per_command(const LinearPlant&) const override { return 1.0; }
   double command_limit(const controller::PositionLoopParams& g) const override { return g.cascade.T_max; }
 

@@ -107,6 +107,8 @@ class LinearLaw {
   /// The command it gives the drive: "u" in "V" (FADAL) or "torque" in the torque unit.
   virtual std::string_view command_name() const noexcept = 0;
   virtual std::string_view command_unit() const noexcept = 0;
+  /// The machine-file name of its limit: u_max, T_max.
+  virtual std::string_view command_limit_name() const noexcept = 0;
   /// Motor torque per unit of command (Ka Kt for V, 1 for a torque).
   virtual double torque_per_command(const LinearPlant& plant) const = 0;
   /// The limit of the command (u_max, T_max).

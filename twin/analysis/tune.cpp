@@ -298,10 +298,11 @@ double command_limit(const sim::MachineDefinition& machine, Axis a, const TuneCo
   const auto& loop = machine.axes[index(a)].loop;
   return c.u_fraction_max * linear_law(loop.law).command_limit(loop);
 }
-/// "|u| 9.844 V" or "|torque| 30.2 torque unit".
-std::string command_text(const sim::MachineDefinition& machine, Axis a, double value) {
+/// "|u| 9.844 V > 9.500 V" or "|torque| 30.200 torque unit > 29.402 torque unit".
+std::string command_text(const sim::MachineDefinition& machine, Axis a, double value, double limit) {
   const LinearLaw& law = linear_law(machine.axes[index(a)].loop.law);
-  return fmt::format("|{}| {:.3f} {}", law.command_name(), value, law.command_unit());
+  return fmt::format("|{}| {:.3f} {} > {:.3f} {}", law.command_name(), value, law.command_unit(), limit,
+                     law.command_unit());
 }
 
 struct StageA {
@@ -433,9 +434,9 @@ AxisTuneResult axis_result(const AxisScales& s, const controller::PositionLoopPa
     pair->command_peak = command_peak(fm, machine, s.axis);
     pair->simulation_ok = fm.completed && pair->command_peak <= pair->command_limit;
     if (pair->violation.empty() && !pair->simulation_ok)
-      pair->violation = fm.completed ? fmt::format("{}: peak {} > {:.3f} {} in the full scenario", name,
-                                                   command_text(machine, s.axis, pair->command_peak),
-                                                   pair->command_limit, pair->command_unit)
+      pair->violation = fm.completed ? fmt::format("{}: peak {} in the full scenario", name,
+                                                   command_text(machine, s.axis, pair->command_peak,
+                                                                pair->command_limit))
                                      : fmt::format("{}: {}", name, fm.failure);
   }
   return ar;
@@ -577,11 +578,13 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
       if (peak > limit) {
         kept.emplace_back(
             scales[i],
-            fmt::format("its own gains already reach peak {} > {:.3f} ({:g} x the limit) on this scenario, at "
+            fmt::format("its own gains already reach peak {} ({:g} x {}) on this scenario, at "
                         "t = {:.4f} s {} ({} ticks at the limit), so the scenario cannot show that new gains keep the "
                         "limit; axis {} is left as it is (tune it on a scenario without that move, or raise "
                         "--u-fraction)",
-                        command_text(m0, a, peak), limit, c.u_fraction_max, result.full_before.u_peak_t_s[index(a)],
+                        command_text(m0, a, peak, limit), c.u_fraction_max,
+                        linear_law(m0.axes[index(a)].loop.law).command_limit_name(),
+                        result.full_before.u_peak_t_s[index(a)],
                         motion_text(planned, result.full_before.u_peak_block[index(a)]),
                         result.full_before.saturated_ticks[index(a)], axis_name(a)));
         continue;
@@ -623,8 +626,8 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
         const bool has_ff = s.feedback_vars < s.size();
         const double alpha = reachable_feedforward(scenario, planned, ms, s, s.gains(q.data()), window, limit);
         const std::string where =
-            fmt::format("with {} the peak {} > {:.3f} at t = {:.4f} s {}",
-                        has_ff ? "the model feedforward" : "the machine's feedforward", command_text(ms, a, peak), limit,
+            fmt::format("with {} the peak {} at t = {:.4f} s {}",
+                        has_ff ? "the model feedforward" : "the machine's feedforward", command_text(ms, a, peak, limit),
                         start.u_peak_t_s[index(a)], motion_text(planned, start.u_peak_block[index(a)]));
         if (alpha < 0.0) {
           kept.emplace_back(s, where + (has_ff ? ", and above it without feedforward too (feedback at the nearest "
@@ -754,10 +757,10 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
         auto& g = result.machine_after.axes[index(s.axis)].loop;
         g = s.scaled_feedforward(g, alpha);
         limited[index(s.axis)] +=
-            fmt::format("{}on the full scenario the gains tuned on the corner window reach peak {} > {:.3f} "
+            fmt::format("{}on the full scenario the gains tuned on the corner window reach peak {} "
                         "at t = {:.4f} s {}: the feedforward was scaled by {:.3f} to keep the limit",
                         limited[index(s.axis)].empty() ? "" : "; ",
-                        command_text(m0, s.axis, ar.constraints_after.command_peak), limit,
+                        command_text(m0, s.axis, ar.constraints_after.command_peak, limit),
                         result.full_after.u_peak_t_s[index(s.axis)],
                         motion_text(planned, result.full_after.u_peak_block[index(s.axis)]), alpha);
         tuned.push_back(s);
