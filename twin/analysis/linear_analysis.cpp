@@ -505,7 +505,8 @@ LoopAnalysis analyse_loop(const DiscreteLoopModel& m, double f_min_Hz, int point
 
 std::string format_analysis(const std::string& title, const DiscreteLoopModel& m, const LoopAnalysis& a) {
   std::string s = fmt::format("{}\n", title);
-  s += fmt::format("  {} law, gains: {}\n", controller::loop_law_name(m.law().id()), m.law().gains_text(m.gains(), true));
+  s += fmt::format("  {} law, gains: {}\n", controller::loop_law_name(m.law().id()),
+                   m.law().gains_text(m.gains(), true));
   s += fmt::format("  loop broken at the command ({} in {})\n", m.law().command_name(), m.law().command_unit());
   s += fmt::format("  closed loop {} (largest pole |z| = {:.6f}); poles:", a.stable ? "stable" : "UNSTABLE",
                    a.max_pole_magnitude);

@@ -75,9 +75,7 @@ struct LawGain {
   /// Feedback only: the base of the log search when the start is 0 (nullptr: a gain
   /// that is 0 stays 0, e.g. no integral).
   double (*base_when_zero)(const controller::PositionLoopParams&){nullptr};
-  double get(const controller::PositionLoopParams& g) const {
-    return ref(const_cast<controller::PositionLoopParams&>(g));
-  }
+  double get(controller::PositionLoopParams g) const { return ref(g); }
 };
 
 /// A law's controller at Ts as a discrete linear system (limits out):

@@ -627,7 +627,8 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
         const double alpha = reachable_feedforward(scenario, planned, ms, s, s.gains(q.data()), window, limit);
         const std::string where =
             fmt::format("with {} the peak {} at t = {:.4f} s {}",
-                        has_ff ? "the model feedforward" : "the machine's feedforward", command_text(ms, a, peak, limit),
+                        has_ff ? "the model feedforward" : "the machine's feedforward",
+                        command_text(ms, a, peak, limit),
                         start.u_peak_t_s[index(a)], motion_text(planned, start.u_peak_block[index(a)]));
         if (alpha < 0.0) {
           kept.emplace_back(s, where + (has_ff ? ", and above it without feedforward too (feedback at the nearest "
@@ -730,7 +731,8 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
     return result;
   }
   for (std::size_t i = 0; i < scales.size(); ++i)
-    if (idle[i]) std::copy(q0[i].begin(), q0[i].end(), data.best_q.begin() + static_cast<std::ptrdiff_t>(data.offsets[i]));
+    if (idle[i])
+      std::copy(q0[i].begin(), q0[i].end(), data.best_q.begin() + static_cast<std::ptrdiff_t>(data.offsets[i]));
   result.window_after = data.best_metrics;
   result.objective_after = data.best_objective;
   for (std::size_t i = 0; i < scales.size(); ++i)

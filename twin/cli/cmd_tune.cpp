@@ -74,7 +74,7 @@ void register_tune(CLI::App& app) {
   cmd->add_flag("--analyse,--analyze", opt->analyse,
                 "print poles, margins, sensitivity peak, bandwidth and step figures for the current gains and stop");
   cmd->add_option("--machine", opt->machine, "machine definition (name or YAML file) replacing the scenario's");
-  cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.Kp=600")->take_all();
+  cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.Kp=600 (x.Kv=80 on a cascade)")->take_all();
   cmd->add_option("--check", opt->check,
                   "second scenario, not used for tuning, on which before/after are reported ('none' to skip)");
   cmd->add_option("--max-evals", opt->tune.max_evaluations, "coupled simulations in the search (default 160)");
@@ -87,7 +87,8 @@ void register_tune(CLI::App& app) {
   cmd->add_option("--overshoot", opt->tune.constraints.step_overshoot_max,
                   "maximum feedback step overshoot, fraction (default 0.35)");
   cmd->add_option("--u-fraction", opt->tune.constraints.u_fraction_max,
-                  "peak |u| allowed in the scenario as a fraction of u_max (default 0.95)");
+                  "peak command allowed in the scenario as a fraction of its limit: |u| of u_max (FADAL law), "
+                  "|torque| of T_max (cascade) (default 0.95)");
   cmd->add_flag("--no-plots", opt->no_plots, "do not draw the PNG plots");
   cmd->callback([opt]() {
     const auto path = opt->scenario.empty() ? io::default_scenario_path() : io::resolve_scenario_path(opt->scenario);
@@ -106,7 +107,8 @@ void register_tune(CLI::App& app) {
                               .c_str());
         std::string ff;
         for (const analysis::LawGain& g : model.law().gains())
-          if (g.feedforward) ff += fmt::format("{}{} = {:.6g} {}", ff.empty() ? "" : ", ", g.name, g.model(plant), g.unit);
+          if (g.feedforward)
+            ff += fmt::format("{}{} = {:.6g} {}", ff.empty() ? "" : ", ", g.name, g.model(plant), g.unit);
         print_line("  model feedforward (cancels the linear plant): " + ff);
       }
       return;
