@@ -1,22 +1,31 @@
 #pragma once
-/// Linear analysis of one axis' position loop at the loop period Ts.
+/// Linear analysis of one axis' position loop at the loop period Ts, for either
+/// law of controller/position_loop.hpp.
 ///
 /// Plant, friction and saturation out (Ozcan 2017 Fig. 1):
-///   J dw/dt = Ka Kt u - B w,   dx/dt = rg w        (w rad/s, x mm, u V)
-/// discretised exactly under the zero-order hold with the matrix exponential:
-///   p[k+1] = Phi p[k] + Gamma u[k],  p = [w, x],  y[k] = x[k] (encoder as unity).
-/// Controller: the FADAL law of spec/measured-data.md with its backward differences,
-///   C(z) = Kp + Ki Ts z/(z-1) + Kd (z-1)/(Ts z)          (feedback, e -> u)
-///   F(z) = K2 (1 - z^-1)/Ts + K1 ((1 - z^-1)/Ts)^2       (feedforward, x_ref -> u)
-/// Loop broken at u: L(z) = C(z) P(z), P(z) = [0 1] (zI - Phi)^-1 Gamma.
-///   S = 1/(1+L) (sensitivity), T = L/(1+L) (feedback position response),
-///   X/R = (C + F) P / (1 + L) (position response with feedforward),
-///   E/R = (1 - F P) / (1 + L) (tracking error transfer function).
+///   J dw/dt = g m - B w,   dx/dt = rg w        (w rad/s, x mm)
+/// with m the law's command held over the tick: u in V for the FADAL law
+/// (g = Ka Kt), the torque for the cascade (g = 1). Discretised exactly under the
+/// zero-order hold with the matrix exponential:
+///   p[k+1] = Phi p[k] + Gamma m[k],  p = [w, x],  y[k] = p[k] (encoder and speed sensor as unity).
+/// Controller: the law exactly as controller::PositionLoop computes it (backward
+/// differences, the integrator updated before it acts, the cascade's current loop as
+/// its first-order filter sampled at Ts), written as a discrete state-space system
+/// (ControllerRealisation) from [p, x_ref] to m.
+/// Loop broken at the command m: L(z) = -K_p(z) P(z), P(z) = (zI - Phi)^-1 Gamma,
+/// K_p the controller from p to m (for the FADAL law L = C P with
+/// C(z) = Kp + Ki Ts z/(z-1) + Kd (z-1)/(Ts z); for the cascade the position and speed
+/// feedback both pass through m, the torque command).
+///   S = 1/(1+L) (sensitivity), T = L/(1+L) (complementary, at the break point),
+///   X/R = P_x K_r / (1 + L) (position response, K_r the controller from x_ref to m),
+///   E/R = 1 - X/R (tracking error transfer function).
 /// Frequencies are reported in Hz; margins follow the usual definitions:
 /// gain margin = 1/|L| at the phase crossovers below the unit circle (upward gain
 /// margin), phase margin = 180 deg + arg L at the gain crossovers (the smallest).
 #include <complex>
+#include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Dense>
@@ -38,7 +47,7 @@ struct LinearPlant {
 };
 LinearPlant linear_plant(const feeddrive::DriveParams& drive);
 
-/// The model-based feedforward gains that cancel the linear plant:
+/// The model-based feedforward gains of the FADAL law that cancel the linear plant:
 /// K1 = J / (Ka Kt rg) [V s^2/mm], K2 = B / (Ka Kt rg) [V s/mm].
 struct FeedforwardGains {
   double K1_V_s2_per_mm{0.0};
@@ -50,6 +59,73 @@ FeedforwardGains model_feedforward(const LinearPlant& plant);
 /// (for the small, well-scaled matrices of a drive over one period).
 Eigen::MatrixXd matrix_exponential(const Eigen::MatrixXd& M);
 
+/// One gain of a law, as the machine file, the report and the tuning name it.
+struct LawGain {
+  std::string_view name;      ///< machine-file name: Kp, Kv, ...
+  std::string_view json_key;  ///< report name with its unit: Kp_V_per_mm, Kv_per_s, ...
+  std::string_view unit;
+  /// A feedforward gain acts outside the loop: it moves neither poles nor margins.
+  bool feedforward{false};
+  /// Whether `twin tune` searches it (feedback: in log ratio to its start; feedforward:
+  /// as a fraction of its model value).
+  bool searched{false};
+  double& (*ref)(controller::PositionLoopParams&){nullptr};
+  /// Feedforward only: the value that cancels the linear plant.
+  double (*model)(const LinearPlant&){nullptr};
+  /// Feedback only: the base of the log search when the start is 0 (nullptr: a gain
+  /// that is 0 stays 0, e.g. no integral).
+  double (*base_when_zero)(const controller::PositionLoopParams&){nullptr};
+  double get(controller::PositionLoopParams g) const { return ref(g); }
+};
+
+/// A law's controller at Ts as a discrete linear system (limits out):
+///   c[k+1] = Ac c[k] + By p[k] + Br r[k],   m[k] = Cc c[k] + Dy p[k] + Dr r[k],
+/// p = [w, x] at tick k, r = x_ref[k], m the command held over the tick. The last
+/// `reference_states` states (x_ref[k-1], v_ref[k-1]) are driven by r only: they
+/// are not modes of the loop. A start at rest at x = 0 with x_ref[0] = r0 has
+/// c[0] = start r0 (the law's start-up convention: v_ref, a_ref 0, e[-1] = e[0]).
+struct ControllerRealisation {
+  Eigen::MatrixXd Ac;
+  Eigen::MatrixXd By;         ///< n x 2
+  Eigen::VectorXd Br;
+  Eigen::RowVectorXd Cc;
+  Eigen::RowVector2d Dy;
+  double Dr{0.0};
+  Eigen::VectorXd start;
+  int reference_states{0};
+};
+
+/// What the analysis and the tuning ask of a position-loop law.
+class LinearLaw {
+ public:
+  virtual ~LinearLaw() = default;
+  virtual controller::LoopLaw id() const noexcept = 0;
+  /// Its gains, feedback first; `twin tune` changes those marked searched.
+  virtual std::span<const LawGain> gains() const noexcept = 0;
+  /// The command it gives the drive: "u" in "V" (FADAL) or "torque" in the torque unit.
+  virtual std::string_view command_name() const noexcept = 0;
+  virtual std::string_view command_unit() const noexcept = 0;
+  /// The machine-file name of its limit: u_max, T_max.
+  virtual std::string_view command_limit_name() const noexcept = 0;
+  /// Motor torque per unit of command (Ka Kt for V, 1 for a torque).
+  virtual double torque_per_command(const LinearPlant& plant) const = 0;
+  /// The limit of the command (u_max, T_max).
+  virtual double command_limit(const controller::PositionLoopParams& g) const = 0;
+  virtual ControllerRealisation realise(const controller::PositionLoopParams& g, const LinearPlant& plant) const = 0;
+  /// The gains with every feedforward gain at 0.
+  controller::PositionLoopParams feedback_only(const controller::PositionLoopParams& g) const;
+  /// "Kp 500 V/mm, Ki 70 V/(s mm), ..." (all gains, with `units`).
+  std::string gains_text(const controller::PositionLoopParams& g, bool units = false) const;
+};
+const LinearLaw& linear_law(controller::LoopLaw law);
+
+/// One point of a frequency response, for plots and reports.
+struct FrequencyPoint {
+  double f_Hz{0.0};
+  std::complex<double> L, S, T, X_over_R, E_over_R;
+  std::complex<double> X_over_R_feedback;  ///< X/R with the feedforward off
+};
+
 /// The discrete closed loop of one axis.
 class DiscreteLoopModel {
  public:
@@ -57,29 +133,33 @@ class DiscreteLoopModel {
   DiscreteLoopModel(const LinearPlant& plant, const controller::PositionLoopParams& gains,
                     const std::string& where = "axis");
 
+  const LinearLaw& law() const noexcept { return *law_; }
   const Eigen::Matrix2d& Phi() const noexcept { return Phi_; }
+  /// Per unit of the law's command (mm/V, rad/s per V for the FADAL law).
   const Eigen::Vector2d& Gamma() const noexcept { return Gamma_; }
-  /// Closed-loop feedback matrix, state [w, x, I[k-1], e[k-1]], reference input
-  /// x_ref held at 0: s[k+1] = A_fb s[k].
-  const Eigen::Matrix4d& A_feedback() const noexcept { return A_fb_; }
+  const ControllerRealisation& controller() const noexcept { return K_; }
+  /// Closed-loop matrix with the reference held at 0, state [w, x, loop states of
+  /// the controller] (FADAL: I[k-1] when Ki > 0, e[k-1]; cascade: Iv[k-1] when Tn > 0,
+  /// Tf[k-1] when tau_i > 0): s[k+1] = A_feedback s[k].
+  const Eigen::MatrixXd& A_feedback() const noexcept { return A_fb_; }
   /// Poles of the feedback loop: the eigenvalues of A_feedback (the feedforward
-  /// only adds poles at z = 0); with Ki = 0 the disconnected integrator state is left out.
+  /// only adds poles at z = 0), largest magnitude first.
   std::vector<std::complex<double>> poles() const;
   bool stable() const;
 
-  std::complex<double> plant_response(double f_Hz) const;       ///< P: mm/V
-  std::complex<double> controller_response(double f_Hz) const;  ///< C: V/mm
-  std::complex<double> feedforward_response(double f_Hz) const; ///< F: V/mm
-  std::complex<double> loop_response(double f_Hz) const;        ///< L = C P
+  FrequencyPoint at(double f_Hz) const;                          ///< all responses at f
+  std::complex<double> plant_response(double f_Hz) const;       ///< P_x: mm per unit command
+  std::complex<double> loop_response(double f_Hz) const;        ///< L
   std::complex<double> sensitivity(double f_Hz) const;          ///< S = 1/(1+L)
   std::complex<double> complementary(double f_Hz) const;        ///< T = L/(1+L)
   std::complex<double> position_response(double f_Hz) const;    ///< X/R with feedforward
+  std::complex<double> feedback_position_response(double f_Hz) const;  ///< X/R, feedforward off
   std::complex<double> error_response(double f_Hz) const;       ///< E/R with feedforward
 
   /// Response of the closed loop (friction and saturation out) to a reference
-  /// sequence x_ref[k], k = 0..n-1, starting at rest at x = x_ref[0] = 0 with the
-  /// law's start-up convention (v_ref, a_ref 0 at k = 0, e[-1] = e[0]).
-  /// Returns x[k] (the measured position at tick k, before u[k] acts).
+  /// sequence x_ref[k], k = 0..n-1, starting at rest at x = 0 with the law's
+  /// start-up convention (v_ref, a_ref 0 at k = 0, e[-1] = e[0]).
+  /// Returns x[k] (the measured position at tick k, before the command of tick k acts).
   std::vector<double> simulate(const std::vector<double>& x_ref_mm) const;
 
   double Ts_s() const noexcept { return Ts_s_; }
@@ -88,19 +168,19 @@ class DiscreteLoopModel {
   const LinearPlant& plant() const noexcept { return plant_; }
 
  private:
-  std::complex<double> z_of(double f_Hz) const;
+  struct Responses {
+    std::complex<double> L, Px, Kr, Kr_fb;
+  };
+  Responses responses(double f_Hz) const;
   LinearPlant plant_;
   controller::PositionLoopParams gains_;
+  const LinearLaw* law_;
   double Ts_s_;
   Eigen::Matrix2d Phi_;
   Eigen::Vector2d Gamma_;
-  Eigen::Matrix4d A_fb_;
-};
-
-/// One point of a frequency response, for plots and reports.
-struct FrequencyPoint {
-  double f_Hz{0.0};
-  std::complex<double> L, S, T, X_over_R, E_over_R;
+  ControllerRealisation K_, K_fb_;  ///< the law, and the law with its feedforward at 0
+  bool same_states_{false};          ///< K_fb_.Ac == K_.Ac
+  Eigen::MatrixXd A_fb_;
 };
 
 /// What the analysis reports for one axis and one set of gains.
@@ -118,8 +198,9 @@ struct LoopAnalysis {
   double sensitivity_peak_Hz{0.0};
   double sensitivity_peak_dB{0.0};
   double complementary_peak{0.0};   ///< Mt = max |T|
-  /// -3 dB bandwidth of the feedback position loop T (first frequency with |T| < 1/sqrt 2), Hz;
-  /// the Nyquist frequency when |T| never drops that far.
+  /// -3 dB bandwidth of the position loop with the feedforward off (X/R of the feedback
+  /// alone; for the FADAL law that is T): first frequency with |X/R| < 1/sqrt 2, Hz;
+  /// the Nyquist frequency when it never drops that far.
   double bandwidth_Hz{0.0};
   /// The same for the position response with feedforward X/R.
   double bandwidth_with_feedforward_Hz{0.0};
@@ -140,7 +221,6 @@ LoopAnalysis analyse_loop(const DiscreteLoopModel& model, double f_min_Hz = 0.01
 std::vector<FrequencyPoint> frequency_response(const DiscreteLoopModel& model, double f_min_Hz, int points);
 
 /// A one-line-per-item text of the analysis, for `twin tune --analyse`.
-std::string format_analysis(const std::string& title, const controller::PositionLoopParams& gains,
-                            const LoopAnalysis& a);
+std::string format_analysis(const std::string& title, const DiscreteLoopModel& model, const LoopAnalysis& a);
 
 }  // namespace twin::analysis

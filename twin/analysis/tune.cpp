@@ -26,10 +26,7 @@ bool is_feed_move(const controller::Program& program, int block) {
          kind == controller::MotionKind::kArcCcw;
 }
 
-std::string gains_text(const controller::PositionLoopParams& g) {
-  return fmt::format("Kp {:.6g}, Ki {:.6g}, Kd {:.6g}, K1 {:.6g}, K2 {:.6g}", g.Kp_V_per_mm, g.Ki_V_per_s_mm,
-                     g.Kd_V_s_per_mm, g.K1_V_s2_per_mm, g.K2_V_s_per_mm);
-}
+std::string gains_text(const controller::PositionLoopParams& g) { return linear_law(g.law).gains_text(g); }
 
 /// How far the linear constraints are broken (0 when all hold), in normalised units.
 double linear_violation(const ConstraintValues& v, const TuneConstraints& c) {
@@ -47,13 +44,16 @@ double linear_violation(const ConstraintValues& v, const TuneConstraints& c) {
 ConstraintValues linear_constraints(const LinearPlant& plant, const controller::PositionLoopParams& gains,
                                     const TuneConstraints& c, const std::string& where) {
   ConstraintValues v;
-  const LoopAnalysis a = analyse_loop(DiscreteLoopModel(plant, gains, where), 0.01, 1500);
+  const DiscreteLoopModel model(plant, gains, where);
+  const LoopAnalysis a = analyse_loop(model, 0.01, 1500);
   v.stable = a.stable;
   v.phase_margin_deg = a.phase_margin_deg;
   v.gain_margin_dB = a.gain_margin_dB;
   v.sensitivity_peak = a.sensitivity_peak;
   v.step_overshoot = a.step_overshoot;
-  v.u_limit_V = c.u_fraction_max * gains.u_max_V;
+  v.command_name = model.law().command_name();
+  v.command_unit = model.law().command_unit();
+  v.command_limit = c.u_fraction_max * model.law().command_limit(gains);
   if (!a.stable) {
     v.violation = fmt::format("{}: closed loop unstable (largest pole |z| = {:.6f})", where, a.max_pole_magnitude);
   } else if (a.phase_margin_deg < c.phase_margin_min_deg) {
@@ -123,8 +123,11 @@ ScenarioMetrics simulate_window(const io::Scenario& scenario, const PlannedScena
   sim::CoSimulation cosim(machine, reference, scenario.make_process ? scenario.make_process() : nullptr, x0);
   const auto& axes = cosim.axes();
   if (k0 > 0) {
-    // Steady motion at tick k0: the drives at the reference speed, no error, the
-    // integrator holding what the feedforward does not give of B w + Tc.
+    // Steady motion at tick k0: the drives at the reference speed, the integrator
+    // holding what the feedforward does not give of B w + Tc. The FADAL law holds it
+    // with no error; the cascade's P position loop lags by the error whose Kv e gives
+    // the speed the velocity feedforward does not: e = (rg w + rg ev - kff v) / Kv, the
+    // velocity error ev = 0 with an integral, T / Kvp without one.
     sim::CoSimState st = cosim.get_state();
     const auto r0 = planned.trajectory.sample(k0);
     const auto r1 = planned.trajectory.sample(k0 - 1);
@@ -146,9 +149,22 @@ ScenarioMetrics simulate_window(const io::Scenario& scenario, const PlannedScena
       auto& ls = st.loops[i];
       ls = controller::PositionLoopState{};
       const double Tc = w > 0.0 ? d.Tc_pos_Nm : (w < 0.0 ? -d.Tc_neg_Nm : 0.0);
-      const double u_needed = (d.B_kg_m2_per_s * w + Tc) / (d.Ka_A_per_V * d.Kt_Nm_per_A);
-      ls.I_mm_s = g.Ki_V_per_s_mm > 0.0 ? (u_needed - g.K2_V_s_per_mm * v) / g.Ki_V_per_s_mm : 0.0;
-      ls.e_prev_mm = 0.0;
+      const double T_needed = d.B_kg_m2_per_s * w + Tc;
+      if (g.law == controller::LoopLaw::kCascade) {
+        const controller::CascadeGains& c = g.cascade;
+        const double ev = c.Tn_s > 0.0 ? 0.0 : T_needed / c.Kvp_torque_s_per_rad;
+        const double e = (d.rg_mm_per_rad * (w + ev) - c.kff * v) / c.Kv_per_s;
+        ds.x_mm -= e;
+        ds.x_load_mm = ds.x_table_mm = ds.x_mm;
+        ls.Iv_rad = c.Tn_s > 0.0 ? c.Tn_s * T_needed / c.Kvp_torque_s_per_rad : 0.0;
+        ls.T_filtered = T_needed;
+        ls.x_meas_prev_mm = ds.x_mm - d.rg_mm_per_rad * w * Ts;
+        ls.e_prev_mm = e;
+      } else {
+        const double u_needed = T_needed / (d.Ka_A_per_V * d.Kt_Nm_per_A);
+        ls.I_mm_s = g.Ki_V_per_s_mm > 0.0 ? (u_needed - g.K2_V_s_per_mm * v) / g.Ki_V_per_s_mm : 0.0;
+        ls.e_prev_mm = 0.0;
+      }
       ls.x_ref_prev_mm = r1.x_mm[a];
       ls.v_ref_prev_mm_per_s = v;
       ls.last_k = k0 - 1;
@@ -210,23 +226,84 @@ ScenarioMetrics simulate_window(const io::Scenario& scenario, const PlannedScena
 
 namespace {
 
-/// Per-axis search variables: ln(Kp/Kp_b), ln(Ki/Ki_b), ln(Kd/Kd_b), K1/K1_m, K2/K2_m.
+/// Per-axis search variables, one per gain the law searches: ln(gain / base) for a
+/// feedback gain (a gain with base 0 stays 0), gain / model value for a feedforward gain.
 struct AxisScales {
   Axis axis{Axis::kX};
   LinearPlant plant;
   controller::PositionLoopParams start;
-  double Kp_b{1.0}, Ki_b{0.0}, Kd_b{1.0};
-  FeedforwardGains ff;
+  const LinearLaw* law{nullptr};
+  std::vector<const LawGain*> vars;  ///< feedback gains first
+  std::vector<double> base;
+  std::size_t feedback_vars{0};
+
+  AxisScales(Axis a, const LinearPlant& p, const controller::PositionLoopParams& g)
+      : axis(a), plant(p), start(g), law(&linear_law(g.law)) {
+    for (const LawGain& lg : law->gains()) {
+      if (!lg.searched) continue;
+      vars.push_back(&lg);
+      if (lg.feedforward) {
+        base.push_back(lg.model(plant));
+      } else {
+        const double v = lg.get(start);
+        base.push_back(v > 0.0 ? v : (lg.base_when_zero ? lg.base_when_zero(start) : 0.0));
+        ++feedback_vars;
+      }
+    }
+  }
+  std::size_t size() const { return vars.size(); }
+  /// The search's starting variables: the start's feedback gains, the model feedforward.
+  std::vector<double> origin() const {
+    std::vector<double> q(size(), 0.0);
+    for (std::size_t i = feedback_vars; i < size(); ++i) q[i] = 1.0;
+    return q;
+  }
+  double lower(std::size_t i, double log_range) const {
+    return vars[i]->feedforward ? 0.0 : (base[i] > 0.0 ? -log_range : 0.0);
+  }
+  double upper(std::size_t i, double log_range, double ff_range) const {
+    return vars[i]->feedforward ? ff_range : (base[i] > 0.0 ? log_range : 0.0);
+  }
   controller::PositionLoopParams gains(const double* q) const {
     controller::PositionLoopParams g = start;
-    g.Kp_V_per_mm = Kp_b * std::exp(q[0]);
-    g.Ki_V_per_s_mm = Ki_b > 0.0 ? Ki_b * std::exp(q[1]) : 0.0;
-    g.Kd_V_s_per_mm = Kd_b * std::exp(q[2]);
-    g.K1_V_s2_per_mm = ff.K1_V_s2_per_mm * q[3];
-    g.K2_V_s_per_mm = ff.K2_V_s_per_mm * q[4];
+    for (std::size_t i = 0; i < size(); ++i)
+      vars[i]->ref(g) = vars[i]->feedforward ? base[i] * q[i] : (base[i] > 0.0 ? base[i] * std::exp(q[i]) : 0.0);
+    return g;
+  }
+  /// `start` with every feedforward gain of the law at its model value.
+  controller::PositionLoopParams model_feedforward() const {
+    controller::PositionLoopParams g = start;
+    for (const LawGain& lg : law->gains())
+      if (lg.feedforward) lg.ref(g) = lg.model(plant);
+    return g;
+  }
+  /// `g` with its searched feedforward gains scaled by alpha.
+  controller::PositionLoopParams scaled_feedforward(controller::PositionLoopParams g, double alpha) const {
+    for (std::size_t i = feedback_vars; i < size(); ++i) vars[i]->ref(g) *= alpha;
     return g;
   }
 };
+
+/// Peak |command| of axis `a` over a run in its law's unit (u in V, or the torque); a
+/// tick at the limit counts as the limit (the cascade limits the torque command before
+/// the current loop's lag, whose output may stay just below it).
+double command_peak(const ScenarioMetrics& m, const sim::MachineDefinition& machine, Axis a) {
+  const auto& def = machine.axes[index(a)];
+  const LinearLaw& law = linear_law(def.loop.law);
+  const LinearPlant p = linear_plant(def.drive);
+  const double peak = m.u_peak_V[index(a)] * p.Ka_A_per_V * p.Kt_Nm_per_A / law.torque_per_command(p);
+  return m.saturated_ticks[index(a)] > 0 ? std::max(peak, law.command_limit(def.loop)) : peak;
+}
+double command_limit(const sim::MachineDefinition& machine, Axis a, const TuneConstraints& c) {
+  const auto& loop = machine.axes[index(a)].loop;
+  return c.u_fraction_max * linear_law(loop.law).command_limit(loop);
+}
+/// "|u| 9.844 V > 9.500 V" or "|torque| 30.200 torque unit > 29.402 torque unit".
+std::string command_text(const sim::MachineDefinition& machine, Axis a, double value, double limit) {
+  const LinearLaw& law = linear_law(machine.axes[index(a)].loop.law);
+  return fmt::format("|{}| {:.3f} {} > {:.3f} {}", law.command_name(), value, law.command_unit(), limit,
+                     law.command_unit());
+}
 
 struct StageA {
   const AxisScales* scales;
@@ -234,13 +311,16 @@ struct StageA {
   std::string where;
 };
 
-double stage_a_objective(unsigned, const double* q, double*, void*) {
-  return q[0] * q[0] + q[1] * q[1] + q[2] * q[2];
+double stage_a_objective(unsigned n, const double* q, double*, void*) {
+  double s = 0.0;
+  for (unsigned i = 0; i < n; ++i) s += q[i] * q[i];
+  return s;
 }
 
-double stage_a_constraint(unsigned, const double* q, double*, void* data) {
+double stage_a_constraint(unsigned n, const double* q, double*, void* data) {
   const auto* d = static_cast<const StageA*>(data);
-  double full[5] = {q[0], q[1], q[2], 0.0, 0.0};
+  std::vector<double> full(d->scales->size(), 0.0);
+  std::copy(q, q + n, full.begin());
   // Aim a little inside the constraints so that COBYLA's last point is feasible.
   TuneConstraints tight = *d->constraints;
   tight.phase_margin_min_deg += 0.5;
@@ -248,7 +328,7 @@ double stage_a_constraint(unsigned, const double* q, double*, void* data) {
   tight.sensitivity_peak_max -= 0.02;
   tight.step_overshoot_max -= 0.005;
   try {
-    const ConstraintValues v = linear_constraints(d->scales->plant, d->scales->gains(full), tight, d->where);
+    const ConstraintValues v = linear_constraints(d->scales->plant, d->scales->gains(full.data()), tight, d->where);
     return linear_violation(v, tight);
   } catch (const ConfigError&) {
     return 100.0;
@@ -261,6 +341,7 @@ struct StageB {
   const SimulationWindow* window;
   const TuneOptions* options;
   std::vector<AxisScales> scales;
+  std::vector<std::size_t> offsets;  ///< where each axis's variables start in q
   sim::MachineDefinition machine;
   double norm_contour{1.0}, norm_rms{1.0}, norm_max{1.0};
   int evaluations{0};
@@ -279,14 +360,14 @@ double objective_of(const ScenarioMetrics& m, const std::vector<AxisScales>& sca
          d.options->max_tracking_weight * mx / d.norm_max;
 }
 
-/// Simulation constraint violation: peak |u| beyond the limit, or a runaway.
+/// Simulation constraint violation: peak |command| beyond the limit, or a runaway.
 double simulation_violation(const ScenarioMetrics& m, const std::vector<AxisScales>& scales,
                             const sim::MachineDefinition& machine, const TuneConstraints& c) {
   if (!m.completed) return 10.0;
   double s = 0.0;
   for (const auto& sc : scales) {
-    const double limit = c.u_fraction_max * machine.axes[index(sc.axis)].loop.u_max_V;
-    s += std::max(0.0, (m.u_peak_V[index(sc.axis)] - limit) / limit);
+    const double limit = command_limit(machine, sc.axis, c);
+    s += std::max(0.0, (command_peak(m, machine, sc.axis) - limit) / limit);
   }
   return s;
 }
@@ -298,7 +379,7 @@ double stage_b_objective(unsigned n, const double* q, double*, void* data) {
   sim::MachineDefinition machine = d->machine;
   for (std::size_t i = 0; i < d->scales.size(); ++i) {
     const auto& s = d->scales[i];
-    const controller::PositionLoopParams g = s.gains(q + 5 * i);
+    const controller::PositionLoopParams g = s.gains(q + d->offsets[i]);
     try {
       lin += linear_violation(linear_constraints(s.plant, g, c, std::string(axis_name(s.axis))), c);
     } catch (const ConfigError&) {
@@ -336,13 +417,13 @@ std::string motion_text(const PlannedScenario& planned, int block) {
 
 /// Before/after figures of one axis; the |u| constraint from the full-scenario runs.
 AxisTuneResult axis_result(const AxisScales& s, const controller::PositionLoopParams& after,
-                           const ScenarioMetrics& full_before, const ScenarioMetrics& full_after,
-                           const TuneConstraints& c) {
+                           const sim::MachineDefinition& machine, const ScenarioMetrics& full_before,
+                           const ScenarioMetrics& full_after, const TuneConstraints& c) {
   AxisTuneResult ar;
   ar.axis = s.axis;
   ar.before = s.start;
   ar.after = after;
-  ar.model_feedforward = s.ff;
+  ar.model_feedforward = s.model_feedforward();
   const std::string name(axis_name(s.axis));
   ar.analysis_before = analyse_loop(DiscreteLoopModel(s.plant, ar.before, name));
   ar.analysis_after = analyse_loop(DiscreteLoopModel(s.plant, ar.after, name));
@@ -350,29 +431,29 @@ AxisTuneResult axis_result(const AxisScales& s, const controller::PositionLoopPa
   ar.constraints_after = linear_constraints(s.plant, ar.after, c, name);
   for (auto* pair : {&ar.constraints_before, &ar.constraints_after}) {
     const ScenarioMetrics& fm = pair == &ar.constraints_before ? full_before : full_after;
-    pair->u_peak_V = fm.u_peak_V[index(s.axis)];
-    pair->simulation_ok = fm.completed && pair->u_peak_V <= pair->u_limit_V;
+    pair->command_peak = command_peak(fm, machine, s.axis);
+    pair->simulation_ok = fm.completed && pair->command_peak <= pair->command_limit;
     if (pair->violation.empty() && !pair->simulation_ok)
-      pair->violation = fm.completed ? fmt::format("{}: peak |u| {:.3f} V > {:.3f} V in the full scenario", name,
-                                                   pair->u_peak_V, pair->u_limit_V)
+      pair->violation = fm.completed ? fmt::format("{}: peak {} in the full scenario", name,
+                                                   command_text(machine, s.axis, pair->command_peak,
+                                                                pair->command_limit))
                                      : fmt::format("{}: {}", name, fm.failure);
   }
   return ar;
 }
 
-/// The largest alpha in [0, 1] (to 1/32) for which axis `a` with gains `g`, its feedforward
-/// K1, K2 scaled by alpha, keeps its peak |u| within `limit_V` on the window (the other axes
-/// as in `machine`); -1 when even alpha = 0 does not. At most 6 simulations.
+/// The largest alpha in [0, 1] (to 1/32) for which axis `s.axis` with gains `g`, its searched
+/// feedforward scaled by alpha, keeps its peak command within `limit` on the window (the
+/// other axes as in `machine`); -1 when even alpha = 0 does not, or when the law searches
+/// no feedforward (the cascade keeps the machine's). At most 6 simulations.
 double reachable_feedforward(const io::Scenario& scenario, const PlannedScenario& planned,
-                             sim::MachineDefinition machine, Axis a, const controller::PositionLoopParams& g,
-                             const SimulationWindow& window, double limit_V) {
+                             sim::MachineDefinition machine, const AxisScales& s,
+                             const controller::PositionLoopParams& g, const SimulationWindow& window, double limit) {
+  if (s.feedback_vars == s.size()) return -1.0;
   auto ok = [&](double alpha) {
-    controller::PositionLoopParams ga = g;
-    ga.K1_V_s2_per_mm *= alpha;
-    ga.K2_V_s_per_mm *= alpha;
-    machine.axes[index(a)].loop = ga;
+    machine.axes[index(s.axis)].loop = s.scaled_feedforward(g, alpha);
     const ScenarioMetrics m = simulate_window(scenario, planned, machine, window);
-    return m.completed && m.u_peak_V[index(a)] <= limit_V;
+    return m.completed && command_peak(m, machine, s.axis) <= limit;
   };
   if (!ok(0.0)) return -1.0;
   double lo = 0.0, hi = 1.0;
@@ -403,16 +484,9 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
     const auto& def = m0.axes[index(a)];
     if (!def.present)
       throw ConfigError(fmt::format("tune: axis {} is not present in machine {}", axis_name(a), m0.name));
-    AxisScales s;
-    s.axis = a;
-    s.plant = linear_plant(def.drive);
-    s.plant.validate(fmt::format("{}: axis {}", m0.source.empty() ? m0.name : m0.source, axis_name(a)));
-    s.start = def.loop;
-    s.Kp_b = def.loop.Kp_V_per_mm > 0.0 ? def.loop.Kp_V_per_mm : 100.0;
-    s.Ki_b = def.loop.Ki_V_per_s_mm;
-    s.Kd_b = def.loop.Kd_V_s_per_mm > 0.0 ? def.loop.Kd_V_s_per_mm : s.Kp_b * 1e-3;
-    s.ff = model_feedforward(s.plant);
-    requested.push_back(s);
+    const LinearPlant plant = linear_plant(def.drive);
+    plant.validate(fmt::format("{}: axis {}", m0.source.empty() ? m0.name : m0.source, axis_name(a)));
+    requested.emplace_back(a, plant, def.loop);
   }
   const double lr = std::log(options.gain_range);
   // Axes that keep the machine's gains, with the reason (in the order asked).
@@ -420,40 +494,53 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
 
   // Stage A: nearest feedback gains that meet the linear constraints, per axis.
   std::vector<AxisScales> scales;
-  std::vector<double> q0;
+  std::vector<std::vector<double>> q0;  // per axis
   for (const auto& s : requested) {
     StageA data{&s, &c, std::string(axis_name(s.axis))};
-    nlopt::opt opt(nlopt::LN_COBYLA, 3);
-    opt.set_lower_bounds(std::vector<double>{-lr, s.Ki_b > 0.0 ? -lr : 0.0, -lr});
-    opt.set_upper_bounds(std::vector<double>{lr, s.Ki_b > 0.0 ? lr : 0.0, lr});
+    const unsigned nf = static_cast<unsigned>(s.feedback_vars);
+    nlopt::opt opt(nlopt::LN_COBYLA, nf);
+    std::vector<double> lo(nf), hi(nf);
+    for (std::size_t i = 0; i < nf; ++i) {
+      lo[i] = s.lower(i, lr);
+      hi[i] = s.upper(i, lr, options.feedforward_range);
+    }
+    opt.set_lower_bounds(lo);
+    opt.set_upper_bounds(hi);
     opt.set_min_objective(stage_a_objective, &data);
     opt.add_inequality_constraint(stage_a_constraint, &data, 0.0);
     opt.set_maxeval(600);
     opt.set_xtol_abs(1e-4);
     opt.set_initial_step(0.3);
-    std::vector<double> x{0.0, 0.0, 0.0};
+    std::vector<double> x(nf, 0.0);
     double fval = 0.0;
-    try {
-      opt.optimize(x, fval);
-    } catch (const std::exception&) {
-      // COBYLA's stopping by round-off is not a failure: the point is checked below.
+    // Gains that already meet the constraints are their own nearest point (COBYLA would
+    // end within its tolerance of them, not on them).
+    if (stage_a_constraint(nf, x.data(), nullptr, &data) > 0.0) {
+      try {
+        opt.optimize(x, fval);
+      } catch (const std::exception&) {
+        // COBYLA's stopping by round-off is not a failure: the point is checked below.
+      }
     }
-    double full[5] = {x[0], x[1], x[2], 1.0, 1.0};
-    const ConstraintValues v = linear_constraints(s.plant, s.gains(full), c, std::string(axis_name(s.axis)));
+    std::vector<double> full = s.origin();
+    std::copy(x.begin(), x.end(), full.begin());
+    const ConstraintValues v = linear_constraints(s.plant, s.gains(full.data()), c, std::string(axis_name(s.axis)));
     if (!v.linear_ok) {
-      kept.emplace_back(s, fmt::format("no gains satisfy the constraints on axis {} within the search range (Kp, Ki, "
-                                       "Kd in [1/{:g}, {:g}] x start): best found {} ({}); start {}",
-                                       axis_name(s.axis), options.gain_range, options.gain_range,
-                                       gains_text(s.gains(full)), v.violation, gains_text(s.start)));
+      std::string names;
+      for (std::size_t i = 0; i < nf; ++i) names += fmt::format("{}{}", i > 0 ? ", " : "", s.vars[i]->name);
+      kept.emplace_back(s, fmt::format("no gains satisfy the constraints on axis {} within the search range ({} in "
+                                       "[1/{:g}, {:g}] x start): best found {} ({}); start {}",
+                                       axis_name(s.axis), names, options.gain_range, options.gain_range,
+                                       gains_text(s.gains(full.data())), v.violation, gains_text(s.start)));
       continue;
     }
     scales.push_back(s);
-    q0.insert(q0.end(), {x[0], x[1], x[2], 1.0, 1.0});
+    q0.push_back(full);
   }
 
   auto finish_kept = [&](const ScenarioMetrics& fb, const ScenarioMetrics& fa) {
     for (const auto& [s, why] : kept) {
-      AxisTuneResult ar = axis_result(s, s.start, fb, fa, c);
+      AxisTuneResult ar = axis_result(s, s.start, m0, fb, fa, c);
       ar.tuned = false;
       ar.note = why;
       result.axes.push_back(ar);
@@ -483,26 +570,27 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
   result.full_before = simulate_window(scenario, planned, m0, full);
   if (result.full_before.completed) {
     std::vector<AxisScales> reachable;
-    std::vector<double> q_reachable;
+    std::vector<std::vector<double>> q_reachable;
     for (std::size_t i = 0; i < scales.size(); ++i) {
       const Axis a = scales[i].axis;
-      const double limit = c.u_fraction_max * m0.axes[index(a)].loop.u_max_V;
-      const double peak = result.full_before.u_peak_V[index(a)];
+      const double limit = command_limit(m0, a, c);
+      const double peak = command_peak(result.full_before, m0, a);
       if (peak > limit) {
         kept.emplace_back(
             scales[i],
-            fmt::format("its own gains already reach peak |u| {:.3f} V > {:.3f} V ({:g} x u_max) on this scenario, at "
-                        "t = {:.4f} s {} ({} ticks at the clamp), so the scenario cannot show that new gains keep the "
+            fmt::format("its own gains already reach peak {} ({:g} x {}) on this scenario, at "
+                        "t = {:.4f} s {} ({} ticks at the limit), so the scenario cannot show that new gains keep the "
                         "limit; axis {} is left as it is (tune it on a scenario without that move, or raise "
                         "--u-fraction)",
-                        peak, limit, c.u_fraction_max, result.full_before.u_peak_t_s[index(a)],
+                        command_text(m0, a, peak, limit), c.u_fraction_max,
+                        linear_law(m0.axes[index(a)].loop.law).command_limit_name(),
+                        result.full_before.u_peak_t_s[index(a)],
                         motion_text(planned, result.full_before.u_peak_block[index(a)]),
                         result.full_before.saturated_ticks[index(a)], axis_name(a)));
         continue;
       }
       reachable.push_back(scales[i]);
-      q_reachable.insert(q_reachable.end(), q0.begin() + static_cast<std::ptrdiff_t>(5 * i),
-                         q0.begin() + static_cast<std::ptrdiff_t>(5 * i + 5));
+      q_reachable.push_back(q0[i]);
     }
     scales = std::move(reachable);
     q0 = std::move(q_reachable);
@@ -524,33 +612,37 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
   std::vector<std::string> limited(kNumAxes);  // per axis: what limited the tuning
   {
     sim::MachineDefinition ms = m0;
-    for (std::size_t i = 0; i < scales.size(); ++i) ms.axes[index(scales[i].axis)].loop = scales[i].gains(&q0[5 * i]);
+    for (std::size_t i = 0; i < scales.size(); ++i) ms.axes[index(scales[i].axis)].loop = scales[i].gains(q0[i].data());
     const ScenarioMetrics start = simulate_window(scenario, planned, ms, window);
     std::vector<AxisScales> reachable;
-    std::vector<double> q_reachable;
+    std::vector<std::vector<double>> q_reachable;
     for (std::size_t i = 0; i < scales.size(); ++i) {
-      const Axis a = scales[i].axis;
-      const double limit = c.u_fraction_max * m0.axes[index(a)].loop.u_max_V;
-      std::vector<double> q(q0.begin() + static_cast<std::ptrdiff_t>(5 * i),
-                            q0.begin() + static_cast<std::ptrdiff_t>(5 * i + 5));
-      if (start.completed && start.u_peak_V[index(a)] > limit) {
-        const double alpha = reachable_feedforward(scenario, planned, ms, a, scales[i].gains(q.data()), window, limit);
-        const std::string where = fmt::format("with the model feedforward the peak |u| is {:.3f} V > {:.3f} V at t = "
-                                              "{:.4f} s {}",
-                                              start.u_peak_V[index(a)], limit, start.u_peak_t_s[index(a)],
-                                              motion_text(planned, start.u_peak_block[index(a)]));
+      const AxisScales& s = scales[i];
+      const Axis a = s.axis;
+      const double limit = command_limit(m0, a, c);
+      std::vector<double> q = q0[i];
+      const double peak = command_peak(start, ms, a);
+      if (start.completed && peak > limit) {
+        const bool has_ff = s.feedback_vars < s.size();
+        const double alpha = reachable_feedforward(scenario, planned, ms, s, s.gains(q.data()), window, limit);
+        const std::string where =
+            fmt::format("with {} the peak {} at t = {:.4f} s {}",
+                        has_ff ? "the model feedforward" : "the machine's feedforward",
+                        command_text(ms, a, peak, limit),
+                        start.u_peak_t_s[index(a)], motion_text(planned, start.u_peak_block[index(a)]));
         if (alpha < 0.0) {
-          kept.emplace_back(scales[i], where + ", and above it without feedforward too (feedback at the nearest gains "
-                                               "meeting the margins): no starting point keeps the limit");
+          kept.emplace_back(s, where + (has_ff ? ", and above it without feedforward too (feedback at the nearest "
+                                                 "gains meeting the margins): no starting point keeps the limit"
+                                               : " at the nearest feedback gains meeting the margins: no starting "
+                                                 "point keeps the limit"));
           continue;
         }
-        q[3] *= alpha;
-        q[4] *= alpha;
+        for (std::size_t j = s.feedback_vars; j < s.size(); ++j) q[j] *= alpha;
         limited[index(a)] = fmt::format("{}; the search started from {:.3f} x the model feedforward", where, alpha);
-        ms.axes[index(a)].loop = scales[i].gains(q.data());
+        ms.axes[index(a)].loop = s.gains(q.data());
       }
-      reachable.push_back(scales[i]);
-      q_reachable.insert(q_reachable.end(), q.begin(), q.end());
+      reachable.push_back(s);
+      q_reachable.push_back(q);
     }
     scales = std::move(reachable);
     q0 = std::move(q_reachable);
@@ -569,11 +661,23 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
   data.options = &options;
   data.scales = scales;
   data.machine = m0;
+  std::vector<double> x0;  // all axes' variables, one after the other
+  for (std::size_t i = 0; i < scales.size(); ++i) {
+    data.offsets.push_back(x0.size());
+    x0.insert(x0.end(), q0[i].begin(), q0[i].end());
+  }
   result.window_before = simulate_window(scenario, planned, m0, window);
+  // An axis that does not move through the corners searched on (its error there is 0)
+  // does not enter the objective: the search's moves of its gains mean nothing, and it
+  // ends at its stage-A point.
+  std::vector<bool> idle;
   {
     sim::MachineDefinition ms = m0;
-    for (std::size_t i = 0; i < scales.size(); ++i) ms.axes[index(scales[i].axis)].loop = scales[i].gains(&q0[5 * i]);
+    for (std::size_t i = 0; i < scales.size(); ++i) ms.axes[index(scales[i].axis)].loop = scales[i].gains(q0[i].data());
     const ScenarioMetrics start = simulate_window(scenario, planned, ms, window);
+    for (const auto& s : scales)
+      idle.push_back(start.completed && start.max_tracking_error_mm[index(s.axis)] == 0.0 &&
+                     start.rms_tracking_error_mm[index(s.axis)] == 0.0);
     const ScenarioMetrics& ref = result.window_before.completed ? result.window_before : start;
     data.norm_contour = std::max(ref.max_contour_error_mm, 1e-6);
     double rms = 0.0, mx = 0.0;
@@ -585,15 +689,13 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
     data.norm_max = std::max(mx, 1e-6);
     result.objective_before = result.window_before.completed ? objective_of(result.window_before, scales, data) : 0.0;
   }
-  const unsigned n = static_cast<unsigned>(q0.size());
-  std::vector<double> lb(n), ub(n);
+  const unsigned n = static_cast<unsigned>(x0.size());
+  std::vector<double> lb(n), ub(n), step(n);
   for (std::size_t i = 0; i < scales.size(); ++i) {
-    const bool has_ki = scales[i].Ki_b > 0.0;
-    const double lo[5] = {-lr, has_ki ? -lr : 0.0, -lr, 0.0, 0.0};
-    const double hi[5] = {lr, has_ki ? lr : 0.0, lr, options.feedforward_range, options.feedforward_range};
-    for (std::size_t j = 0; j < 5; ++j) {
-      lb[5 * i + j] = lo[j];
-      ub[5 * i + j] = hi[j];
+    for (std::size_t j = 0; j < scales[i].size(); ++j) {
+      lb[data.offsets[i] + j] = scales[i].lower(j, lr);
+      ub[data.offsets[i] + j] = scales[i].upper(j, lr, options.feedforward_range);
+      step[data.offsets[i] + j] = scales[i].vars[j]->feedforward ? 0.1 : 0.15;
     }
   }
   {
@@ -602,11 +704,9 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
     opt.set_upper_bounds(ub);
     opt.set_min_objective(stage_b_objective, &data);
     opt.set_maxeval(options.max_evaluations);
-    std::vector<double> step(n);
-    for (std::size_t i = 0; i < n; ++i) step[i] = (i % 5) < 3 ? 0.15 : 0.1;
     opt.set_initial_step(step);
     opt.set_xtol_abs(1e-3);
-    std::vector<double> x = q0;
+    std::vector<double> x = x0;
     double fval = 0.0;
     try {
       opt.optimize(x, fval);
@@ -622,7 +722,7 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
     result.window_after = result.window_before;
     result.full_after = result.full_before;
     for (const auto& s : scales) {
-      AxisTuneResult ar = axis_result(s, s.start, result.full_before, result.full_after, c);
+      AxisTuneResult ar = axis_result(s, s.start, m0, result.full_before, result.full_after, c);
       ar.tuned = false;
       ar.note = result.message;
       result.axes.push_back(ar);
@@ -630,10 +730,13 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
     finish_kept(result.full_before, result.full_after);
     return result;
   }
+  for (std::size_t i = 0; i < scales.size(); ++i)
+    if (idle[i])
+      std::copy(q0[i].begin(), q0[i].end(), data.best_q.begin() + static_cast<std::ptrdiff_t>(data.offsets[i]));
   result.window_after = data.best_metrics;
   result.objective_after = data.best_objective;
   for (std::size_t i = 0; i < scales.size(); ++i)
-    result.machine_after.axes[index(scales[i].axis)].loop = scales[i].gains(&data.best_q[5 * i]);
+    result.machine_after.axes[index(scales[i].axis)].loop = scales[i].gains(&data.best_q[data.offsets[i]]);
 
   // Judge on the full scenario. An axis whose tuned gains break a constraint there
   // (the search saw only the corner window) goes back to its own gains, and the
@@ -642,24 +745,24 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
   std::vector<AxisScales> tuned;
   for (const auto& s : scales) {
     const AxisTuneResult ar =
-        axis_result(s, result.machine_after.axes[index(s.axis)].loop, result.full_before, result.full_after, c);
+        axis_result(s, result.machine_after.axes[index(s.axis)].loop, m0, result.full_before, result.full_after, c);
     if (ar.constraints_after.violation.empty() || !result.full_after.completed) {
       tuned.push_back(s);
       continue;
     }
     if (ar.constraints_after.linear_ok) {
-      // Only the |u| limit is broken: scale this axis's feedforward down to what keeps it.
-      const double limit = ar.constraints_after.u_limit_V;
-      const double alpha = reachable_feedforward(scenario, planned, result.machine_after, s.axis,
+      // Only the command limit is broken: scale this axis's feedforward down to what keeps it.
+      const double limit = ar.constraints_after.command_limit;
+      const double alpha = reachable_feedforward(scenario, planned, result.machine_after, s,
                                                  result.machine_after.axes[index(s.axis)].loop, full, limit);
       if (alpha >= 0.0) {
         auto& g = result.machine_after.axes[index(s.axis)].loop;
-        g.K1_V_s2_per_mm *= alpha;
-        g.K2_V_s_per_mm *= alpha;
+        g = s.scaled_feedforward(g, alpha);
         limited[index(s.axis)] +=
-            fmt::format("{}on the full scenario the gains tuned on the corner window reach peak |u| {:.3f} V > {:.3f} "
-                        "V at t = {:.4f} s {}: the feedforward was scaled by {:.3f} to keep the limit",
-                        limited[index(s.axis)].empty() ? "" : "; ", ar.constraints_after.u_peak_V, limit,
+            fmt::format("{}on the full scenario the gains tuned on the corner window reach peak {} "
+                        "at t = {:.4f} s {}: the feedforward was scaled by {:.3f} to keep the limit",
+                        limited[index(s.axis)].empty() ? "" : "; ",
+                        command_text(m0, s.axis, ar.constraints_after.command_peak, limit),
                         result.full_after.u_peak_t_s[index(s.axis)],
                         motion_text(planned, result.full_after.u_peak_block[index(s.axis)]), alpha);
         tuned.push_back(s);
@@ -671,7 +774,9 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
                                      "keeps its own gains",
                                      ar.constraints_after.violation, result.full_after.u_peak_t_s[index(s.axis)],
                                      motion_text(planned, result.full_after.u_peak_block[index(s.axis)]),
-                                     ar.constraints_after.linear_ok ? ", also with no feedforward" : "",
+                                     ar.constraints_after.linear_ok && s.feedback_vars < s.size()
+                                         ? ", also with no feedforward"
+                                         : "",
                                      axis_name(s.axis)));
     result.machine_after.axes[index(s.axis)].loop = s.start;
   }
@@ -679,10 +784,27 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
   for (const auto& l : limited) changed = changed || l.find("on the full scenario") != std::string::npos;
   if (changed) result.full_after = simulate_window(scenario, planned, result.machine_after, full);
   result.feasible = !tuned.empty();
+  std::size_t changed_axes = 0;
   for (const auto& s : tuned) {
     AxisTuneResult ar =
-        axis_result(s, result.machine_after.axes[index(s.axis)].loop, result.full_before, result.full_after, c);
+        axis_result(s, result.machine_after.axes[index(s.axis)].loop, m0, result.full_before, result.full_after, c);
     ar.note = limited[index(s.axis)];
+    bool same = true;
+    for (const LawGain& lg : s.law->gains()) same = same && lg.get(ar.before) == lg.get(ar.after);
+    if (same) {
+      // The search's best point left this axis where it started (its start met every
+      // constraint and nothing it tried on this axis lowered the objective).
+      ar.tuned = false;
+      ar.note = result.window_before.max_tracking_error_mm[index(s.axis)] == 0.0
+                    ? fmt::format("axis {} does not move through the corners searched on (its tracking error there "
+                                  "is 0), so the search cannot judge its gains; the machine's meet every constraint "
+                                  "and are kept",
+                                  axis_name(s.axis))
+                    : std::string("the machine's gains meet every constraint and no change of them lowered the "
+                                  "objective; they are kept");
+    } else {
+      ++changed_axes;
+    }
     if (!ar.constraints_after.violation.empty() && result.feasible) {
       result.feasible = false;
       result.message = fmt::format("tuned gains break a constraint on the full scenario: {}",
@@ -694,7 +816,7 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
   if (result.feasible) {
     result.message = fmt::format(
         "tuned {} axis(es) in {} simulations: max contour error through the corners {:.3f} um -> {:.3f} um",
-        tuned.size(), result.evaluations, 1e3 * result.full_before.max_contour_error_mm,
+        changed_axes, result.evaluations, 1e3 * result.full_before.max_contour_error_mm,
         1e3 * result.full_after.max_contour_error_mm);
     if (!kept.empty()) result.message += "; " + kept_text();
   } else if (result.message.empty()) {
@@ -705,10 +827,12 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
 
 namespace {
 
-nlohmann::json gains_json(const controller::PositionLoopParams& g) {
-  return {{"Kp_V_per_mm", g.Kp_V_per_mm},       {"Ki_V_per_s_mm", g.Ki_V_per_s_mm},
-          {"Kd_V_s_per_mm", g.Kd_V_s_per_mm},   {"K1_V_s2_per_mm", g.K1_V_s2_per_mm},
-          {"K2_V_s_per_mm", g.K2_V_s_per_mm}};
+/// The law's gains under their report names (`feedforward_only`: only its feedforward gains).
+nlohmann::json gains_json(const controller::PositionLoopParams& g, bool feedforward_only = false) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const LawGain& lg : linear_law(g.law).gains())
+    if (lg.feedforward || !feedforward_only) j[std::string(lg.json_key)] = lg.get(g);
+  return j;
 }
 
 double finite_or(double v, double alt) { return std::isfinite(v) ? v : alt; }
@@ -735,12 +859,15 @@ nlohmann::json analysis_json(const LoopAnalysis& a) {
 }
 
 nlohmann::json constraints_json(const ConstraintValues& v) {
+  // The FADAL law's command is u in V (u_peak_V, u_limit_V); the cascade's the torque in
+  // the machine's torque unit (torque_peak, torque_limit).
+  const std::string unit = v.command_unit == "V" ? "_V" : "";
   return {{"phase_margin_deg", finite_or(v.phase_margin_deg, 1e300)},
           {"gain_margin_dB", finite_or(v.gain_margin_dB, 1e300)},
           {"sensitivity_peak", v.sensitivity_peak},
           {"step_overshoot", finite_or(v.step_overshoot, 1e300)},
-          {"u_peak_V", v.u_peak_V},
-          {"u_limit_V", v.u_limit_V},
+          {fmt::format("{}_peak{}", v.command_name, unit), v.command_peak},
+          {fmt::format("{}_limit{}", v.command_name, unit), v.command_limit},
           {"satisfied", v.violation.empty()},
           {"violation", v.violation}};
 }
@@ -780,7 +907,15 @@ nlohmann::json tune_report(const io::Scenario& scenario, const TuneOptions& opti
                       {"sensitivity_peak_max", c.sensitivity_peak_max},
                       {"step_overshoot_max", c.step_overshoot_max},
                       {"u_fraction_max", c.u_fraction_max}};
+  nlohmann::json searched = nlohmann::json::object();
+  for (const auto& a : r.axes) {
+    nlohmann::json names = nlohmann::json::array();
+    for (const LawGain& lg : linear_law(a.before.law).gains())
+      if (lg.searched) names.push_back(lg.name);
+    searched[std::string(axis_name(a.axis))] = names;
+  }
   j["search"] = {{"method", "NLopt COBYLA (linear constraints) then BOBYQA (coupled simulation)"},
+                 {"gains_searched", searched},
                  {"simulations", r.evaluations},
                  {"max_evaluations", options.max_evaluations},
                  {"window_before_s", options.window_before_s},
@@ -796,8 +931,8 @@ nlohmann::json tune_report(const io::Scenario& scenario, const TuneOptions& opti
     ja["note"] = a.note;
     ja["gains_before"] = gains_json(a.before);
     ja["gains_after"] = gains_json(a.after);
-    ja["model_feedforward"] = {{"K1_V_s2_per_mm", a.model_feedforward.K1_V_s2_per_mm},
-                               {"K2_V_s_per_mm", a.model_feedforward.K2_V_s_per_mm}};
+    ja["controller"] = controller::loop_law_name(a.before.law);
+    ja["model_feedforward"] = gains_json(a.model_feedforward, true);
     ja["analysis_before"] = analysis_json(a.analysis_before);
     ja["analysis_after"] = analysis_json(a.analysis_after);
     ja["constraints_before"] = constraints_json(a.constraints_before);
@@ -856,7 +991,7 @@ std::vector<std::filesystem::path> plot_tune(io::ResultSet& results, const io::S
   script += fmt::format("set output {}\n", gnuplot_output(bode_png));
   script += "set multiplot layout 2,1\nset logscale x\nset grid\nset xlabel 'f [Hz]'\nset ylabel 'dB'\n";
   script += fmt::format("set title {}\n",
-                        gnuplot_text(fmt::format("Open loop L (broken at u), {}: before (Table gains) and after tuning",
+                        gnuplot_text(fmt::format("Open loop L (broken at the command), {}: before and after tuning",
                                                  scenario.machine.name)));
   std::string mag = "plot ", ph = "plot ";
   int idx = 0;

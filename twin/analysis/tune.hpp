@@ -1,19 +1,21 @@
 #pragma once
-/// Gain tuning of the position loops (`twin tune`): Kp, Ki, Kd, K1, K2 per axis
-/// are searched to minimise the tracking and contour error through the corners
-/// of a scenario in the coupled nonlinear simulation (friction, saturation,
-/// encoder, cutting load in), subject to constraints read from the linear
-/// analysis (linear_analysis.hpp) and from the simulation:
+/// Gain tuning of the position loops (`twin tune`): the gains each axis's law
+/// searches (linear_analysis.hpp, LinearLaw: FADAL Kp, Ki, Kd, K1, K2; cascade
+/// Kv, Kvp, Tn with the machine's feedforward kff, Jff kept) are searched to minimise
+/// the tracking and contour error through the corners of a scenario in the coupled
+/// nonlinear simulation (friction, saturation, encoder, cutting load in), subject to
+/// constraints read from the linear analysis and from the simulation:
 ///   phase margin >= PM_min, gain margin >= GM_min, sensitivity peak <= Ms_max,
 ///   feedback step overshoot <= overshoot_max (linear model),
-///   |u| <= u_fraction_max * u_max at every tick of the scenario (never at the clamp).
+///   |command| <= u_fraction_max * its limit at every tick of the scenario, never at the
+///   limit (FADAL: u and u_max; cascade: the torque and T_max).
 ///
 /// Two stages, both NLopt (derivative-free):
-///  A. per axis, COBYLA on the linear model only: the feedback gains (Kp, Ki, Kd)
+///  A. per axis, COBYLA on the linear model only: the feedback gains
 ///     nearest (in log ratio) to the starting gains that meet the linear constraints;
 ///  B. all tuned axes together, BOBYQA on the simulated corners, starting from the
-///     stage-A gains and the model-based feedforward K1 = J/(Ka Kt rg),
-///     K2 = B/(Ka Kt rg); a broken constraint is a penalty, and the result is the
+///     stage-A gains and the model-based feedforward (FADAL K1 = J/(Ka Kt rg),
+///     K2 = B/(Ka Kt rg)); a broken constraint is a penalty, and the result is the
 ///     best point that met every constraint (never an infeasible one).
 /// The search simulates a window around the corners (the run starts on the path
 /// in steady motion, see docs/tuning.md); the result is judged on the full scenario.
@@ -22,6 +24,7 @@
 #include <limits>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -40,7 +43,7 @@ struct TuneConstraints {
   double gain_margin_min_dB{6.0};
   double sensitivity_peak_max{2.0};    ///< |S| peak, absolute (2 = 6 dB)
   double step_overshoot_max{0.35};     ///< feedback-only position step overshoot, fraction of the step
-  double u_fraction_max{0.95};         ///< peak |u| over the scenario / u_max
+  double u_fraction_max{0.95};         ///< peak |command| over the scenario / its limit (u_max, T_max)
 };
 
 struct TuneOptions {
@@ -62,14 +65,19 @@ struct ConstraintValues {
   double gain_margin_dB{0.0};
   double sensitivity_peak{0.0};
   double step_overshoot{0.0};
-  double u_peak_V{0.0};                ///< from the simulation (0 before one ran)
-  double u_limit_V{0.0};               ///< u_fraction_max * u_max
+  /// The law's command to the drive (u in V for the FADAL law, the torque for the
+  /// cascade): its peak from the simulation (0 before one ran; a tick at the limit
+  /// counts as the limit) and u_fraction_max times its limit (u_max, T_max).
+  std::string_view command_name;
+  std::string_view command_unit;
+  double command_peak{0.0};
+  double command_limit{0.0};
   bool stable{false};
   bool linear_ok{false};
   bool simulation_ok{false};
   std::string violation;               ///< empty when all hold; otherwise the first broken one, with values
 };
-/// Linear constraint values for an axis (u_peak is left at 0).
+/// Linear constraint values for an axis (command_peak is left at 0).
 ConstraintValues linear_constraints(const LinearPlant& plant, const controller::PositionLoopParams& gains,
                                     const TuneConstraints& c, const std::string& where);
 
@@ -137,7 +145,9 @@ struct AxisTuneResult {
   bool tuned{true};                          ///< false: the machine's gains were kept (see note)
   std::string note;                          ///< why the gains were kept, or what limited the tuning
   controller::PositionLoopParams before, after;
-  FeedforwardGains model_feedforward;
+  /// `before` with every feedforward gain at its model value (FADAL K1 = J/(Ka Kt rg),
+  /// K2 = B/(Ka Kt rg); cascade kff = 1, Jff = J).
+  controller::PositionLoopParams model_feedforward;
   LoopAnalysis analysis_before, analysis_after;
   ConstraintValues constraints_before, constraints_after;  ///< u_peak from the full scenario
 };

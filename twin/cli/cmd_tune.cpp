@@ -65,15 +65,16 @@ void register_tune(CLI::App& app) {
   };
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
-      "tune", "Linear analysis of the position loops and tuning of Kp, Ki, Kd, K1, K2 on a scenario's corners "
-              "(default: the FADAL 2216 pocket corner); writes OUT/machine.yaml, OUT/report.json and plots");
+      "tune", "Linear analysis of the position loops and tuning of their gains (FADAL law: Kp, Ki, Kd, K1, K2; "
+              "cascade: Kv, Kvp, Tn) on a scenario's corners (default: the FADAL 2216 pocket corner); writes "
+              "OUT/machine.yaml, OUT/report.json and plots");
   cmd->add_option("scenario", opt->scenario, "scenario.yaml, its folder, or a shipped scenario name");
   cmd->add_option("-o,--out", opt->out, "output folder (created if missing); required unless --analyse");
   cmd->add_option("--axis", opt->axes, "axes to tune: x, y, z, all, or a list like x,y (default x,y)");
   cmd->add_flag("--analyse,--analyze", opt->analyse,
                 "print poles, margins, sensitivity peak, bandwidth and step figures for the current gains and stop");
   cmd->add_option("--machine", opt->machine, "machine definition (name or YAML file) replacing the scenario's");
-  cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.Kp=600")->take_all();
+  cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.Kp=600 (x.Kv=80 on a cascade)")->take_all();
   cmd->add_option("--check", opt->check,
                   "second scenario, not used for tuning, on which before/after are reported ('none' to skip)");
   cmd->add_option("--max-evals", opt->tune.max_evaluations, "coupled simulations in the search (default 160)");
@@ -86,7 +87,8 @@ void register_tune(CLI::App& app) {
   cmd->add_option("--overshoot", opt->tune.constraints.step_overshoot_max,
                   "maximum feedback step overshoot, fraction (default 0.35)");
   cmd->add_option("--u-fraction", opt->tune.constraints.u_fraction_max,
-                  "peak |u| allowed in the scenario as a fraction of u_max (default 0.95)");
+                  "peak command allowed in the scenario as a fraction of its limit: |u| of u_max (FADAL law), "
+                  "|torque| of T_max (cascade) (default 0.95)");
   cmd->add_flag("--no-plots", opt->no_plots, "do not draw the PNG plots");
   cmd->callback([opt]() {
     const auto path = opt->scenario.empty() ? io::default_scenario_path() : io::resolve_scenario_path(opt->scenario);
@@ -99,14 +101,15 @@ void register_tune(CLI::App& app) {
         const auto& def = scenario.machine.axes[index(a)];
         const analysis::LinearPlant plant = analysis::linear_plant(def.drive);
         const analysis::DiscreteLoopModel model(plant, def.loop, fmt::format("axis {}", axis_name(a)));
-        const analysis::FeedforwardGains ff = analysis::model_feedforward(plant);
         std::printf("%s", analysis::format_analysis(fmt::format("axis {} of {} (Ts {:g} s):", axis_name(a),
                                                                 scenario.machine.name, def.loop.Ts_s),
-                                                    def.loop, analysis::analyse_loop(model))
+                                                    model, analysis::analyse_loop(model))
                               .c_str());
-        print_line(fmt::format("  model feedforward: K1 = J/(Ka Kt rg) = {:.6g} V s^2/mm, K2 = B/(Ka Kt rg) = {:.6g} "
-                               "V s/mm",
-                               ff.K1_V_s2_per_mm, ff.K2_V_s_per_mm));
+        std::string ff;
+        for (const analysis::LawGain& g : model.law().gains())
+          if (g.feedforward)
+            ff += fmt::format("{}{} = {:.6g} {}", ff.empty() ? "" : ", ", g.name, g.model(plant), g.unit);
+        print_line("  model feedforward (cancels the linear plant): " + ff);
       }
       return;
     }
@@ -162,19 +165,20 @@ void register_tune(CLI::App& app) {
     }
     const std::vector<std::filesystem::path> written = results.commit();
     for (const auto& a : result.axes) {
+      const analysis::LinearLaw& law = analysis::linear_law(a.before.law);
+      std::string gains;
+      for (const analysis::LawGain& g : law.gains()) {
+        gains += gains.empty() ? "" : ", ";
+        gains += a.tuned ? fmt::format("{} {:.4g} -> {:.4g}", g.name, g.get(a.before), g.get(a.after))
+                         : fmt::format("{} {:.4g}", g.name, g.get(a.before));
+      }
       if (!a.tuned) {
-        print_line(fmt::format("axis {}: gains kept (Kp {:.4g}, Ki {:.4g}, Kd {:.4g}, K1 {:.4g}, K2 {:.4g}): {}",
-                               axis_name(a.axis), a.before.Kp_V_per_mm, a.before.Ki_V_per_s_mm,
-                               a.before.Kd_V_s_per_mm, a.before.K1_V_s2_per_mm, a.before.K2_V_s_per_mm, a.note));
+        print_line(fmt::format("axis {}: gains kept ({}): {}", axis_name(a.axis), gains, a.note));
         continue;
       }
-      print_line(fmt::format("axis {}: Kp {:.4g} -> {:.4g}, Ki {:.4g} -> {:.4g}, Kd {:.4g} -> {:.4g}, K1 {:.4g} -> "
-                             "{:.4g}, K2 {:.4g} -> {:.4g}; PM {:.1f} -> {:.1f} deg, GM {:.1f} -> {:.1f} dB, Ms {:.2f} "
+      print_line(fmt::format("axis {}: {}; PM {:.1f} -> {:.1f} deg, GM {:.1f} -> {:.1f} dB, Ms {:.2f} "
                              "-> {:.2f}, bandwidth {:.1f} -> {:.1f} Hz",
-                             axis_name(a.axis), a.before.Kp_V_per_mm, a.after.Kp_V_per_mm, a.before.Ki_V_per_s_mm,
-                             a.after.Ki_V_per_s_mm, a.before.Kd_V_s_per_mm, a.after.Kd_V_s_per_mm,
-                             a.before.K1_V_s2_per_mm, a.after.K1_V_s2_per_mm, a.before.K2_V_s_per_mm,
-                             a.after.K2_V_s_per_mm, a.analysis_before.phase_margin_deg,
+                             axis_name(a.axis), gains, a.analysis_before.phase_margin_deg,
                              a.analysis_after.phase_margin_deg, a.analysis_before.gain_margin_dB,
                              a.analysis_after.gain_margin_dB, a.analysis_before.sensitivity_peak,
                              a.analysis_after.sensitivity_peak, a.analysis_before.bandwidth_Hz,
