@@ -17,6 +17,7 @@
 #include <gtest/gtest.h>
 
 #include "controller/gcode.hpp"
+#include "feeddrive/drive_bank.hpp"
 #include "twin/core/error.hpp"
 #include "twin/io/machine_file.hpp"
 #include "twin/io/trace_csv.hpp"
@@ -143,6 +144,48 @@ TEST(StructureMachine, DefaultScenarioRunsOnTheStructureMachine) {
   const double Tg = (s.head_kg * kG - s.counterbalance_N) * m.axes[index(Axis::kZ)].drive.rg_mm_per_rad / 1000.0 /
                     s.screw_efficiency;
   EXPECT_NEAR(T.back(), Tg, m.axes[index(Axis::kZ)].drive.Tc_pos_Nm);
+}
+
+// A screw stiffness makes the drive two masses: the motor and screw (the file's
+// J) against the carried mass J_l = m (rg/1000)^2, joined by K = k rg^2. Free
+// vibration of the drive (no friction, no damping, no command, the twist set
+// off by 1 um) against the two-mass mode w = sqrt(K (1/J_m + 1/J_l)). The
+// period is measured over 8 cycles from interpolated zero crossings of the
+// twist sampled at 67 points a cycle: 1e-3 relative covers the interpolation
+// and the integrator's tolerance.
+TEST(StructureMachine, ScrewStiffnessGivesTheTwoMassScrewTableMode) {
+  std::string text = slurp(io::resolve_machine_path("fadal2216_structure"));
+  text += "  screw_stiffness_N_per_um: {x: 150}\n";
+  const sim::MachineDefinition m = io::load_machine(write("stiff.yaml", text));
+  const sim::MachineDefinition file_j = structure_machine();
+  feeddrive::DriveParams d = m.axes[index(Axis::kX)].drive;
+  ASSERT_TRUE(d.effects.compliance.enabled);
+  EXPECT_FALSE(m.axes[index(Axis::kY)].drive.effects.compliance.enabled);
+  const double rg_m = d.rg_mm_per_rad / 1000.0;
+  const double Jl = m.structure->carried_kg[0] * rg_m * rg_m;
+  const double Jm = file_j.axes[index(Axis::kX)].drive.J_kg_m2 - file_j.structure->reflected_J_kg_m2[0];
+  const double K = 150e6 * rg_m * rg_m;
+  const double w = std::sqrt(K * (1.0 / Jm + 1.0 / Jl));
+  d.B_kg_m2_per_s = 0.0;
+  d.Tc_pos_Nm = d.Tc_neg_Nm = 0.0;
+  const double Ts = 1e-4;
+  feeddrive::DriveBank bank({d}, Ts);
+  bank.reset({0.0});
+  std::vector<feeddrive::DriveState> st = bank.states();
+  st[0].x_load_mm = 0.001;
+  st[0].stuck = st[0].load_stuck = false;
+  bank.set_states(st);
+  std::vector<double> crossings;
+  double prev = st[0].x_load_mm - st[0].x_mm;
+  for (int k = 0; k < 2000 && crossings.size() < 17; ++k) {
+    bank.advance(k * Ts, (k + 1) * Ts, {feeddrive::DriveInput{}});
+    const double twist = bank.state(0).x_load_mm - bank.state(0).x_mm;
+    if ((prev > 0.0) != (twist > 0.0)) crossings.push_back(k * Ts + Ts * prev / (prev - twist));
+    prev = twist;
+  }
+  ASSERT_EQ(crossings.size(), 17u);
+  const double period = (crossings.back() - crossings.front()) / 8.0;
+  EXPECT_NEAR(2.0 * M_PI / period, w, 1e-3 * w) << "K " << K << " Jm " << Jm << " Jl " << Jl;
 }
 
 TEST(StructureMachine, BadStructureIsAOneLineConfigError) {
