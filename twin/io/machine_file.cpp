@@ -164,7 +164,9 @@ void fold_structure(sim::MachineDefinition& m, const std::string& where) {
       throw ConfigError(fmt::format("{}: structure: needs all three axes (axis {} is missing)", where, axis_name(a)));
     rg[index(a)] = m.axes[index(a)].drive.rg_mm_per_rad;
   }
-  const auto loads = structure::axis_loads(structure_spec(s, where), rg);
+  const structure::StructureSpec spec = structure_spec(s, where);
+  spec.validate(where);
+  const auto loads = structure::axis_loads(spec, rg);
   for (Axis a : kAllAxes) {
     const std::size_t i = index(a);
     feeddrive::DriveParams& d = m.axes[i].drive;

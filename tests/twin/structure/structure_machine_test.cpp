@@ -200,6 +200,7 @@ TEST(StructureMachine, BadStructureIsAOneLineConfigError) {
       ADD_FAILURE() << "no error for " << to;
     } catch (const ConfigError& e) {
       EXPECT_THAT(std::string(e.what()), HasSubstr(words));
+      EXPECT_THAT(std::string(e.what()), HasSubstr("bad.yaml"));   // names the file
       EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos);
     }
   };
