@@ -42,9 +42,10 @@ struct Model {
   SimTK::SimbodyMatterSubsystem matter{system};
   SimTK::GeneralForceSubsystem forces{system};
   SimTK::MobilizedBody slide[3];
+  std::optional<SimTK::Force::DiscreteForces> discrete;   // the screws' forces (stepper only)
   SimTK::State state;
 
-  Model(const StructureSpec& spec, const std::array<double, 3>& q_mm) {
+  Model(const StructureSpec& spec, const std::array<double, 3>& q_mm, bool with_screw_forces = false) {
     using namespace SimTK;
     spec.validate("structure model");
     Force::Gravity(forces, matter, -ZAxis, spec.g_m_per_s2);
@@ -70,6 +71,7 @@ struct Model {
     slide[lower] = saddle;
     slide[2] = head;
     if (spec.counterbalance_N != 0.0) Force::MobilityConstantForce(forces, head, 0, spec.counterbalance_N);
+    if (with_screw_forces) discrete.emplace(forces, matter);
     system.realizeTopology();
     state = system.getDefaultState();
     for (int a = 0; a < 3; ++a) slide[a].setOneQ(state, 0, q_mm[static_cast<std::size_t>(a)] / 1000.0);
@@ -79,6 +81,41 @@ struct Model {
 };
 
 }  // namespace
+
+struct StructureStepper::Impl {
+  Model model;
+  SimTK::RungeKuttaMersonIntegrator integrator;
+  Impl(const StructureSpec& spec, const std::array<double, 3>& q0_mm, double accuracy)
+      : model(spec, q0_mm, true), integrator(model.system) {
+    integrator.setAccuracy(accuracy);
+    integrator.setAllowInterpolation(false);   // land on every tick's end, the state the next tick starts from
+    integrator.initialize(model.state);
+  }
+};
+
+StructureStepper::StructureStepper(const StructureSpec& spec, const std::array<double, 3>& q0_mm, double accuracy)
+    : impl_(std::make_unique<Impl>(spec, q0_mm, accuracy)) {}
+StructureStepper::~StructureStepper() = default;
+
+double StructureStepper::time_s() const { return impl_->integrator.getTime(); }
+
+std::array<double, 3> StructureStepper::advance(const std::array<double, 3>& F_N, double dt_s) {
+  if (!(std::isfinite(dt_s) && dt_s > 0.0)) throw ConfigError("structure stepper: dt_s = " + fmt_value(dt_s) + " must be > 0");
+  Model& m = impl_->model;
+  SimTK::State& s = impl_->integrator.updAdvancedState();
+  for (int a = 0; a < 3; ++a) m.discrete->setOneMobilityForce(s, m.slide[a], SimTK::MobilizerUIndex(0), F_N[static_cast<std::size_t>(a)]);
+  impl_->integrator.reinitialize(SimTK::Stage::Dynamics, false);
+  const double t_end = impl_->integrator.getTime() + dt_s;
+  while (impl_->integrator.getTime() < t_end) {
+    const SimTK::Integrator::SuccessfulStepStatus st = impl_->integrator.stepTo(t_end);
+    if (st == SimTK::Integrator::EndOfSimulation || impl_->integrator.isSimulationOver())
+      throw ModelError("structure stepper: the integrator stopped at t = " + fmt_value(impl_->integrator.getTime()));
+  }
+  std::array<double, 3> q{};
+  const SimTK::State& out = impl_->integrator.getState();
+  for (int a = 0; a < 3; ++a) q[static_cast<std::size_t>(a)] = m.slide[a].getOneQ(out, 0) * 1000.0;
+  return q;
+}
 
 std::optional<Stacking> parse_stacking(const std::string& name) {
   if (name == "x_on_y") return Stacking::kXOnY;

@@ -16,6 +16,7 @@
 /// Plain data only: the Simbody types stay in machine_structure.cpp (built as
 /// C++17 in its own library), so a caller needs no Simbody headers.
 #include <array>
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -62,5 +63,27 @@ std::array<AxisLoad, 3> axis_loads(const StructureSpec& spec, const std::array<d
 
 /// The full 3x3 mass matrix M(q) in kg (row-major, axes x, y, z).
 std::array<double, 9> mass_matrix(const StructureSpec& spec, const std::array<double, 3>& q_mm);
+
+/// The multibody model integrated in time, slide forces in, slide positions
+/// out: what stepping Simbody in every co-simulation tick would do. The twin
+/// does not run it in the tick (the structure is folded into the drives at
+/// load, docs/stability.md "Structure"); it is here to measure that cost
+/// (tests/twin/structure/structure_bench.cpp) and to check the dynamics.
+class StructureStepper {
+ public:
+  /// At rest at q0_mm; Runge-Kutta-Merson with the given accuracy.
+  StructureStepper(const StructureSpec& spec, const std::array<double, 3>& q0_mm, double accuracy = 1e-8);
+  ~StructureStepper();
+  StructureStepper(const StructureStepper&) = delete;
+  StructureStepper& operator=(const StructureStepper&) = delete;
+  /// Advances by dt_s with the screw forces F_N on the slides (x, y, z) held
+  /// (gravity and the counterbalance act besides); returns the positions in mm.
+  std::array<double, 3> advance(const std::array<double, 3>& F_N, double dt_s);
+  double time_s() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 }  // namespace twin::structure
