@@ -9,14 +9,9 @@
 
 namespace {
 
+// The slides of scenarios/machines/fadal2216_structure.yaml.
 twin::structure::StructureSpec fadal_like() {
-  twin::structure::StructureSpec sp;
-  sp.table_kg = 160.0;
-  sp.saddle_kg = 220.0;
-  sp.head_kg = 300.0;
-  sp.workpiece_kg = 20.0;
-  sp.screw_efficiency = 0.9;
-  return sp;
+  return {.table_kg = 160.0, .saddle_kg = 220.0, .head_kg = 300.0, .workpiece_kg = 20.0, .screw_efficiency = 0.9};
 }
 
 // The model built and evaluated (mass matrix, gravity) once.
