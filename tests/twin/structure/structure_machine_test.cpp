@@ -208,6 +208,10 @@ TEST(StructureMachine, BadStructureIsAOneLineConfigError) {
   expect_error("  stacking: x_on_y", "  stacking: z_on_x", "stacking");
   expect_error("  screw_efficiency: 0.9", "  screw_efficiency: 1.2", "screw_efficiency");
   expect_error("  table_kg: 160", "  tabel_kg: 160", "tabel_kg");
+  // The stack needs every slide's transmission: a machine without Z is refused.
+  const auto z_from = base.find("  z:\n"), z_to = base.find("# The tool tip");
+  ASSERT_TRUE(z_from != std::string::npos && z_to != std::string::npos && z_from < z_to);
+  expect_error(base.substr(z_from, z_to - z_from), "", "axis z is missing");
 }
 
 }  // namespace
