@@ -10,12 +10,22 @@
 #include "twin/core/error.hpp"
 #include "twin/io/atomic_file.hpp"
 #include "twin/io/yaml_util.hpp"
+#include "twin/structure/machine_structure.hpp"
 
 #ifndef TWIN_SCENARIOS_DIR
 #error "TWIN_SCENARIOS_DIR must be defined by the build"
 #endif
 
 namespace twin::io {
+
+namespace {
+/// A YAML single-quoted scalar: a quote is doubled, nothing else is special (a newline becomes a space).
+std::string single_quoted(const std::string& text) {
+  std::string quoted;
+  for (char ch : text) quoted += ch == '\'' ? std::string("''") : std::string(1, ch == '\n' ? ' ' : ch);
+  return "'" + quoted + "'";
+}
+}  // namespace
 
 std::filesystem::path scenarios_dir() {
   if (const char* env = std::getenv("TWIN_SCENARIOS_DIR"); env != nullptr && *env != '\0') return env;
@@ -94,6 +104,116 @@ void parse_tool_tip(const YAML::Node& node, sim::MachineDefinition& m, const std
   }
 }
 
+/// `structure:` {stacking, table_kg, saddle_kg, head_kg, workpiece_kg,
+/// counterbalance_N, screw_efficiency, screw_stiffness_N_per_um: {x, y, z}, source}.
+void parse_structure(const YAML::Node& node, sim::MachineDefinition& m, const std::string& where) {
+  const std::string w = where + ": structure";
+  if (!node.IsMap()) throw ConfigError(fmt::format("{} must be a map (stacking, table_kg, saddle_kg, head_kg ...)", w));
+  sim::StructureDefinition s;
+  bool table = false, saddle = false, head = false;
+  for (const auto& kv : node) {
+    const std::string key = kv.first.as<std::string>();
+    const std::string kw = w + "." + key;
+    if (key == "stacking") s.stacking = yaml_string(kv.second, kw);
+    else if (key == "source") s.source = yaml_string(kv.second, kw);
+    else if (key == "table_kg") s.table_kg = yaml_number(kv.second, kw), table = true;
+    else if (key == "saddle_kg") s.saddle_kg = yaml_number(kv.second, kw), saddle = true;
+    else if (key == "head_kg") s.head_kg = yaml_number(kv.second, kw), head = true;
+    else if (key == "workpiece_kg") s.workpiece_kg = yaml_number(kv.second, kw);
+    else if (key == "counterbalance_N") s.counterbalance_N = yaml_number(kv.second, kw);
+    else if (key == "screw_efficiency") s.screw_efficiency = yaml_number(kv.second, kw);
+    else if (key == "screw_stiffness_N_per_um") {
+      if (!kv.second.IsMap()) throw ConfigError(fmt::format("{} must be a map of axes x/y/z", kw));
+      for (const auto& ax : kv.second) {
+        const std::string an = ax.first.as<std::string>();
+        const auto axis = parse_axis(an);
+        if (!axis) throw ConfigError(fmt::format("{}: unknown axis '{}'", kw, an));
+        s.screw_stiffness_N_per_um[index(*axis)] = yaml_number(ax.second, kw + "." + an);
+      }
+    } else {
+      throw ConfigError(fmt::format("{}: unknown key '{}' (stacking, table_kg, saddle_kg, head_kg, workpiece_kg, "
+                                    "counterbalance_N, screw_efficiency, screw_stiffness_N_per_um, source)",
+                                    w, key));
+    }
+  }
+  if (!table || !saddle || !head) throw ConfigError(fmt::format("{}: needs table_kg, saddle_kg and head_kg", w));
+  m.structure = s;
+}
+
+structure::StructureSpec structure_spec(const sim::StructureDefinition& s, const std::string& where) {
+  structure::StructureSpec sp;
+  const auto st = structure::parse_stacking(s.stacking);
+  if (!st) throw ConfigError(fmt::format("{}: structure.stacking: unknown '{}' (x_on_y or y_on_x)", where, s.stacking));
+  sp.stacking = *st;
+  sp.table_kg = s.table_kg;
+  sp.saddle_kg = s.saddle_kg;
+  sp.head_kg = s.head_kg;
+  sp.workpiece_kg = s.workpiece_kg;
+  sp.counterbalance_N = s.counterbalance_N;
+  sp.screw_efficiency = s.screw_efficiency;
+  sp.screw_stiffness_N_per_um = s.screw_stiffness_N_per_um;
+  return sp;
+}
+
+/// Evaluates the structure model (Simbody) and folds its loads into the drives.
+void fold_structure(sim::MachineDefinition& m, const std::string& where) {
+  sim::StructureDefinition& s = *m.structure;
+  std::array<double, 3> rg{};
+  for (Axis a : kAllAxes) {
+    if (!m.axes[index(a)].present)
+      throw ConfigError(fmt::format("{}: structure: needs all three axes (axis {} is missing)", where, axis_name(a)));
+    rg[index(a)] = m.axes[index(a)].drive.rg_mm_per_rad;
+  }
+  const structure::StructureSpec spec = structure_spec(s, where);
+  spec.validate(where);
+  const auto loads = structure::axis_loads(spec, rg);
+  for (Axis a : kAllAxes) {
+    const std::size_t i = index(a);
+    feeddrive::DriveParams& d = m.axes[i].drive;
+    s.carried_kg[i] = loads[i].carried_kg;
+    s.reflected_J_kg_m2[i] = loads[i].reflected_J_kg_m2;
+    s.gravity_torque_Nm[i] = loads[i].gravity_torque_Nm;
+    const double J_motor = d.J_kg_m2;
+    d.J_kg_m2 += loads[i].reflected_J_kg_m2;
+    s.enabled_constant_load[i] = false;
+    if (loads[i].gravity_torque_Nm != 0.0) {
+      s.enabled_constant_load[i] = !d.effects.constant_load.enabled;
+      d.effects.constant_load.enabled = true;
+      d.effects.constant_load.torque_Nm += loads[i].gravity_torque_Nm;
+    }
+    s.enabled_compliance[i] = false;
+    if (loads[i].screw_K_Nm_per_rad > 0.0) {
+      if (d.effects.compliance.enabled)
+        throw ConfigError(fmt::format("{}: axes.{}: effects.compliance and structure.screw_stiffness_N_per_um.{} "
+                                      "both set the screw's compliance; give one",
+                                      where, axis_name(a), axis_name(a)));
+      // Two masses: the motor and screw (the file's J) against the carried mass.
+      s.enabled_compliance[i] = true;
+      d.effects.compliance.enabled = true;
+      d.effects.compliance.K_Nm_per_rad = loads[i].screw_K_Nm_per_rad;
+      d.effects.compliance.load_fraction = loads[i].reflected_J_kg_m2 / (J_motor + loads[i].reflected_J_kg_m2);
+    }
+  }
+}
+
+/// The machine as its file gives it: the structure's loads taken back out of the drives.
+sim::MachineDefinition unfold_structure(const sim::MachineDefinition& folded) {
+  sim::MachineDefinition m = folded;
+  if (!m.structure) return m;
+  const sim::StructureDefinition& s = *m.structure;
+  for (Axis a : kAllAxes) {
+    const std::size_t i = index(a);
+    feeddrive::DriveParams& d = m.axes[i].drive;
+    d.J_kg_m2 -= s.reflected_J_kg_m2[i];
+    if (s.gravity_torque_Nm[i] != 0.0) {
+      d.effects.constant_load.torque_Nm -= s.gravity_torque_Nm[i];
+      if (s.enabled_constant_load[i]) d.effects.constant_load = {};
+    }
+    if (s.enabled_compliance[i]) d.effects.compliance = {};
+  }
+  return m;
+}
+
 }  // namespace
 
 sim::MachineDefinition load_machine(const std::filesystem::path& path) {
@@ -119,6 +239,8 @@ sim::MachineDefinition load_machine(const std::filesystem::path& path) {
       m.name = yaml_string(kv.second, where + ": name");
     } else if (key == "tool_tip") {
       parse_tool_tip(kv.second, m, where);
+    } else if (key == "structure") {
+      parse_structure(kv.second, m, where);
     } else if (key == "description") {
       static_cast<void>(yaml_string(kv.second, where + ": description"));
     } else if (key == "axes") {
@@ -156,11 +278,13 @@ sim::MachineDefinition load_machine(const std::filesystem::path& path) {
   if (!have_axes) throw ConfigError(fmt::format("{}: missing key 'axes'", where));
   for (auto& ax : m.axes) ax.loop.Ts_s = m.Ts_s;
   sim::set_machine_loop_law(m, law);
+  if (m.structure) fold_structure(m, where);
   m.validate();
   return m;
 }
 
-std::string machine_to_yaml(const sim::MachineDefinition& m, const std::string& header_comment) {
+std::string machine_to_yaml(const sim::MachineDefinition& folded, const std::string& header_comment) {
+  const sim::MachineDefinition m = unfold_structure(folded);
   std::ostringstream o;
   o.precision(12);
   std::istringstream hc(header_comment);
@@ -199,9 +323,7 @@ std::string machine_to_yaml(const sim::MachineDefinition& m, const std::string& 
   if (!m.tool_tip.empty()) {
     o << "tool_tip:    # tool-tip modes (stability lobes)\n";
     if (!m.tool_tip_source.empty()) {
-      std::string quoted;  // a YAML single-quoted scalar: a quote is doubled, nothing else is special
-      for (char ch : m.tool_tip_source) quoted += ch == '\'' ? std::string("''") : std::string(1, ch == '\n' ? ' ' : ch);
-      o << "  source: '" << quoted << "'\n";
+      o << "  source: " << single_quoted(m.tool_tip_source) << "\n";
     }
     for (const auto* dir : {"x", "y"}) {
       const auto& modes = dir[0] == 'x' ? m.tool_tip.x : m.tool_tip.y;
@@ -210,6 +332,16 @@ std::string machine_to_yaml(const sim::MachineDefinition& m, const std::string& 
       for (const auto& md : modes)
         o << "    - {fn_Hz: " << md.fn_Hz << ", zeta: " << md.zeta << ", k_N_per_m: " << md.k_N_per_m << "}\n";
     }
+  }
+  if (m.structure) {
+    const sim::StructureDefinition& s = *m.structure;
+    o << "structure:    # masses on the slides (J above is the motor and screw alone)\n";
+    if (!s.source.empty()) o << "  source: " << single_quoted(s.source) << "\n";
+    o << "  stacking: " << s.stacking << "\n  table_kg: " << s.table_kg << "\n  saddle_kg: " << s.saddle_kg
+      << "\n  head_kg: " << s.head_kg << "\n  workpiece_kg: " << s.workpiece_kg
+      << "\n  counterbalance_N: " << s.counterbalance_N << "\n  screw_efficiency: " << s.screw_efficiency << "\n";
+    o << "  screw_stiffness_N_per_um: {x: " << s.screw_stiffness_N_per_um[0]
+      << ", y: " << s.screw_stiffness_N_per_um[1] << ", z: " << s.screw_stiffness_N_per_um[2] << "}\n";
   }
   return o.str();
 }

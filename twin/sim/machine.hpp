@@ -32,6 +32,31 @@ struct AxisDefinition {
   double following_error_limit_mm{1.0};
 };
 
+/// The machine's structure (`structure:` in a machine file): masses, stacking,
+/// counterbalance, screw efficiency and stiffness. Plain data: the multibody
+/// model that turns it into per-drive numbers lives in twin/structure (Simbody)
+/// and is evaluated when the file is loaded (twin/io), which folds the result
+/// into the drives: J += carried_kg (rg/1000)^2, the gravity torque as a
+/// constant load, a screw stiffness as the two-mass compliance. The drives, the
+/// co-simulation and the FMU then see ordinary drive parameters.
+struct StructureDefinition {
+  std::string stacking{"x_on_y"};     ///< x_on_y: table on the saddle in x, saddle on the base in y
+  double table_kg{0.0};
+  double saddle_kg{0.0};
+  double head_kg{0.0};
+  double workpiece_kg{0.0};
+  double counterbalance_N{0.0};
+  double screw_efficiency{1.0};
+  AxisArray<double> screw_stiffness_N_per_um{};   ///< axial, per axis (0: rigid)
+  std::string source;                  ///< where the figures come from
+  /// What the load folded into each drive (to write the file back unfolded).
+  AxisArray<double> carried_kg{};
+  AxisArray<double> reflected_J_kg_m2{};
+  AxisArray<double> gravity_torque_Nm{};
+  AxisArray<bool> enabled_constant_load{};
+  AxisArray<bool> enabled_compliance{};
+};
+
 struct MachineDefinition {
   std::string name;
   std::string source;                  ///< file it was read from (for messages)
@@ -44,6 +69,8 @@ struct MachineDefinition {
   /// rigid). Used by the stability lobes.
   process::ToolTipFrf tool_tip;
   std::string tool_tip_source;         ///< where the modes come from (measured, assumed ...)
+  /// The structure (absent: rigid drives with the file's J, the default).
+  std::optional<StructureDefinition> structure;
 
   /// Throws ConfigError naming the source, the axis, the key and the value.
   void validate() const;
