@@ -101,7 +101,7 @@ ProcessOutput MillingProcess::step(const ProcessInput& in) {
     if (speed_xy > 0.0) {
       const double depth_mm = std::min(z_top - p[2], tool.flute_length_mm);
       out.engagement_deg =
-          model_.engaged_arc_deg(p, v_dir, model_.disk_height_nearest_mm(0.5 * depth_mm), probe, material);
+          model_.engaged_arc_deg(p, v_dir, model_.disk_height_nearest_mm(0.5 * depth_mm), probe, stock_);
     }
   }
   phi_rad_ = std::fmod(phi_rad_ + omega_rad_per_s * in.Ts_s, kRadPerRev);
