@@ -387,30 +387,35 @@ double HeightMapStock::remove_sweep(const ToolGeometry& tool, const std::array<d
   if (incremental && L == 0.0) return 0.0;
   double removed = 0.0;
   const SweepCut cut = make_cut(tool, p0_mm, p1_mm);
-  const double ylo = (incremental ? p1_mm[1] : std::min(p0_mm[1], p1_mm[1])) - R;
-  const double yhi = (incremental ? p1_mm[1] : std::max(p0_mm[1], p1_mm[1])) + R;
-  const double ia = std::max(std::ceil((ylo - y0_mm_) * inv_cell_ - 0.5), 0.0);
-  const double ib = std::min(std::floor((yhi - y0_mm_) * inv_cell_ - 0.5), static_cast<double>(ny_) - 1.0);
-  const double mx = 0.5 * (p0_mm[0] + p1_mm[0]);
-  const double my = 0.5 * (p0_mm[1] + p1_mm[1]);
+  const double y_min = std::min(p0_mm[1], p1_mm[1]);
+  const double y_max = std::max(p0_mm[1], p1_mm[1]);
+  const double x_min = std::min(p0_mm[0], p1_mm[0]);
+  const double x_max = std::max(p0_mm[0], p1_mm[0]);
+  const double ia = std::max(std::ceil((y_min - R - y0_mm_) * inv_cell_ - 0.5), 0.0);
+  const double ib = std::min(std::floor((y_max + R - y0_mm_) * inv_cell_ - 0.5), static_cast<double>(ny_) - 1.0);
   for (double fiy = ia; fiy <= ib; fiy += 1.0) {
     const auto iy = static_cast<std::size_t>(fiy);
     const double y = y0_mm_ + (fiy + 0.5) * cell_mm_;
     if (!incremental) {
-      lower_cells_in_row(iy, std::min(p0_mm[0], p1_mm[0]) - R, std::max(p0_mm[0], p1_mm[0]) + R, cut, removed);
+      lower_cells_in_row(iy, x_min - R, x_max + R, cut, removed);
       continue;
     }
-    const double dy1 = y - p1_mm[1];
-    if (std::abs(dy1) > R) continue;
-    const double w1 = std::sqrt(R * R - dy1 * dy1);
-    double xa = p1_mm[0] - w1;
-    double xb = p1_mm[0] + w1;
-    // Only cells ahead of the bisector of p0 p1 come closer to the axis.
+    // The row's cells within R of the segment lie within w of its x range.
+    const double dy = y < y_min ? y_min - y : (y > y_max ? y - y_max : 0.0);
+    if (dy > R) continue;
+    const double w = std::sqrt(R * R - dy * dy);
+    double xa = x_min - w;
+    double xb = x_max + w;
+    // A cell behind the line through p0 across the move is nearest to p0,
+    // where the sweep before this one ended: it is already as low as this
+    // move can cut it. Ahead of that line its distance from the segment is
+    // shorter than from p0 (also between p0 and the bisector of p0 p1, beside
+    // the path, where a rounded end cuts its fillet lower).
     if (Dx > 0.0) {
-      xa = std::max(xa, mx - (y - my) * Dy / Dx);
+      xa = std::max(xa, p0_mm[0] - (y - p0_mm[1]) * Dy / Dx);
     } else if (Dx < 0.0) {
-      xb = std::min(xb, mx - (y - my) * Dy / Dx);
-    } else if ((y - my) * Dy <= 0.0) {
+      xb = std::min(xb, p0_mm[0] - (y - p0_mm[1]) * Dy / Dx);
+    } else if ((y - p0_mm[1]) * Dy < 0.0) {
       continue;
     }
     if (xa > xb) continue;

@@ -71,7 +71,9 @@ class HeightMapStock {
 
   /// Removes what `tool` sweeps moving straight from tip p0 to tip p1 (mm).
   /// With `whole` false, the caller guarantees that the sweep ending at p0 was
-  /// removed before, and only the cells the move can still lower are visited.
+  /// removed before and did not move down (so the cells over the tool's flat
+  /// core at p0 are at p0's height), and only the cells the move can still
+  /// lower are visited: ahead of the line through p0 across the move.
   /// Returns the removed volume in mm^3.
   double remove_sweep(const ToolGeometry& tool, const std::array<double, 3>& p0_mm,
                       const std::array<double, 3>& p1_mm, bool whole);
