@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 #include <fmt/format.h>
 
@@ -72,8 +73,48 @@ MillingForceModel::MillingForceModel(const ToolGeometry& tool, const CuttingCoef
   const int n_arc = static_cast<int>(std::lround(360.0 / options_.engagement_step_deg));
   for (int i = 0; i < n_arc; ++i) {
     const double phi = (i + 0.5) * kRadPerRev / n_arc;
-    arc_dirs_.push_back({std::sin(phi), std::cos(phi)});
+    arc_sin_.push_back(std::sin(phi));
+    arc_cos_.push_back(std::cos(phi));
   }
+}
+
+MillingForceModel::ArcRuns MillingForceModel::forward_arc(const std::array<double, 2>& v_dir) const {
+  // Sample i lies at phi_i = (i + 1/2) step; v_dir at theta (clockwise from
+  // +y): v_dir . (sin, cos)_i = cos(phi_i - theta) > 0 within a quarter turn
+  // of theta. The quarter turns end in [lo + 2, lo + 3) and (hi - 3, hi - 2]
+  // in units of samples. Samples more than a step inside the half circle
+  // (lo + 4 ... hi - 4) have a product above sin(step) (8.7e-4 at the
+  // smallest step, 0.05 deg), those a step or more outside (lo, lo + 1,
+  // hi - 1, hi) at most -sin(step): their signs are far past rounding. So
+  // only the five samples at each end are tested, with the same product a
+  // test of every sample would use, and the samples between them all count.
+  ArcRuns runs;
+  if (!(v_dir[0] != 0.0 || v_dir[1] != 0.0)) return runs;   // every product is 0
+  const auto n = static_cast<std::int64_t>(arc_sin_.size());
+  const double step = kRadPerRev / static_cast<double>(n);
+  const double theta = std::atan2(v_dir[0], v_dir[1]);
+  const auto lo = static_cast<std::int64_t>(std::floor((theta - 0.5 * kPi) / step - 0.5)) - 2;
+  const auto hi = static_cast<std::int64_t>(std::ceil((theta + 0.5 * kPi) / step - 0.5)) + 2;
+  const auto forward = [&](std::int64_t k) {
+    const auto i = static_cast<std::size_t>(((k % n) + n) % n);
+    return v_dir[0] * arc_sin_[i] + v_dir[1] * arc_cos_[i] > 0.0;
+  };
+  std::int64_t first = lo;
+  while (first < lo + 4 && !forward(first)) ++first;
+  std::int64_t last = hi;
+  while (last > hi - 4 && !forward(last)) --last;
+  // [first, last] as indices modulo n, split where it wraps.
+  const std::int64_t b = ((first % n) + n) % n;
+  const std::int64_t len = std::min(last - first + 1, n);
+  runs.begin[0] = static_cast<std::size_t>(b);
+  runs.end[0] = static_cast<std::size_t>(std::min(b + len, n));
+  runs.count = 1;
+  if (b + len > n) {
+    runs.begin[1] = 0;
+    runs.end[1] = static_cast<std::size_t>(b + len - n);
+    runs.count = 2;
+  }
+  return runs;
 }
 
 double MillingForceModel::fraction_below(const Disk& d, double z_top_local_mm) const {

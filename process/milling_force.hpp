@@ -83,10 +83,24 @@ class MillingForceModel {
 
   /// Engaged arc (deg) of the edge circle at height z_local_mm above the tip:
   /// the angles where the edge moves into material (v_dir . r > 0) and the
-  /// probe point lies in material.
+  /// probe point lies in material. A Material with a member
+  /// count_in_material(cx, cy, r, sin, cos, n, z), the number of the n points
+  /// (cx + r sin[i], cy + r cos[i]) in material at height z, is asked once
+  /// per run of sample angles; otherwise point by point.
   template <class Material>
   double engaged_arc_deg(const std::array<double, 3>& p_mm, const std::array<double, 2>& v_dir, double z_local_mm,
                          double probe_mm, const Material& material) const;
+
+  /// The engagement sample angles i (at (i + 1/2) 360/n deg) with
+  /// v_dir . (sin, cos) > 0: up to two runs [begin, end) of indices (two when
+  /// the half circle wraps past index 0). Only the few angles next to the two
+  /// ends of the half circle are tested; the others cannot change sign.
+  struct ArcRuns {
+    std::array<std::size_t, 2> begin{};
+    std::array<std::size_t, 2> end{};
+    int count{0};
+  };
+  ArcRuns forward_arc(const std::array<double, 2>& v_dir) const;
 
   /// Height above the tip of the disk nearest to z_mm.
   double disk_height_nearest_mm(double z_mm) const;
@@ -122,7 +136,8 @@ class MillingForceModel {
   std::vector<Disk> disks_;
   std::vector<double> dR_mm_;        ///< runout: R_j(z) - R, per element i and flute j at [i N + j]
   std::vector<std::array<double, 2>> flute_dir_;   ///< (sin, cos) of j 2 pi/N
-  std::vector<std::array<double, 2>> arc_dirs_;    ///< (sin, cos) of the engagement sample angles
+  std::vector<double> arc_sin_;   ///< sin and cos of the engagement sample angles
+  std::vector<double> arc_cos_;
 };
 
 template <class Material>
@@ -183,17 +198,22 @@ ForceSample MillingForceModel::sample(double phi_rad, const std::array<double, 3
 template <class Material>
 double MillingForceModel::engaged_arc_deg(const std::array<double, 3>& p_mm, const std::array<double, 2>& v_dir,
                                           double z_local_mm, double probe_mm, const Material& material) const {
-  const int n = static_cast<int>(arc_dirs_.size());
+  const std::size_t n = arc_sin_.size();
   const double r = tool_.edge_radius_mm(z_local_mm) + probe_mm;
   const double z_abs = p_mm[2] + z_local_mm;
+  const ArcRuns runs = forward_arc(v_dir);
   int hits = 0;
-  for (const auto& dir : arc_dirs_) {
-    const double s = dir[0];
-    const double c = dir[1];
-    if (v_dir[0] * s + v_dir[1] * c <= 0.0) continue;
-    if (material(p_mm[0] + r * s, p_mm[1] + r * c, z_abs)) ++hits;
+  for (int k = 0; k < runs.count; ++k) {
+    const std::size_t b = runs.begin[static_cast<std::size_t>(k)];
+    const std::size_t e = runs.end[static_cast<std::size_t>(k)];
+    if constexpr (requires { material.count_in_material(0.0, 0.0, 0.0, &arc_sin_[0], &arc_cos_[0], n, 0.0); }) {
+      hits += material.count_in_material(p_mm[0], p_mm[1], r, &arc_sin_[b], &arc_cos_[b], e - b, z_abs);
+    } else {
+      for (std::size_t i = b; i < e; ++i)
+        if (material(p_mm[0] + r * arc_sin_[i], p_mm[1] + r * arc_cos_[i], z_abs)) ++hits;
+    }
   }
-  return hits * (360.0 / n);
+  return hits * (360.0 / static_cast<double>(n));
 }
 
 }  // namespace twin::process

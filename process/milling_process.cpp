@@ -37,6 +37,7 @@ double MillingProcess::remove_swept(const std::array<double, 3>& p0_mm, const st
   const double v = stock_.remove_sweep(model_.tool(), p0_mm, p1_mm, true);
   swept_once_ = true;
   last_removed_mm_ = p1_mm;
+  last_sweep_level_ = p1_mm[2] >= p0_mm[2] - 1e-9;
   return v;
 }
 
@@ -101,7 +102,7 @@ ProcessOutput MillingProcess::step(const ProcessInput& in) {
     if (speed_xy > 0.0) {
       const double depth_mm = std::min(z_top - p[2], tool.flute_length_mm);
       out.engagement_deg =
-          model_.engaged_arc_deg(p, v_dir, model_.disk_height_nearest_mm(0.5 * depth_mm), probe, material);
+          model_.engaged_arc_deg(p, v_dir, model_.disk_height_nearest_mm(0.5 * depth_mm), probe, stock_);
     }
   }
   phi_rad_ = std::fmod(phi_rad_ + omega_rad_per_s * in.Ts_s, kRadPerRev);
@@ -114,7 +115,11 @@ ProcessOutput MillingProcess::step(const ProcessInput& in) {
   }
   const double moved = std::hypot(p_next[0] - last_removed_mm_[0], p_next[1] - last_removed_mm_[1]);
   if (moved >= 2.0 * stock_.cell_mm() || p_next[2] < last_removed_mm_[2] - 1e-6) {
-    out.removed_mm3 += stock_.remove_sweep(tool, last_removed_mm_, p_next, false);
+    // An update may visit only the cells this move can still lower when the
+    // one before it was level or rising (the cells over its end's flat core
+    // are then at the tip height); after a descent it visits every cell.
+    out.removed_mm3 += stock_.remove_sweep(tool, last_removed_mm_, p_next, !last_sweep_level_);
+    last_sweep_level_ = p_next[2] >= last_removed_mm_[2] - 1e-9;
     last_removed_mm_ = p_next;
   }
   for (double f : {out.F_avg_N[0], out.F_avg_N[1], out.F_avg_N[2], out.F_N[0], out.F_N[1], out.F_N[2], out.power_W})

@@ -67,6 +67,7 @@ class MillingProcess final : public ProcessModel {
   double phi_rad_{0.0};
   bool swept_once_{false};
   std::array<double, 3> last_removed_mm_{};
+  bool last_sweep_level_{true};   ///< the last update did not move down (by more than 1e-9 mm)
 };
 
 /// A MillingProcess behind the ProcessModel interface.

@@ -62,12 +62,18 @@ class HeightMapStock {
     if (ix >= nx_ || iy >= ny_) return false;
     return z_mm > bottom_z_mm_ && z_mm < static_cast<double>(top_[iy * nx_ + ix]);
   }
+  /// How many of the n points (cx + r s[i], cy + r c[i]) (mm) lie inside
+  /// remaining material at height z_mm: has_material of each, counted.
+  int count_in_material(double cx_mm, double cy_mm, double r_mm, const double* s, const double* c, std::size_t n,
+                        double z_mm) const noexcept;
   /// Top of the material in the cell holding (x, y); bottom_z when none.
   double top_z_at_mm(double x_mm, double y_mm) const noexcept;
 
   /// Removes what `tool` sweeps moving straight from tip p0 to tip p1 (mm).
   /// With `whole` false, the caller guarantees that the sweep ending at p0 was
-  /// removed before, and only the cells the move can still lower are visited.
+  /// removed before and did not move down (so the cells over the tool's flat
+  /// core at p0 are at p0's height), and only the cells the move can still
+  /// lower are visited: ahead of the line through p0 across the move.
   /// Returns the removed volume in mm^3.
   double remove_sweep(const ToolGeometry& tool, const std::array<double, 3>& p0_mm,
                       const std::array<double, 3>& p1_mm, bool whole);
@@ -81,8 +87,31 @@ class HeightMapStock {
   double volume_mm3() const;
 
  private:
-  void lower_cells_in_row(std::size_t iy, double xa, double xb, const ToolGeometry& tool,
-                          const std::array<double, 3>& p0, const std::array<double, 3>& p1, double& removed);
+  /// One straight move of the tool: the constants every visited cell needs.
+  struct SweepCut {
+    double R_mm, R2_mm2;             ///< tool radius and its square
+    double Rc_mm;                    ///< radius of the flat core, R - r
+    double r_mm, r2_mm2;             ///< corner radius and its square
+    double p0x_mm, p0y_mm, p0z_mm;   ///< start of the move (tip)
+    double Dx_mm, Dy_mm, Dz_mm;      ///< the move, p1 - p0
+    double inv_L2_per_mm2;           ///< 1 / (Dx^2 + Dy^2), 0 for a move along z
+    /// Cells whose top is at or below this height cannot be lowered by the
+    /// move (the bottom, or the tip's lowest height less 1e-9 mm when that is
+    /// higher: every cell is cut to the tip's height or above), so they are
+    /// skipped before any arithmetic.
+    double z_skip_mm;
+  };
+  SweepCut make_cut(const ToolGeometry& tool, const std::array<double, 3>& p0, const std::array<double, 3>& p1) const;
+  void lower_cells_in_row(std::size_t iy, double xa, double xb, const SweepCut& cut, double& removed);
+  /// The heights the cut leaves at the n cells ix, ix + 1, ... of the row at
+  /// y (+inf beyond the tool's radius) into out[0, n rounded up to 4).
+  void cut_heights(const SweepCut& cut, double y, std::size_t ix, std::size_t n, double* out) const;
+  void cut_heights_avx(const SweepCut& cut, double y, std::size_t ix, std::size_t n, double* out) const;
+  bool use_avx_{false};   ///< the CPU runs cut_heights_avx
+  /// Cells per block of a row (64 bytes of heights).
+  static constexpr std::size_t kBlock = 16;
+  /// Recomputes the highest top of every block (after the stock is built).
+  void refresh_block_max();
   double x0_mm_{0.0};
   double y0_mm_{0.0};
   double cell_mm_{0.025};
@@ -92,6 +121,11 @@ class HeightMapStock {
   double top_z_mm_{0.0};
   double bottom_z_mm_{0.0};
   std::vector<float> top_;
+  /// Per row, per block of kBlock cells: an upper bound of the block's tops
+  /// (exact after the block was last visited), so a sweep skips whole blocks
+  /// it cannot lower (e.g. a pocket already at the bottom).
+  std::size_t blocks_per_row_{0};
+  std::vector<float> block_max_;
 };
 
 }  // namespace twin::process
