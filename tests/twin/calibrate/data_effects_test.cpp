@@ -186,6 +186,53 @@ TEST(DataEffects, SmoothFrictionIsKeptOnlyWhereTheHeldTorqueRelaxes) {
   }
 }
 
+// Friction rising to 0.45 N m (18 raw) below about 3 rad/s (4.77 mm/s of
+// travel) over Coulomb levels of 0.25 / 0.15 N m (the truth's own law,
+// Tc + (Ts - Tc) exp(-(w/ws)^2), with its breakaway at Ts). The breakaway
+// level within 15 %: the truth's 0.05 N m load makes the friction plus load
+// at rest 20 raw one way and 16 the other, and the twin's one Ts_static is
+// fitted between them (a tenth off the mean either way). The speed within
+// 15 %: the curve's excess halves over a factor 1.2 of speed, so the
+// residual pins ws less tightly than the level.
+TEST(DataEffects, StribeckIsFound) {
+  truth::Effects fx;
+  fx.stribeck_Ts = 0.45;
+  fx.stribeck_ws = 3.0;
+  const Outcome o = calibrate_truth("stribeck", fx);
+  expect_only(o, "stribeck");
+  const DataEffect& e = kept_effect(o, "stribeck");
+  EXPECT_NEAR(e.params.at("Ts_static"), 0.45 * kRawPerNm, 0.15 * 0.45 * kRawPerNm) << describe(o);
+  EXPECT_NEAR(e.params.at("ws"), 3.0 * kRg, 0.15 * 3.0 * kRg) << describe(o);
+  expect_validation_improves(o);
+}
+
+// The torque applied two loop periods after the loop commands it (the
+// truth's ring buffer, a lag the logged torque shows too): the lag at
+// which the PI law on the logged speed error fits the logged torque best,
+// exactly 2 ms (a whole number of 1 ms samples).
+TEST(DataEffects, DelayIsFound) {
+  truth::Effects fx;
+  fx.delay_ticks = 2;
+  const Outcome o = calibrate_truth("delay", fx);
+  expect_only(o, "delay");
+  EXPECT_NEAR(kept_effect(o, "delay").params.at("delay_s"), 0.002, 1e-9) << describe(o);
+  expect_validation_improves(o);
+}
+
+// A current limit of 8 A (152.6 raw: 40 raw per N m times Kt 0.4769 N m/A)
+// that the torque overshoot at the start of the fastest moves reaches for a
+// few samples (the unlimited run peaks at 170 raw): the limit is the level
+// the logged torque flattens at, within 1 % (the torque noise is 0.08 raw).
+TEST(DataEffects, CurrentSaturationIsFound) {
+  truth::Effects fx;
+  fx.i_max_A = 8.0;
+  const Outcome o = calibrate_truth("saturation", fx);
+  expect_only(o, "current_saturation");
+  const double limit_raw = kRawPerNm * 0.4769 * 8.0;
+  EXPECT_NEAR(kept_effect(o, "current_saturation").params.at("i_max_A"), limit_raw, 0.01 * limit_raw) << describe(o);
+  expect_validation_improves(o);
+}
+
 // A log at 100 ms with positions to 0.1 mm (as the U-Mich logs): the
 // effects the rate and the rounding hide are listed as skipped, each with
 // its reason, and none of them is tried.
