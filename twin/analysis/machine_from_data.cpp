@@ -1131,11 +1131,85 @@ void search_catalogue_effects(DataCalibration& out, const std::vector<RunData>& 
       }
     }
 
-    // backlash: after a reversal of the command the measured position lags
+    // backlash, where a fast log has the motor's speed beside the encoder's
+    // position (a linear scale on the table, the loop closed across the
+    // gap): the motor's travel (the logged speed integrated) runs ahead of
+    // the table by half the gap while it pushes one way and behind by half
+    // while it pushes the other, so across each reversal of the command
+    // their difference steps by the gap, signed by the new direction. Read
+    // over the 50 ms of motion before the stop and 30 to 80 ms into the new
+    // move (the gap crossed at any acceleration over 100 mm/s^2), where the
+    // motor's speed has the direction of each; the median over the fitting
+    // part's reversals is the gap. A run without a gap steps by the
+    // encoder's rounding and the integration's drift, well under 3 counts
+    // (and so does a log whose speed is the encoder's own, derived from the
+    // position: then the lost motion in the position below is looked for).
+    bool gap_from_speed = false;
+    if (fast && fine && rows.measured_speed && logs_x) {
+      const auto w = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.05 / dt)));
+      const auto skip = static_cast<std::size_t>(std::lround(0.03 / dt));
+      std::vector<double> steps;
+      for (const RunData& rd : runs) {
+        const auto& xm = rd.run->trace.at(col(a, "_mm"));
+        const auto& vm = rd.run->trace.at(col(a, "_v_mm_s"));
+        std::vector<double> d(rd.n_fit, 0.0);
+        std::vector<std::size_t> seg(rd.n_fit, 0);
+        double travel = 0.0;
+        for (std::size_t s = 0; s < rd.segments.size(); ++s)
+          for (std::size_t k = rd.segments[s].begin; k < std::min(rd.segments[s].end, rd.n_fit); ++k) {
+            travel = k == rd.segments[s].begin ? xm[k] : travel + 0.5 * (vm[k] + vm[k - 1]) * dt;
+            d[k] = travel - xm[k];
+            seg[k] = s;
+          }
+        // Mean of d over rows [b, e) whose logged speed has direction `dir`.
+        auto mean_d = [&](std::size_t b, std::size_t e, int dir, std::size_t s) {
+          double sum = 0.0;
+          std::size_t n = 0;
+          for (std::size_t k = b; k < e; ++k)
+            if (seg[k] == s && rd.interior[k] && direction(vm[k], rd.v_move[ai]) == dir) {
+              sum += d[k];
+              ++n;
+            }
+          return n >= w / 2 ? std::optional<double>(sum / static_cast<double>(n)) : std::nullopt;
+        };
+        int last = 0;
+        std::size_t last_end = 0;
+        for (std::size_t k = 0; k < rd.n_fit; ++k) {
+          const int dr = direction(rd.kin[ai].v_mm_per_s[k], rd.v_move[ai]);
+          if (dr == 0) continue;
+          if (last != 0 && dr != last && last_end + 1 >= w && k + skip + w <= rd.n_fit && seg[last_end] == seg[k]) {
+            const auto before = mean_d(last_end + 1 - w, last_end + 1, last, seg[k]);
+            const auto after = mean_d(k + skip, k + skip + w, dr, seg[k]);
+            if (before && after) steps.push_back(dr * (*after - *before));
+          }
+          last = dr;
+          last_end = k;
+        }
+      }
+      if (steps.size() >= 4) {
+        std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
+        const double g = steps[steps.size() / 2];
+        if (g >= 3.0 * q) {
+          gap_from_speed = true;
+          Trial t;
+          t.effect = "backlash";
+          t.judge = {"_err_mm"};
+          for (double m : {0.85, 1.0, 1.15}) t.sets.push_back({{"gap_mm", m * g}});
+          t.evidence = fmt::format("across {} reversals of the command the motor's travel (the logged speed "
+                                   "integrated) and the logged position part by a median {:.4g} mm ({:.1f} "
+                                   "position quanta), signed by the new direction: a gap of that size (0.85 to "
+                                   "1.15 times it replayed)",
+                                   steps.size(), g, g / q);
+          attempt(t);
+        }
+      }
+    }
+
+    // backlash, from the position: after a reversal of the command the measured position lags
     // the replay's in the new direction while the motor crosses the gap: the
     // median over the fitting part's reversals of the peak of that lag in the
     // 50 ms after each sizes the gap; gaps of 0.5 to 2 times it are replayed.
-    if (fine) {
+    if (fine && !gap_from_speed) {
       const auto span = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.05 / dt)));
       std::vector<double> peaks;
       for (std::size_t run = 0; run < runs.size(); ++run) {

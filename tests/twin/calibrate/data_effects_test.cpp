@@ -206,6 +206,22 @@ TEST(DataEffects, StribeckIsFound) {
   expect_validation_improves(o);
 }
 
+// A gap of 20 um between the motor and the table, the encoder on the table
+// (the loop closes across the gap) and the logged speed the motor's: the
+// gap within 10 % (the motor's travel, integrated from the 1 kHz speed, and
+// the 1 um encoder part by the gap at every reversal; two counts of 20). No
+// false positive: the run without an effect (NothingIsAddedWithoutAnEffect)
+// and the lead error's (ScrewPitchErrorIsFound, whose encoder error also
+// parts motor and encoder, but by position, not direction) keep no gap.
+TEST(DataEffects, BacklashIsFound) {
+  truth::Effects fx;
+  fx.backlash_mm = 0.02;
+  const Outcome o = calibrate_truth("backlash", fx);
+  expect_only(o, "backlash");
+  EXPECT_NEAR(kept_effect(o, "backlash").params.at("gap_mm"), 0.02, 0.1 * 0.02) << describe(o);
+  expect_validation_improves(o, {"x_err_mm"});
+}
+
 // The torque applied two loop periods after the loop commands it (the
 // truth's ring buffer, a lag the logged torque shows too): the lag at
 // which the PI law on the logged speed error fits the logged torque best,
