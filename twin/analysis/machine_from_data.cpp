@@ -1189,7 +1189,9 @@ void search_catalogue_effects(DataCalibration& out, const std::vector<RunData>& 
       if (steps.size() >= 4) {
         std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
         const double g = steps[steps.size() / 2];
-        if (g >= 3.0 * q) {
+        // A step beyond 1 mm is no feed drive's gap but a run whose motor
+        // and encoder have parted (a diverging loop, a slipping coupling).
+        if (g >= 3.0 * q && g <= 1.0) {
           gap_from_speed = true;
           Trial t;
           t.effect = "backlash";
