@@ -102,6 +102,12 @@ struct AxisFromData {
   double J{0.0}, B{0.0}, Tc_pos{0.0}, Tc_neg{0.0}, c{0.0};  ///< channel unit, rg = 1 mm/rad
   double J_se{0.0}, B_se{0.0}, Tc_pos_se{0.0}, Tc_neg_se{0.0}, c_se{0.0};
   std::size_t fit_rows{0};
+  /// Where the velocity loop is fitted from data: the lag (in samples of the
+  /// log) at which the logged torque follows the PI law on the speed error
+  /// best, and the gains fitted at that lag. A lag beyond 0 is a delay
+  /// candidate (the gains above stay the lag-0 fit).
+  std::size_t torque_lag_samples{0};
+  controller::CascadeGains gains_at_lag;
   std::string note;
 };
 
@@ -113,6 +119,10 @@ struct DataEffect {
   std::map<std::string, double> params;
   std::string evidence;
   double before{0.0}, after{0.0};  ///< held-out channel NRMS without / with
+  /// Held-out NRMS of every channel of the axis (torque, tracking error,
+  /// velocity command) without and with the effect (empty for smooth_friction,
+  /// which is judged on the torque channel alone).
+  std::map<std::string, double> before_channels, after_channels;
   bool kept{false};
 };
 

@@ -104,44 +104,12 @@ TEST(RealLogs, StitchedSegmentsAreFoundWhereThePositionJumps) {
 // A reference of moves back and forth at several speeds with dwells, long
 // enough for fitting and held-out parts: the truth's program.
 std::vector<double> program(double Ts_s, double scale, double seconds) {
-  std::vector<double> r;
-  double x = 50.0, v = 0.0;
-  const double a_max = 500.0;
-  const std::vector<double> speeds{20.0 * scale, -35.0 * scale, 8.0 * scale, -12.0 * scale, 50.0 * scale, -30.0 * scale};
-  std::size_t seg = 0;
-  double t_in = 0.0;
-  for (double t = 0.0; t < seconds; t += Ts_s) {
-    const double phase = std::fmod(t_in, 2.0);
-    const double target = phase < 1.4 ? speeds[seg % speeds.size()] : 0.0;
-    const double dv = std::clamp(target - v, -a_max * Ts_s, a_max * Ts_s);
-    v += dv;
-    x += v * Ts_s;
-    r.push_back(x);
-    t_in += Ts_s;
-    if (t_in >= 2.0) {
-      t_in = 0.0;
-      ++seg;
-    }
-  }
-  return r;
+  return truth::moves_program(
+      Ts_s, {20.0 * scale, -35.0 * scale, 8.0 * scale, -12.0 * scale, 50.0 * scale, -30.0 * scale}, seconds);
 }
 
 truth::RunSpec cascade_spec(double Ts_s) {
-  truth::RunSpec sp;
-  sp.plant = truth::perturbed_x_plant();
-  sp.plant.Tc_pos = 0.25;
-  sp.plant.Tc_neg = 0.15;
-  sp.effects.load_Nm = 0.05;
-  sp.cascade.on = true;
-  sp.cascade.Kv = 45.0;
-  sp.cascade.kff = 0.6;
-  sp.cascade.Kvp = 0.5;
-  sp.cascade.Tn = 0.008;
-  sp.cascade.raw_per_Nm = 100.0 / 2.5;  // percent of a 2.5 N m rated torque
-  sp.Ts_s = Ts_s;
-  sp.resolution_mm = 0.0005;
-  sp.current_noise_A = 0.002;
-  return sp;
+  return truth::cascade_run_spec(100.0 / 2.5, 0.0005, Ts_s);  // percent of a 2.5 N m rated torque
 }
 
 // 1 kHz, velocity command, speed and a raw torque logged: the loop's gains

@@ -59,6 +59,24 @@ struct State {
 
 }  // namespace
 
+std::vector<double> moves_program(double Ts_s, const std::vector<double>& speeds, double seconds) {
+  std::vector<double> r;
+  double x = 50.0, v = 0.0, t_in = 0.0;
+  std::size_t seg = 0;
+  for (double t = 0.0; t < seconds; t += Ts_s) {
+    const double target = std::fmod(t_in, 2.0) < 1.4 ? speeds[seg % speeds.size()] : 0.0;
+    v += std::clamp(target - v, -500.0 * Ts_s, 500.0 * Ts_s);
+    x += v * Ts_s;
+    r.push_back(x);
+    t_in += Ts_s;
+    if (t_in >= 2.0) {
+      t_in = 0.0;
+      ++seg;
+    }
+  }
+  return r;
+}
+
 std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec& sp) {
   const Plant& p = sp.plant;
   const Effects& e = sp.effects;
@@ -171,7 +189,23 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
       const double x_f = (two_mass ? s.th_l : s.th_m) * p.rg;
       const double cog_th = s.th_m;
       const double T_cog = e.cogging_A * std::sin(e.cogging_n * cog_th + e.cogging_phase);
-      if (!two_mass) {
+      if (!two_mass && e.creep_w > 0.0) {
+        // Creep below creep_w: friction linear in speed up to the Coulomb
+        // level, never sticking; RK4 on (w, th).
+        auto acc = [&](double w, double th) {
+          const double tc = e.cogging_A * std::sin(e.cogging_n * th + e.cogging_phase);
+          const double Tfr = coulomb(w >= 0.0 ? 1 : -1, th * p.rg) * std::clamp(w / e.creep_w, -1.0, 1.0);
+          return (Tm - p.B * w - e.load_Nm - tc - Tfr) / p.J;
+        };
+        const double k1w = acc(s.w_m, s.th_m), k1t = s.w_m;
+        const double k2w = acc(s.w_m + 0.5 * h * k1w, s.th_m + 0.5 * h * k1t), k2t = s.w_m + 0.5 * h * k1w;
+        const double k3w = acc(s.w_m + 0.5 * h * k2w, s.th_m + 0.5 * h * k2t), k3t = s.w_m + 0.5 * h * k2w;
+        const double k4w = acc(s.w_m + h * k3w, s.th_m + h * k3t), k4t = s.w_m + h * k3w;
+        s.w_m += h / 6 * (k1w + 2 * k2w + 2 * k3w + k4w);
+        s.th_m += h / 6 * (k1t + 2 * k2t + 2 * k3t + k4t);
+        s.th_l = s.th_m;
+        s.w_l = s.w_m;
+      } else if (!two_mass) {
         const double F = Tm - p.B * s.w_m - e.load_Nm - T_cog;
         if (stuck) {
           const int dir = F > 0 ? 1 : -1;

@@ -68,6 +68,11 @@ struct Effects {
   bool delay_after_current{false};  // true: the logged current is Ka u undelayed, the torque is delayed
   double compliance_K{0.0}, compliance_C{0.0}, compliance_frac{0.5};
   double i_max_A{0.0};
+  /// > 0 (rad/s): friction without stiction, a creep regime below this
+  /// speed: Tf = Tc_dir clamp(w / creep_w, -1, 1) (rigid drive only). A
+  /// torque below the Coulomb level creeps the axis, so a position loop that
+  /// holds it at rest lets its torque relax towards the load.
+  double creep_w{0.0};
 };
 
 /// The cascade law of spec/measured-data.md ("Position loops of real
@@ -106,6 +111,32 @@ struct RunSpec {
   int log_every{1};
   bool log_current_only{false};
 };
+
+/// A reference of moves at `speeds` (mm/s) for 1.4 s each with 0.6 s dwells
+/// between them, accelerations of 500 mm/s^2, from x = 50 mm, one position
+/// per `Ts_s` for `seconds`.
+std::vector<double> moves_program(double Ts_s, const std::vector<double>& speeds, double seconds);
+
+/// The cascade runs of the data-path tests: the perturbed X plant with
+/// Coulomb 0.25 / 0.15 N m and a 0.05 N m load, Kv 45, kff 0.6, Kvp 0.5,
+/// Tn 8 ms, the torque logged raw at `raw_per_Nm`, at 1 kHz unless `Ts_s`.
+inline RunSpec cascade_run_spec(double raw_per_Nm, double resolution_mm, double Ts_s = 1e-3) {
+  RunSpec sp;
+  sp.plant = perturbed_x_plant();
+  sp.plant.Tc_pos = 0.25;
+  sp.plant.Tc_neg = 0.15;
+  sp.effects.load_Nm = 0.05;
+  sp.cascade.on = true;
+  sp.cascade.Kv = 45.0;
+  sp.cascade.kff = 0.6;
+  sp.cascade.Kvp = 0.5;
+  sp.cascade.Tn = 0.008;
+  sp.cascade.raw_per_Nm = raw_per_Nm;
+  sp.Ts_s = Ts_s;
+  sp.resolution_mm = resolution_mm;
+  sp.current_noise_A = 0.002;
+  return sp;
+}
 
 /// Simulates and writes dir/trace.csv and dir/meta.json for one axis (spec.axis) of the
 /// shipped fadal2216 machine. Returns the number of rows.
