@@ -246,6 +246,38 @@ std::string corner_path_script(const std::string& T, const controller::Trajector
 }
 }  // namespace
 
+namespace {
+/// The rows the plots draw, written once so gnuplot does not parse the whole
+/// trace for every curve: `full` holds every n-th row (about 20000 rows, the
+/// whole run's view), `window` every row with t_s in [w0, w1] (the corner
+/// views). Both keep the header. Returns the rows of the trace.
+std::size_t write_plot_rows(const std::filesystem::path& trace, const std::filesystem::path& full,
+                            const std::filesystem::path& window, double w0, double w1) {
+  std::size_t rows = 0;
+  {
+    std::ifstream in(trace, std::ios::binary);
+    if (!in) throw IoError(fmt::format("cannot read {} for the plots", trace.string()));
+    for (std::string line; std::getline(in, line);) rows += line.empty() ? 0 : 1;
+  }
+  rows = rows > 0 ? rows - 1 : 0;
+  const std::size_t every = rows > 20000 ? rows / 20000 : 1;
+  std::ifstream in(trace, std::ios::binary);
+  std::ofstream f(full, std::ios::binary), w(window, std::ios::binary);
+  std::string line;
+  if (std::getline(in, line)) f << line << '\n', w << line << '\n';
+  for (std::size_t i = 0; std::getline(in, line); ++i) {
+    if (line.empty()) continue;
+    if (i % every == 0) f << line << '\n';
+    if (w1 >= w0) {
+      const double t = std::strtod(line.c_str(), nullptr);
+      if (t >= w0 && t <= w1) w << line << '\n';
+    }
+  }
+  if (!f || !w) throw IoError(fmt::format("cannot write the plots' rows beside {}", trace.string()));
+  return rows;
+}
+}  // namespace
+
 std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::string& trace_name,
                                             const std::vector<Axis>& axes, const std::vector<CornerWindow>& corners,
                                             bool cutting, const controller::Trajectory* trajectory) {
@@ -255,7 +287,32 @@ std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::s
                       std::find(axes.begin(), axes.end(), Axis::kY) != axes.end();
   const bool path_view = trajectory != nullptr && !corners.empty() && has_xy;
   if (path_view) outputs.push_back("corner_path.png");
-  const std::string T = gnuplot_file(trace_name);
+  // Full-rate rows only around the first corner: the hull of its zoom and
+  // corner-path windows (each at most the corner +-0.5 s or its own window).
+  double w0 = 1.0, w1 = 0.0;
+  if (!corners.empty()) {
+    const auto& c = corners.front();
+    w0 = std::min({c.corner.t_s - 0.5, c.t_begin_s - 0.05, c.corner.t_blend_begin_s - 0.05});
+    w1 = std::max({c.corner.t_s + 0.5, c.t_end_s + 0.05, c.corner.t_blend_end_s + 0.05});
+    const double v = std::max(c.corner.v_ref_mm_per_s, 1e-3);
+    const double half_mm = std::max({0.1, 4.0 * c.corner.deviation_mm, 2.0 * c.corner.blend_radius_mm});
+    w0 = std::min(w0, c.corner.t_s - 3.0 * half_mm / v - 0.05);
+    w1 = std::max(w1, c.corner.t_s + 3.0 * half_mm / v + 0.05);
+  }
+  const auto full_path = results.staging_dir() / "plot-rows-full.csv";
+  const auto window_path = results.staging_dir() / "plot-rows-corner.csv";
+  io::TempPathGuard full_guard(full_path), window_guard(window_path);
+  struct Remove {
+    std::filesystem::path a, b;
+    ~Remove() {
+      std::error_code ec;
+      std::filesystem::remove(a, ec);
+      std::filesystem::remove(b, ec);
+    }
+  } remove_rows{full_path, window_path};
+  write_plot_rows(results.staging_dir() / trace_name, full_path, window_path, w0, w1);
+  const std::string T = gnuplot_file(full_path.filename().string());
+  const std::string W = gnuplot_file(window_path.filename().string());
   std::ostringstream g;
   g << "set datafile separator ','\n"
     << "set terminal pngcairo size 1400,1000 font 'DejaVu Sans,11' noenhanced\n"
@@ -271,10 +328,8 @@ std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::s
                          "font ',9'\n",
                          c + 1, c + 1, corners[c].corner.turn_angle_deg, corners[c].line_after, t);
   }
-  // Thin the full view to about 20000 points a curve; the corner zoom uses every sample.
-  g << "stats " << T << " using 1 nooutput\n"
-    << "every_n = (STATS_records > 20000) ? int(STATS_records / 20000) : 1\n"
-    << marks.str();
+  // The full view draws about 20000 rows a curve (T); the corner zoom every row (W).
+  g << marks.str();
   // Each figure: the whole run on top and, when the program has corners, the
   // first corner's window below (+-0.25 s or the window, whichever is wider).
   std::string zoom;
@@ -293,42 +348,41 @@ std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::s
       g << "set title " << gnuplot_text(title + ", around corner 1") << "\n" << zoom << plot_zoom << "\nunset multiplot\n";
     g << "set autoscale x\nunset y2tics\nunset y2label\nset ytics mirror\n";
   };
-  auto feed_plot = [&](const std::string& every) {
-    return "plot " + T + every +
-           " using 't_s':'feed_programmed_mm_per_min' with lines lw 2 lc rgb '#999999' title 'programmed', '' " +
-           every + " using 't_s':'feed_ref_mm_per_min' with lines lw 2 lc rgb '#1f77b4' title 'interpolator "
-           "reference', '' " + every + " using 't_s':'feed_mm_per_min' with lines lw 1 lc rgb '#d62728' title "
+  auto feed_plot = [&](const std::string& file) {
+    return "plot " + file +
+           " using 't_s':'feed_programmed_mm_per_min' with lines lw 2 lc rgb '#999999' title 'programmed', '' "
+           "using 't_s':'feed_ref_mm_per_min' with lines lw 2 lc rgb '#1f77b4' title 'interpolator "
+           "reference', '' using 't_s':'feed_mm_per_min' with lines lw 1 lc rgb '#d62728' title "
            "'real (drives)'";
   };
-  figure(outputs[0], "Feedrate (dashed lines: corners)", "set ylabel 'feed [mm/min]'\n", feed_plot(" every every_n"),
-         feed_plot(""));
+  figure(outputs[0], "Feedrate (dashed lines: corners)", "set ylabel 'feed [mm/min]'\n", feed_plot(T), feed_plot(W));
   const std::array<const char*, 3> colours{"#1f77b4", "#2ca02c", "#9467bd"};
-  auto error_plot = [&](const std::string& every) {
+  auto error_plot = [&](const std::string& file) {
     std::string p = "plot ";
     for (std::size_t i = 0; i < axes.size(); ++i) {
       const std::string n(axis_name(axes[i]));
-      p += (i ? ", " : "") + T + every + " using 't_s':(column('" + n + "_err_mm')*1000) with lines lc rgb '" +
+      p += (i ? ", " : "") + file + " using 't_s':(column('" + n + "_err_mm')*1000) with lines lc rgb '" +
            colours[i % 3] + "' title '" + n + " tracking error'";
     }
-    return p + ", ''" + every +
+    return p + ", ''" +
            " using 't_s':(column('contour_error_mm')*1000) with lines lw 2 lc rgb '#d62728' title 'contour error'";
   };
-  figure(outputs[1], "Tracking error per axis and contour error", "set ylabel 'error [um]'\n",
-         error_plot(" every every_n"), error_plot(""));
+  figure(outputs[1], "Tracking error per axis and contour error", "set ylabel 'error [um]'\n", error_plot(T),
+         error_plot(W));
   if (cutting) {
-    auto force_plot = [&](const std::string& every) {
-      return "plot " + T + every + " using 't_s':'fx_avg_N' with lines lc rgb '#1f77b4' title 'fx (tick mean)', ''" +
-             every + " using 't_s':'fy_avg_N' with lines lc rgb '#2ca02c' title 'fy (tick mean)', ''" + every +
-             " using 't_s':'fz_avg_N' with lines lc rgb '#9467bd' title 'fz (tick mean)', ''" + every +
+    auto force_plot = [&](const std::string& file) {
+      return "plot " + file + " using 't_s':'fx_avg_N' with lines lc rgb '#1f77b4' title 'fx (tick mean)', ''" +
+             " using 't_s':'fy_avg_N' with lines lc rgb '#2ca02c' title 'fy (tick mean)', ''" +
+             " using 't_s':'fz_avg_N' with lines lc rgb '#9467bd' title 'fz (tick mean)', ''" +
              " using 't_s':'engagement_deg' axes x1y2 with lines lc rgb '#ff7f0e' title 'engagement'";
     };
     figure(outputs[2], "Cutting force on the workpiece and engagement",
            "set ylabel 'force [N]'\nset y2label 'engagement [deg]'\nset y2tics\nset ytics nomirror\n"
            "set y2range [0:*]\n",
-           force_plot(" every every_n"), force_plot(""));
+           force_plot(T), force_plot(W));
     g << "set autoscale y2\n";
   }
-  if (path_view) g << corner_path_script(T, *trajectory, corners.front(), cutting);
+  if (path_view) g << corner_path_script(W, *trajectory, corners.front(), cutting);
   g << "unset output\n";
   std::vector<std::filesystem::path> written;
   for (const auto& o : outputs) written.push_back(results.path(o));
