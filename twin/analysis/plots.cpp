@@ -174,20 +174,43 @@ void run_gnuplot(const std::filesystem::path& work_dir, const std::string& scrip
 }
 
 namespace {
+/// The views of the first corner: the zoom of the time plots, and the XY path
+/// and the force along it of corner_path.png (times in s).
+struct CornerViews {
+  double zoom0_s{0.0}, zoom1_s{0.0};   ///< +-0.25 s or the corner's window, whichever is wider
+  double half_mm{0.0};                  ///< half-width of the XY view: the blend and a little of the lines around it
+  double path0_s{0.0}, path1_s{0.0};   ///< the blend and long enough on either side to leave the XY view
+  double force0_s{0.0}, force1_s{0.0}; ///< force along the path: +-0.5 s
+  /// The hull of all three: the rows the corner views draw.
+  double begin_s() const { return std::min({zoom0_s, path0_s, force0_s}); }
+  double end_s() const { return std::max({zoom1_s, path1_s, force1_s}); }
+};
+
+CornerViews corner_views(const CornerWindow& w) {
+  const controller::Corner& c = w.corner;
+  CornerViews v;
+  v.zoom0_s = std::min(c.t_s - 0.25, w.t_begin_s - 0.05);
+  v.zoom1_s = std::max(c.t_s + 0.25, w.t_end_s + 0.05);
+  v.half_mm = std::max({0.1, 4.0 * c.deviation_mm, 2.0 * c.blend_radius_mm});
+  const double speed = std::max(c.v_ref_mm_per_s, 1e-3);
+  v.path0_s = std::min(c.t_blend_begin_s, c.t_s - 3.0 * v.half_mm / speed) - 0.05;
+  v.path1_s = std::max(c.t_blend_end_s, c.t_s + 3.0 * v.half_mm / speed) + 0.05;
+  v.force0_s = c.t_s - 0.5;
+  v.force1_s = c.t_s + 0.5;
+  return v;
+}
+
 /// corner_path.png: the XY path through a corner and the force along it.
 /// Every number in the script is formatted here; the only file is T.
 std::string corner_path_script(const std::string& T, const controller::Trajectory& traj, const CornerWindow& w,
                                bool cutting) {
   const controller::Corner& c = w.corner;
   const double px = c.p_mm[0], py = c.p_mm[1];
-  // Half-width of the XY view: the blend and a little of the lines around it.
-  const double half_mm = std::max({0.1, 4.0 * c.deviation_mm, 2.0 * c.blend_radius_mm});
-  // Time span shown: the blend and long enough on either side to leave the view.
+  const CornerViews views = corner_views(w);
+  const double half_mm = views.half_mm;
   const double v = std::max(c.v_ref_mm_per_s, 1e-3);
-  const double t0 = std::min(c.t_blend_begin_s, c.t_s - 3.0 * half_mm / v) - 0.05;
-  const double t1 = std::max(c.t_blend_end_s, c.t_s + 3.0 * half_mm / v) + 0.05;
-  // Force along the path: within +-3 mm of the corner.
-  const double tf0 = c.t_s - 0.5, tf1 = c.t_s + 0.5;
+  const double t0 = views.path0_s, t1 = views.path1_s;
+  const double tf0 = views.force0_s, tf1 = views.force1_s;
   std::ostringstream g;
   // The programmed corner: the reference where the blend starts and ends lies
   // on the programmed moves; the corner point between them.
@@ -248,20 +271,14 @@ std::string corner_path_script(const std::string& T, const controller::Trajector
 
 namespace {
 /// The rows the plots draw, written once so gnuplot does not parse the whole
-/// trace for every curve: `full` holds every n-th row (about 20000 rows, the
-/// whole run's view), `window` every row with t_s in [w0, w1] (the corner
-/// views). Both keep the header. Returns the rows of the trace.
-std::size_t write_plot_rows(const std::filesystem::path& trace, const std::filesystem::path& full,
-                            const std::filesystem::path& window, double w0, double w1) {
-  std::size_t rows = 0;
-  {
-    std::ifstream in(trace, std::ios::binary);
-    if (!in) throw IoError(fmt::format("cannot read {} for the plots", trace.string()));
-    for (std::string line; std::getline(in, line);) rows += line.empty() ? 0 : 1;
-  }
-  rows = rows > 0 ? rows - 1 : 0;
+/// trace for every curve: `full` holds every n-th of the trace's `rows` data
+/// rows (about 20000, the whole run's view), `window` every row with t_s in
+/// [w0, w1] (the corner views). Both keep the header.
+void write_plot_rows(const std::filesystem::path& trace, std::size_t rows, const std::filesystem::path& full,
+                     const std::filesystem::path& window, double w0, double w1) {
   const std::size_t every = rows > 20000 ? rows / 20000 : 1;
   std::ifstream in(trace, std::ios::binary);
+  if (!in) throw IoError(fmt::format("cannot read {} for the plots", trace.string()));
   std::ofstream f(full, std::ios::binary), w(window, std::ios::binary);
   std::string line;
   if (std::getline(in, line)) f << line << '\n', w << line << '\n';
@@ -274,12 +291,11 @@ std::size_t write_plot_rows(const std::filesystem::path& trace, const std::files
     }
   }
   if (!f || !w) throw IoError(fmt::format("cannot write the plots' rows beside {}", trace.string()));
-  return rows;
 }
 }  // namespace
 
 std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::string& trace_name,
-                                            const std::vector<Axis>& axes, const std::vector<CornerWindow>& corners,
+                                            std::size_t rows, const std::vector<Axis>& axes, const std::vector<CornerWindow>& corners,
                                             bool cutting, const controller::Trajectory* trajectory) {
   std::vector<std::string> outputs{"feedrate.png", "errors.png"};
   if (cutting) outputs.push_back("forces.png");
@@ -287,18 +303,10 @@ std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::s
                       std::find(axes.begin(), axes.end(), Axis::kY) != axes.end();
   const bool path_view = trajectory != nullptr && !corners.empty() && has_xy;
   if (path_view) outputs.push_back("corner_path.png");
-  // Full-rate rows only around the first corner: the hull of its zoom and
-  // corner-path windows (each at most the corner +-0.5 s or its own window).
-  double w0 = 1.0, w1 = 0.0;
-  if (!corners.empty()) {
-    const auto& c = corners.front();
-    w0 = std::min({c.corner.t_s - 0.5, c.t_begin_s - 0.05, c.corner.t_blend_begin_s - 0.05});
-    w1 = std::max({c.corner.t_s + 0.5, c.t_end_s + 0.05, c.corner.t_blend_end_s + 0.05});
-    const double v = std::max(c.corner.v_ref_mm_per_s, 1e-3);
-    const double half_mm = std::max({0.1, 4.0 * c.corner.deviation_mm, 2.0 * c.corner.blend_radius_mm});
-    w0 = std::min(w0, c.corner.t_s - 3.0 * half_mm / v - 0.05);
-    w1 = std::max(w1, c.corner.t_s + 3.0 * half_mm / v + 0.05);
-  }
+  // Full-rate rows only where the first corner's views draw them.
+  const bool corner_view = !corners.empty();
+  const CornerViews views = corner_view ? corner_views(corners.front()) : CornerViews{};
+  const double w0 = corner_view ? views.begin_s() : 1.0, w1 = corner_view ? views.end_s() : 0.0;
   const auto full_path = results.staging_dir() / "plot-rows-full.csv";
   const auto window_path = results.staging_dir() / "plot-rows-corner.csv";
   io::TempPathGuard full_guard(full_path), window_guard(window_path);
@@ -310,7 +318,7 @@ std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::s
       std::filesystem::remove(b, ec);
     }
   } remove_rows{full_path, window_path};
-  write_plot_rows(results.staging_dir() / trace_name, full_path, window_path, w0, w1);
+  write_plot_rows(results.staging_dir() / trace_name, rows, full_path, window_path, w0, w1);
   const std::string T = gnuplot_file(full_path.filename().string());
   const std::string W = gnuplot_file(window_path.filename().string());
   std::ostringstream g;
@@ -332,13 +340,8 @@ std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::s
   g << marks.str();
   // Each figure: the whole run on top and, when the program has corners, the
   // first corner's window below (+-0.25 s or the window, whichever is wider).
-  std::string zoom;
-  if (!corners.empty()) {
-    const auto& c = corners.front();
-    const double t0 = std::min(c.corner.t_s - 0.25, c.t_begin_s - 0.05);
-    const double t1 = std::max(c.corner.t_s + 0.25, c.t_end_s + 0.05);
-    zoom = fmt::format("set xrange [{:.6f}:{:.6f}]\n", t0, t1);
-  }
+  const std::string zoom =
+      corner_view ? fmt::format("set xrange [{:.6f}:{:.6f}]\n", views.zoom0_s, views.zoom1_s) : std::string();
   auto figure = [&](const std::string& out, const std::string& title, const std::string& setup,
                     const std::string& plot_full, const std::string& plot_zoom) {
     g << "set output " << gnuplot_output(out) << "\n";

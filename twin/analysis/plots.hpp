@@ -43,13 +43,13 @@ void run_gnuplot(const std::filesystem::path& work_dir, const std::string& scrip
 /// feedrate.png (programmed, reference and real feed over time, corners
 /// marked), errors.png (tracking per axis and contour error), and with a cut
 /// forces.png (fx fy fz and engagement), drawn from the result set's file
-/// `trace_name`. With the plan (`trajectory`), a corner and the x and y axes,
+/// `trace_name` (`rows` data rows). With the plan (`trajectory`), a corner and the x and y axes,
 /// also corner_path.png: the XY path at the first corner (programmed
 /// corner, planned blend arc, reference and the drives' real path coloured
 /// by the force) and the force and engagement along the path. Returns the
 /// plots written (staged paths of `results`).
 std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::string& trace_name,
-                                            const std::vector<Axis>& axes,
+                                            std::size_t rows, const std::vector<Axis>& axes,
                                             const std::vector<CornerWindow>& corners, bool cutting,
                                             const controller::Trajectory* trajectory = nullptr);
 

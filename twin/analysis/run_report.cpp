@@ -440,14 +440,15 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
   if (options.plots) {
     try {
       if (options.trace_format == io::TraceFormat::kCsv) {
-        plots = plot_run(results, trace_name, axes, stats.corners(), scenario.make_process != nullptr, &traj);
+        plots = plot_run(results, trace_name, writer.num_rows(), axes, stats.corners(),
+                         scenario.make_process != nullptr, &traj);
       } else {
         // gnuplot reads no gzip (and no shell pipe is opened): the plots are drawn
         // from a plain copy in the staging folder, which is not part of the result.
         const auto plain = results.staging_dir() / "plot-trace.csv";
         io::gunzip_file(results.path(trace_name), plain);
         try {
-          plots = plot_run(results, plain.filename().string(), axes, stats.corners(),
+          plots = plot_run(results, plain.filename().string(), writer.num_rows(), axes, stats.corners(),
                            scenario.make_process != nullptr, &traj);
         } catch (const Error&) {
           std::error_code ec;
