@@ -6,7 +6,7 @@
 #include <filesystem>
 
 #include "../process/force_truth_generator.hpp"
-#include "twin/analysis/force_calibrate.hpp"
+#include "twin/force_calibrate/force_calibrate.hpp"
 
 namespace {
 

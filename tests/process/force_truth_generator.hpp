@@ -1,7 +1,7 @@
 #pragma once
 // An independent generator of dynamometer force series for the truth tests
 // of `twin calibrate` on forces. It shares no code with the twin's force
-// model or with twin/analysis/force_calibrate: a direct per-slice sum of the
+// model or with twin/force_calibrate: a direct per-slice sum of the
 // textbook mechanistic model (Altintas, Manufacturing Automation, ch. 2),
 // one slice of dz per height, every sample evaluated at its exact spindle
 // angle, with the one effect the series carries:

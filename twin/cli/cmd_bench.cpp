@@ -5,7 +5,7 @@
 
 #include <CLI/CLI.hpp>
 
-#include "twin/analysis/benchmark.hpp"
+#include "twin/report/benchmark.hpp"
 #include "twin/cli/commands.hpp"
 #include "twin/cli/common.hpp"
 

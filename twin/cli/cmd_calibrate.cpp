@@ -8,11 +8,11 @@
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
-#include "twin/analysis/calibrate.hpp"
-#include "twin/analysis/force_calibrate.hpp"
-#include "twin/analysis/machine_from_data.hpp"
-#include "twin/analysis/plots.hpp"
-#include "twin/analysis/signal.hpp"
+#include "twin/calibrate/calibrate.hpp"
+#include "twin/force_calibrate/force_calibrate.hpp"
+#include "twin/calibrate/machine_from_data.hpp"
+#include "twin/report/plots.hpp"
+#include "twin/calibrate/signal.hpp"
 #include "twin/cli/commands.hpp"
 #include "twin/cli/common.hpp"
 #include "twin/core/error.hpp"

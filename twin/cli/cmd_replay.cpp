@@ -7,8 +7,8 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
-#include "twin/analysis/machine_from_data.hpp"
-#include "twin/analysis/replay.hpp"
+#include "twin/calibrate/machine_from_data.hpp"
+#include "twin/report/replay.hpp"
 #include "twin/cli/commands.hpp"
 #include "twin/cli/common.hpp"
 #include "twin/io/atomic_file.hpp"

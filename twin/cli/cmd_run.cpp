@@ -8,7 +8,7 @@
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
-#include "twin/analysis/run_report.hpp"
+#include "twin/report/run_report.hpp"
 #include "twin/cli/commands.hpp"
 #include "twin/cli/common.hpp"
 #include "twin/io/scenario_file.hpp"

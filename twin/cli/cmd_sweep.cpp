@@ -10,7 +10,7 @@
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
-#include "twin/analysis/plots.hpp"
+#include "twin/report/plots.hpp"
 #include "twin/cli/commands.hpp"
 #include "twin/core/error.hpp"
 #include "twin/io/atomic_file.hpp"

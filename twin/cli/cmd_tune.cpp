@@ -8,8 +8,8 @@
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
-#include "twin/analysis/linear_analysis.hpp"
-#include "twin/analysis/tune.hpp"
+#include "twin/tune/linear_analysis.hpp"
+#include "twin/tune/tune.hpp"
 #include "twin/cli/commands.hpp"
 #include "twin/cli/common.hpp"
 #include "twin/core/error.hpp"

@@ -9,7 +9,7 @@
 #include <fmt/format.h>
 
 #include "controller/interpolator.hpp"
-#include "twin/analysis/run_report.hpp"
+#include "twin/report/run_report.hpp"
 #include <iterator>
 #include <system_error>
 

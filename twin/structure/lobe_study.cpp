@@ -9,7 +9,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
-#include "twin/analysis/plots.hpp"
+#include "twin/report/plots.hpp"
 #include "twin/core/error.hpp"
 
 namespace twin::structure {

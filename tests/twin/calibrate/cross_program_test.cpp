@@ -14,7 +14,7 @@
 #include <gtest/gtest.h>
 
 #include "truth_sim.hpp"
-#include "twin/analysis/calibrate.hpp"
+#include "twin/calibrate/calibrate.hpp"
 
 namespace twin::analysis {
 namespace {

@@ -20,7 +20,7 @@
 #include <gtest/gtest.h>
 
 #include "truth_sim.hpp"
-#include "twin/analysis/machine_from_data.hpp"
+#include "twin/calibrate/machine_from_data.hpp"
 
 namespace twin::analysis {
 namespace {

@@ -9,7 +9,7 @@
 
 #include <gtest/gtest.h>
 
-#include "twin/analysis/calibrate.hpp"
+#include "twin/calibrate/calibrate.hpp"
 #include "twin/io/atomic_file.hpp"
 #include "twin/io/trace_csv.hpp"
 #include "twin/io/machine_file.hpp"

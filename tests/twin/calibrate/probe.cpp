@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "twin/analysis/calibrate.hpp"
+#include "twin/calibrate/calibrate.hpp"
 #include "twin/core/error.hpp"
 
 int main(int argc, char** argv) {

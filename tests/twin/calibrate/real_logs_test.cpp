@@ -15,7 +15,7 @@
 #include <gtest/gtest.h>
 
 #include "truth_sim.hpp"
-#include "twin/analysis/machine_from_data.hpp"
+#include "twin/calibrate/machine_from_data.hpp"
 #include "twin/io/atomic_file.hpp"
 #include "twin/io/machine_file.hpp"
 

@@ -6,9 +6,9 @@
 
 #include <gtest/gtest.h>
 
-#include "twin/analysis/diagnose.hpp"
-#include "twin/analysis/identify.hpp"
-#include "twin/analysis/signal.hpp"
+#include "twin/calibrate/diagnose.hpp"
+#include "twin/calibrate/identify.hpp"
+#include "twin/calibrate/signal.hpp"
 #include "twin/core/error.hpp"
 
 namespace twin::analysis {

@@ -29,7 +29,7 @@
 #include <vector>
 
 #include "truth_sim.hpp"
-#include "twin/analysis/calibrate.hpp"
+#include "twin/calibrate/calibrate.hpp"
 #include "twin/core/error.hpp"
 
 namespace {

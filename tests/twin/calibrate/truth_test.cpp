@@ -13,8 +13,8 @@
 #include <gtest/gtest.h>
 
 #include "truth_sim.hpp"
-#include "twin/analysis/calibrate.hpp"
-#include "twin/analysis/identify.hpp"
+#include "twin/calibrate/calibrate.hpp"
+#include "twin/calibrate/identify.hpp"
 
 namespace twin::analysis {
 namespace {

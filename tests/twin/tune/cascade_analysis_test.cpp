@@ -1,4 +1,4 @@
-// Tests of the linear analysis of the cascade position loop (twin/analysis/linear_analysis.hpp)
+// Tests of the linear analysis of the cascade position loop (twin/tune/linear_analysis.hpp)
 // against the co-simulation: the real controller::PositionLoop (cascade law) and the
 // SUNDIALS-integrated drive of the fadal2216_cascade example machine, with friction
 // and the torque limit out so that the loop is linear.
@@ -11,7 +11,7 @@
 
 #include <gtest/gtest.h>
 
-#include "twin/analysis/linear_analysis.hpp"
+#include "twin/tune/linear_analysis.hpp"
 #include "twin/core/error.hpp"
 #include "twin/core/units.hpp"
 #include "twin/io/machine_file.hpp"

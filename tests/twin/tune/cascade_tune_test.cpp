@@ -1,4 +1,4 @@
-// Tests of the gain tuning (twin/analysis/tune.hpp) of a machine whose position loops
+// Tests of the gain tuning (twin/tune/tune.hpp) of a machine whose position loops
 // are the cascade (the fadal2216_cascade example machine), on a short air cut.
 #include <cmath>
 #include <filesystem>
@@ -8,7 +8,7 @@
 
 #include <gtest/gtest.h>
 
-#include "twin/analysis/tune.hpp"
+#include "twin/tune/tune.hpp"
 #include "twin/io/machine_file.hpp"
 #include "twin/io/scenario_file.hpp"
 

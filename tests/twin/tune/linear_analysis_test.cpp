@@ -1,5 +1,5 @@
-// Tests of the linear position-loop analysis (twin/analysis/linear_analysis.hpp).
-#include "twin/analysis/linear_analysis.hpp"
+// Tests of the linear position-loop analysis (twin/tune/linear_analysis.hpp).
+#include "twin/tune/linear_analysis.hpp"
 
 #include <cmath>
 #include <complex>

@@ -1,5 +1,5 @@
-// Tests of the gain tuning (twin/analysis/tune.hpp) on short air-cut scenarios.
-#include "twin/analysis/tune.hpp"
+// Tests of the gain tuning (twin/tune/tune.hpp) on short air-cut scenarios.
+#include "twin/tune/tune.hpp"
 
 #include <cmath>
 #include <filesystem>

@@ -1,0 +1,2118 @@
+#include "twin/calibrate/machine_from_data.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <numeric>
+#include <sstream>
+
+#include <fmt/format.h>
+
+#include "twin/calibrate/signal.hpp"
+#include "twin/core/error.hpp"
+
+namespace twin::analysis {
+namespace {
+
+std::string col(Axis a, const char* suffix) { return std::string(axis_name(a)) + suffix; }
+
+bool is_multiple(double x, double q) {
+  const double r = x / q;
+  return std::abs(r - std::round(r)) < 1e-6 * std::max(1.0, std::abs(r)) + 1e-9;
+}
+
+double round_significant(double x, int digits) {
+  if (x == 0.0 || !std::isfinite(x)) return x;
+  const int e = static_cast<int>(std::floor(std::log10(std::abs(x))));
+  const double q = std::pow(10.0, e - digits + 1);
+  return std::round(x / q) * q;
+}
+
+/// Sums of squares of a channel over rows, pooled over runs: NRMS = sqrt(res / meas).
+struct Pool {
+  double res2{0.0}, meas2{0.0};
+  std::size_t n{0};
+  void add(double meas, double model) {
+    res2 += (meas - model) * (meas - model);
+    meas2 += meas * meas;
+    ++n;
+  }
+  void add(const Pool& o) {
+    res2 += o.res2;
+    meas2 += o.meas2;
+    n += o.n;
+  }
+};
+using PoolSet = std::map<std::string, Pool>;
+
+void pools_to_errors(const PoolSet& pools, ChannelErrors& out) {
+  for (const auto& [key, p] : pools) {
+    if (p.n < 3) {
+      out.not_computed[key] = fmt::format("{} rows compared: too few", p.n);
+    } else if (!(p.meas2 > 0.0)) {
+      out.not_computed[key] = "the measured signal is zero on the rows compared";
+    } else {
+      const double v = std::sqrt(p.res2 / p.meas2);
+      // 4 significant digits, as the drive calibration reports them.
+      const double mag = std::pow(10.0, std::floor(std::log10(std::max(v, 1e-300))) - 3);
+      out.nrms[key] = std::round(v / mag) * mag;
+    }
+  }
+}
+
+/// Commanded kinematics of an axis at the samples, segment by segment (the
+/// monotone cubic the replay follows): speed and acceleration.
+struct Kinematics {
+  std::vector<double> v_mm_per_s, a_mm_per_s2;
+};
+Kinematics commanded_kinematics(const MeasuredRun& run, Axis a, const std::vector<Segment>& segs) {
+  const auto& ref = run.trace.at(col(a, "_ref_mm"));
+  const double dt = run.sample_period_s;
+  Kinematics k;
+  k.v_mm_per_s.assign(ref.size(), 0.0);
+  k.a_mm_per_s2.assign(ref.size(), 0.0);
+  for (const Segment& s : segs) {
+    if (s.end - s.begin < 2) continue;
+    const std::vector<double> r(ref.begin() + static_cast<std::ptrdiff_t>(s.begin),
+                                ref.begin() + static_cast<std::ptrdiff_t>(s.end));
+    const std::vector<double> sl = monotone_slopes(r);
+    for (std::size_t i = 0; i < r.size(); ++i) k.v_mm_per_s[s.begin + i] = sl[i] / dt;
+    for (std::size_t i = 0; i < r.size(); ++i) {
+      const std::size_t lo = i == 0 ? 0 : i - 1, hi = std::min(i + 1, r.size() - 1);
+      if (hi > lo) k.a_mm_per_s2[s.begin + i] = (sl[hi] - sl[lo]) / (static_cast<double>(hi - lo) * dt * dt);
+    }
+  }
+  return k;
+}
+
+/// Rows inside segments away from their ends (the cubic's end slopes are one-sided).
+std::vector<char> interior_rows(std::size_t n, const std::vector<Segment>& segs) {
+  std::vector<char> in(n, 0);
+  for (const Segment& s : segs) {
+    if (s.end - s.begin < 5) continue;
+    for (std::size_t r = s.begin + 2; r + 1 < s.end; ++r) in[r] = 1;
+  }
+  return in;
+}
+
+double percentile_abs(const std::vector<double>& v, double q) {
+  std::vector<double> a;
+  a.reserve(v.size());
+  for (double x : v) a.push_back(std::abs(x));
+  if (a.empty()) return 0.0;
+  const auto k = static_cast<std::size_t>(q * static_cast<double>(a.size() - 1));
+  std::nth_element(a.begin(), a.begin() + static_cast<std::ptrdiff_t>(k), a.end());
+  return a[k];
+}
+
+/// Everything derived from one run that the fits and the errors use.
+struct RunData {
+  const MeasuredRun* run{nullptr};
+  /// The run with its references rebuilt from the rounding staircase
+  /// (dequantize_reference): what the replay follows and the kinematics come from.
+  std::shared_ptr<MeasuredRun> smooth;
+  std::vector<Segment> segments;
+  std::vector<char> interior;
+  std::size_t n{0}, n_fit{0};
+  AxisArray<Kinematics> kin;
+  AxisArray<double> v_move{};
+};
+
+RunData prepare_run(const MeasuredRun& run, const std::vector<Axis>& axes, const PositionRounding& rounding,
+                    double fit_fraction, std::vector<std::string>& notes) {
+  RunData d;
+  d.run = &run;
+  d.n = run.trace.num_rows();
+  d.n_fit = static_cast<std::size_t>(fit_fraction * static_cast<double>(d.n));
+  std::string seg_note;
+  d.segments = find_segments(run, rounding.quantum_mm, std::nullopt, &seg_note);
+  if (!seg_note.empty()) notes.push_back(fmt::format("{}: {}", run.dir.string(), seg_note));
+  d.interior = interior_rows(d.n, d.segments);
+  d.smooth = std::make_shared<MeasuredRun>(run);
+  if (rounding.kind != PositionRounding::Kind::kNone && rounding.quantum_mm > 0.005) {
+    const auto& t = run.trace.at("t_s");
+    for (Axis a : axes) {
+      const std::string name = col(a, "_ref_mm");
+      auto it = std::find(d.smooth->trace.names.begin(), d.smooth->trace.names.end(), name);
+      auto& dst = d.smooth->trace.columns[static_cast<std::size_t>(it - d.smooth->trace.names.begin())];
+      for (const Segment& sg : d.segments) {
+        const std::vector<double> ts(t.begin() + static_cast<std::ptrdiff_t>(sg.begin),
+                                     t.begin() + static_cast<std::ptrdiff_t>(sg.end));
+        const std::vector<double> rs(dst.begin() + static_cast<std::ptrdiff_t>(sg.begin),
+                                     dst.begin() + static_cast<std::ptrdiff_t>(sg.end));
+        const std::vector<double> sm = dequantize_reference(ts, rs, rounding);
+        std::copy(sm.begin(), sm.end(), dst.begin() + static_cast<std::ptrdiff_t>(sg.begin));
+      }
+    }
+  }
+  for (Axis a : axes) {
+    d.kin[index(a)] = commanded_kinematics(*d.smooth, a, d.segments);
+    d.v_move[index(a)] = std::max(0.02 * percentile_abs(d.kin[index(a)].v_mm_per_s, 0.99), 1e-9);
+  }
+  return d;
+}
+
+int direction(double v, double v_move) { return v > v_move ? 1 : (v < -v_move ? -1 : 0); }
+
+/// The PI velocity law fitted on the fitting rows: the logged torque at row k
+/// against the speed error (vcmd - v) and its integral at row k - lag (within
+/// a segment), and a constant.
+struct VelocityLoopFit {
+  LsqResult ls;
+  double T_rms{0.0};
+};
+VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, const std::string& channel,
+                                  std::size_t lag) {
+  std::vector<double> ev, iev, c1, Tm;
+  std::vector<std::size_t> vrows;
+  for (const auto& rd : runs) {
+    const auto& t = rd.run->trace;
+    const auto& vc = t.at(col(a, "_vcmd_mm_s"));
+    const auto& v = t.at(col(a, "_v_mm_s"));
+    const auto& ch = t.at(channel);
+    for (const Segment& s : rd.segments) {
+      const std::size_t end = std::min(s.end, rd.n_fit);
+      if (end <= s.begin) continue;
+      std::vector<double> e(end - s.begin), ie(end - s.begin);
+      double integral = 0.0;
+      for (std::size_t k = s.begin; k < end; ++k) {
+        e[k - s.begin] = vc[k] - v[k];
+        integral += e[k - s.begin] * rd.run->sample_period_s;
+        ie[k - s.begin] = integral;
+      }
+      for (std::size_t k = s.begin; k < end; ++k) {
+        const std::size_t j = k - s.begin;
+        ev.push_back(j >= lag ? e[j - lag] : 0.0);
+        iev.push_back(j >= lag ? ie[j - lag] : 0.0);
+        c1.push_back(1.0);
+        Tm.push_back(ch[k]);
+        if (k >= s.begin + 2 + lag) vrows.push_back(ev.size() - 1);
+      }
+    }
+  }
+  VelocityLoopFit f;
+  f.ls = least_squares({&ev, &iev, &c1}, Tm, vrows);
+  double t2 = 0.0;
+  for (std::size_t k : vrows) t2 += Tm[k] * Tm[k];
+  f.T_rms = vrows.empty() ? 0.0 : std::sqrt(t2 / static_cast<double>(vrows.size()));
+  return f;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// Data checks
+
+double PositionRounding::round(double x) const {
+  switch (kind) {
+    case Kind::kDecimals:
+      return std::round(x / quantum_mm) * quantum_mm;
+    case Kind::kSignificant:
+      return round_significant(x, digits);
+    case Kind::kNone:
+      break;
+  }
+  return x;
+}
+
+std::string PositionRounding::describe() const {
+  switch (kind) {
+    case Kind::kDecimals:
+      return fmt::format("positions logged to {} decimal(s) ({:g} mm)", digits, quantum_mm);
+    case Kind::kSignificant:
+      return fmt::format("positions logged to {} significant figures ({:g} mm at the run's largest position)", digits,
+                         quantum_mm);
+    case Kind::kNone:
+      break;
+  }
+  return "positions logged at full precision";
+}
+
+PositionRounding detect_rounding(const MeasuredRun& run) {
+  std::vector<const std::vector<double>*> cols;
+  for (Axis a : run.axes)
+    for (const char* s : {"_ref_mm", "_mm"})
+      if (const auto* c = run.trace.find(col(a, s))) cols.push_back(c);
+  PositionRounding r;
+  double max_abs = 0.0;
+  for (const auto* c : cols)
+    for (double x : *c) max_abs = std::max(max_abs, std::abs(x));
+  auto all = [&](auto pred) {
+    for (const auto* c : cols)
+      for (double x : *c)
+        if (!pred(x)) return false;
+    return true;
+  };
+  int decimals = -1;
+  for (int d = 0; d <= 6 && decimals < 0; ++d) {
+    const double q = std::pow(10.0, -d);
+    if (all([&](double x) { return is_multiple(x, q); })) decimals = d;
+  }
+  int sig = -1;
+  for (int s = 1; s <= 7 && sig < 0; ++s)
+    if (all([&](double x) { return std::abs(round_significant(x, s) - x) <= 1e-9 * std::max(1.0, std::abs(x)); }))
+      sig = s;
+  const double q_sig =
+      sig > 0 && max_abs > 0.0 ? std::pow(10.0, std::floor(std::log10(max_abs)) - sig + 1) : 0.0;
+  const double q_dec = decimals >= 0 ? std::pow(10.0, -decimals) : 0.0;
+  if (sig > 0 && sig <= 5 && q_sig > 1.5 * q_dec) {
+    r.kind = PositionRounding::Kind::kSignificant;
+    r.digits = sig;
+    r.quantum_mm = q_sig;
+  } else if (decimals >= 0) {
+    r.kind = PositionRounding::Kind::kDecimals;
+    r.digits = decimals;
+    r.quantum_mm = q_dec;
+  }
+  return r;
+}
+
+std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, std::optional<double> v_max_mm_per_s,
+                                   std::string* note) {
+  const std::size_t n = run.trace.num_rows();
+  // Per axis: its reference and position columns, and the limit of a step.
+  struct AxisCols {
+    std::vector<const std::vector<double>*> cols;
+    double limit{0.0};
+    /// A step this large that stands alone (4 times both neighbouring
+    /// steps) or turns the motion back at twice its speed is a stitch too:
+    /// the axis would have to start and stop, or reverse, within one sample.
+    double isolated{0.0};
+  };
+  std::vector<AxisCols> axes;
+  double limit_max = 0.0;
+  for (Axis a : run.axes) {
+    AxisCols ac;
+    for (const char* s : {"_ref_mm", "_mm"})
+      if (const auto* c = run.trace.find(col(a, s))) ac.cols.push_back(c);
+    // The largest step the axis holds over three consecutive samples: a speed
+    // the machine shows this axis moves at.
+    double held = 0.0;
+    for (const auto* c : ac.cols)
+      for (std::size_t k = 2; k + 1 < n; ++k)
+        held = std::max(held, std::min({std::abs((*c)[k - 1] - (*c)[k - 2]), std::abs((*c)[k] - (*c)[k - 1]),
+                                        std::abs((*c)[k + 1] - (*c)[k])}));
+    ac.limit = v_max_mm_per_s ? 1.2 * *v_max_mm_per_s * run.sample_period_s
+                              : std::max(3.0 * held, 5.0 * quantum_mm);
+    ac.isolated = v_max_mm_per_s ? ac.limit : std::max(1.5 * held, 5.0 * quantum_mm);
+    limit_max = std::max(limit_max, ac.limit);
+    axes.push_back(ac);
+  }
+  std::vector<Segment> segs;
+  std::size_t start = 0, jumps = 0;
+  double largest = 0.0;
+  for (std::size_t k = 1; k < n; ++k) {
+    double step = 0.0;
+    bool jump = false;
+    for (const auto& ac : axes)
+      for (const auto* c : ac.cols) {
+        const double d = std::abs((*c)[k] - (*c)[k - 1]);
+        const double before = k >= 2 ? std::abs((*c)[k - 1] - (*c)[k - 2]) : 0.0;
+        const double after = k + 1 < n ? std::abs((*c)[k + 1] - (*c)[k]) : 0.0;
+        // Or turning back at once, faster than it came: the axis cannot
+        // reverse a motion and run at twice its speed the other way within one sample.
+        const double prev_step = k >= 2 ? (*c)[k - 1] - (*c)[k - 2] : 0.0;
+        const bool turns = prev_step * ((*c)[k] - (*c)[k - 1]) < 0.0 && d > 2.0 * before;
+        const bool alone = ac.isolated > 0.0 && d > ac.isolated && (d > 4.0 * std::max(before, after) || turns);
+        if ((ac.limit > 0.0 && d > ac.limit) || alone) {
+          jump = true;
+          step = std::max(step, d);
+        }
+      }
+    if (jump) {
+      segs.push_back({start, k});
+      start = k;
+      ++jumps;
+      largest = std::max(largest, step);
+    }
+  }
+  segs.push_back({start, n});
+  const double limit = limit_max;
+  if (note && jumps > 0) {
+    std::size_t short_rows = 0;
+    for (const auto& s : segs)
+      if (s.end - s.begin < 5) short_rows += s.end - s.begin;
+    *note = fmt::format(
+        "stitched from {} segments: {} jumps of up to {:.4g} mm between two rows, beyond the {:.4g} mm a sample "
+        "allows on the axis that jumps, at most ({}; or a step of over 1.5 times that held step standing alone (4 times its neighbours) or turning back at twice the speed it came); each segment is replayed from its own start{}",
+        segs.size(), jumps, largest, limit,
+        v_max_mm_per_s ? "the machine's rapid" : "3 times the largest step the axis holds over 3 samples",
+        short_rows ? fmt::format(", {} rows in segments under 5 rows are not compared", short_rows) : "");
+  }
+  return segs;
+}
+
+std::vector<double> dequantize_reference(const std::vector<double>& t, const std::vector<double>& r0,
+                                         const PositionRounding& rounding) {
+  const std::size_t n0 = r0.size();
+  if (n0 < 3 || rounding.kind == PositionRounding::Kind::kNone) return r0;
+  // A single row off by more than one quantum between two equal neighbours is
+  // a logging glitch, not a motion (the axis would move out and back within
+  // two samples): it takes its neighbours' value.
+  std::vector<double> r = r0;
+  for (std::size_t k = 1; k + 1 < n0; ++k)
+    if (r0[k - 1] == r0[k + 1] && std::abs(r0[k] - r0[k - 1]) > 1.5 * rounding.quantum_mm) r[k] = r0[k - 1];
+  const std::size_t n = n0;
+  struct Run {
+    std::size_t s, e;
+    double v;
+  };
+  std::vector<Run> runs;
+  for (std::size_t k = 0; k < n; ++k) {
+    if (runs.empty() || r[k] != runs.back().v) runs.push_back({k, k, r[k]});
+    runs.back().e = k;
+  }
+  auto quantum_at = [&](double a, double b) {
+    if (rounding.kind == PositionRounding::Kind::kDecimals) return rounding.quantum_mm;
+    const double m = std::max(std::abs(a), std::abs(b));
+    return m > 0.0 ? std::pow(10.0, std::floor(std::log10(m)) - rounding.digits + 1) : rounding.quantum_mm;
+  };
+  auto one_quantum = [&](double a, double b) { return std::abs(b - a) <= 1.5 * quantum_at(a, b); };
+  std::vector<double> kt, kv;
+  auto knot = [&](double tk, double vk) {
+    if (kt.empty() || tk > kt.back()) {
+      kt.push_back(tk);
+      kv.push_back(vk);
+    }
+  };
+  for (std::size_t j = 0; j < runs.size(); ++j) {
+    const Run& u = runs[j];
+    const bool has_prev = j > 0, has_next = j + 1 < runs.size();
+    const bool through = has_prev && has_next && (u.v - runs[j - 1].v) * (runs[j + 1].v - u.v) > 0.0;
+    const bool small_in = has_prev && one_quantum(runs[j - 1].v, u.v);
+    const bool small_out = has_next && one_quantum(u.v, runs[j + 1].v);
+    if (!through) {
+      // Flat: where the values turn back, and at the segment's ends.
+      knot(t[u.s], u.v);
+      knot(t[u.e], u.v);
+    } else if (!(small_in && small_out)) {
+      // A step of several quanta on one side: the samples hold information.
+      if (!small_in) knot(t[u.s], u.v);
+      if (!small_out) knot(t[u.e], u.v);
+    }
+    if (has_next && small_out) knot(0.5 * (t[u.e] + t[runs[j + 1].s]), 0.5 * (u.v + runs[j + 1].v));
+  }
+  std::vector<double> out(n);
+  std::size_t j = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    if (t[k] <= kt.front()) {
+      out[k] = kv.front();
+    } else if (t[k] >= kt.back()) {
+      out[k] = kv.back();
+    } else {
+      while (kt[j + 1] < t[k]) ++j;
+      out[k] = kv[j] + (t[k] - kt[j]) / (kt[j + 1] - kt[j]) * (kv[j + 1] - kv[j]);
+    }
+  }
+  return out;
+}
+
+TorqueChannel torque_channel(const MeasuredRun& run, Axis a) {
+  for (const auto& [suffix, unit] : std::vector<std::pair<const char*, const char*>>{
+           {"_torque_Nm", "N m"}, {"_torque_raw", "raw"}, {"_i_A", "A"}, {"_u_V", "V"}})
+    if (run.trace.find(col(a, suffix))) return {col(a, suffix), unit};
+  return {};
+}
+
+nlohmann::json ChannelErrors::to_json() const {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& [k, v] : nrms) j[k] = v;
+  for (const auto& [k, why] : not_computed) j[k] = nullptr;
+  return j;
+}
+
+// ---------------------------------------------------------------------------
+// Replay
+
+ReplayResult replay_segments(const MeasuredRun& run, const sim::MachineDefinition& machine,
+                             const std::vector<Segment>& segments, const PositionRounding& rounding,
+                             std::vector<char>* compared) {
+  const std::size_t n = run.trace.num_rows();
+  ReplayResult out;
+  for (Axis a : run.axes)
+    if (machine.axes[index(a)].present) out.axes.push_back(a);
+  const auto& t = run.trace.at("t_s");
+  out.t_s = t;
+  for (Axis a : out.axes) {
+    const auto& ref = run.trace.at(col(a, "_ref_mm"));
+    out.x_ref_mm[index(a)] = ref;
+    out.x_mm[index(a)] = ref;
+    for (auto* v : {&out.u_V, &out.i_A, &out.Tm, &out.vcmd_mm_per_s}) (*v)[index(a)].assign(n, 0.0);
+  }
+  if (compared) compared->assign(n, 0);
+  for (const Segment& s : segments) {
+    if (s.end - s.begin < 5) continue;
+    MeasuredRun sub;
+    sub.dir = run.dir;
+    sub.meta = run.meta;
+    sub.axes = out.axes;
+    sub.sample_period_s = run.sample_period_s;
+    sub.trace.source = run.trace.source;
+    sub.trace.names.push_back("t_s");
+    sub.trace.columns.emplace_back(t.begin() + static_cast<std::ptrdiff_t>(s.begin),
+                                   t.begin() + static_cast<std::ptrdiff_t>(s.end));
+    for (Axis a : out.axes) {
+      const auto& ref = run.trace.at(col(a, "_ref_mm"));
+      sub.trace.names.push_back(col(a, "_ref_mm"));
+      sub.trace.columns.emplace_back(ref.begin() + static_cast<std::ptrdiff_t>(s.begin),
+                                     ref.begin() + static_cast<std::ptrdiff_t>(s.end));
+    }
+    const ReplayResult r = replay_run(sub, machine, 0, {}, ChannelSampling::kMeanOverNeighbours);
+    for (Axis a : out.axes) {
+      const std::size_t i = index(a);
+      for (std::size_t k = 0; k < r.t_s.size(); ++k) {
+        out.x_mm[i][s.begin + k] = rounding.round(r.x_mm[i][k]);
+        out.u_V[i][s.begin + k] = r.u_V[i][k];
+        out.i_A[i][s.begin + k] = r.i_A[i][k];
+        out.Tm[i][s.begin + k] = r.Tm[i][k];
+        out.vcmd_mm_per_s[i][s.begin + k] = r.vcmd_mm_per_s[i][k];
+      }
+    }
+    if (compared)
+      for (std::size_t k = s.begin; k < s.end; ++k) (*compared)[k] = 1;
+    if (out.notes.empty()) out.notes = r.notes;
+  }
+  return out;
+}
+
+namespace {
+
+/// The model's value of a channel: what the replay gives in the channel's unit.
+const std::vector<double>* model_channel(const ReplayResult& r, Axis a, const TorqueChannel& ch,
+                                         bool same_unit_machine) {
+  const std::size_t i = index(a);
+  if (ch.unit == "A") return &r.i_A[i];
+  if (ch.unit == "V") return &r.u_V[i];
+  if (ch.unit == "N m") return &r.Tm[i];
+  return same_unit_machine ? &r.Tm[i] : nullptr;  // raw: only a machine identified in the log's unit
+}
+
+/// Adds a model's errors on rows [from, to) where compared to `pools`.
+/// `has_vcmd`: the model's loop is a cascade, so its velocity command compares
+/// with a logged one.
+void add_errors(PoolSet& pools, const MeasuredRun& run, const ReplayResult& model, const std::vector<char>& compared,
+                const std::vector<Axis>& axes, std::size_t from, std::size_t to, bool same_unit_machine,
+                bool has_vcmd, std::map<std::string, std::string>* not_comparable) {
+  for (Axis a : axes) {
+    const std::size_t i = index(a);
+    if (model.x_mm[i].empty()) continue;
+    const auto& ref = run.trace.at(col(a, "_ref_mm"));
+    if (const auto* x = run.trace.find(col(a, "_mm"))) {
+      Pool& p = pools[col(a, "_err_mm")];
+      for (std::size_t k = from; k < to; ++k)
+        if (compared[k]) p.add(ref[k] - (*x)[k], ref[k] - model.x_mm[i][k]);
+    }
+    if (const auto* vc = run.trace.find(col(a, "_vcmd_mm_s"))) {
+      if (has_vcmd) {
+        Pool& p = pools[col(a, "_vcmd_mm_s")];
+        for (std::size_t k = from; k < to; ++k)
+          if (compared[k]) p.add((*vc)[k], model.vcmd_mm_per_s[i][k]);
+      } else if (not_comparable) {
+        (*not_comparable)[col(a, "_vcmd_mm_s")] = "the machine's loop (FADAL) has no velocity command";
+      }
+    }
+    const TorqueChannel ch = torque_channel(run, a);
+    if (!ch.present()) continue;
+    const std::string key = ch.column;
+    const auto* m = model_channel(model, a, ch, same_unit_machine);
+    if (m == nullptr) {
+      if (not_comparable) (*not_comparable)[key] = "the log's torque unit is not stated: the nominal machine's N m cannot be compared";
+      continue;
+    }
+    const auto& meas = run.trace.at(ch.column);
+    Pool& p = pools[key];
+    for (std::size_t k = from; k < to; ++k)
+      if (compared[k]) p.add(meas[k], (*m)[k]);
+  }
+}
+
+/// The rigid-body regression of one axis: T = m a + Fc sgn(v) + b v + c.
+struct Regression {
+  bool ok{false};
+  std::vector<double> theta;  // m, Fc, b, c
+  double lag_s{0.0};          // tracking baseline: e = lag v
+};
+
+ChannelErrors errors_from(const PoolSet& pools) {
+  ChannelErrors e;
+  pools_to_errors(pools, e);
+  return e;
+}
+
+struct Fitter {
+  const std::vector<RunData>& runs;
+
+  /// Rows of the fitting part (interior rows of segments), per run.
+  template <typename F>
+  void for_fit_rows(F f) const {
+    for (std::size_t r = 0; r < runs.size(); ++r)
+      for (std::size_t k = 0; k < runs[r].n_fit; ++k)
+        if (runs[r].interior[k]) f(r, k);
+  }
+};
+
+// ---------------------------------------------------------------------------
+// Catalogue effects on the residual of the identified machine
+
+/// Errors of a machine on the fitting runs, fitting rows and held-out rows,
+/// from one replay of each run (kept for the detectors that read the replay).
+struct FitRunErrors {
+  bool ok{false};
+  ChannelErrors fit, held;
+  std::vector<ReplayResult> replays;
+};
+
+FitRunErrors errors_on_fit_runs(const std::vector<RunData>& runs, const sim::MachineDefinition& machine,
+                                const std::vector<Axis>& axes, const PositionRounding& rounding, int& replays) {
+  FitRunErrors out;
+  PoolSet fit, held;
+  try {
+    for (const RunData& rd : runs) {
+      std::vector<char> cmp;
+      ReplayResult rr = replay_segments(*rd.smooth, machine, rd.segments, rounding, &cmp);
+      ++replays;
+      for (std::size_t k = 0; k < cmp.size(); ++k) cmp[k] = static_cast<char>(cmp[k] && rd.interior[k]);
+      add_errors(fit, *rd.run, rr, cmp, axes, 0, rd.n_fit, true, true, nullptr);
+      add_errors(held, *rd.run, rr, cmp, axes, rd.n_fit, rd.n, true, true, nullptr);
+      out.replays.push_back(std::move(rr));
+    }
+  } catch (const Error&) {
+    return out;
+  }
+  out.fit = errors_from(fit);
+  out.held = errors_from(held);
+  out.ok = true;
+  return out;
+}
+
+/// The channels an effect on an axis is judged on: its torque channel, its
+/// tracking error and its velocity command (those the log has).
+std::vector<std::string> axis_keys(const AxisFromData& ax) {
+  return {ax.channel.column, col(ax.axis, "_err_mm"), col(ax.axis, "_vcmd_mm_s")};
+}
+
+/// An effect is kept where the sum of the axis's held-out NRMS falls by more
+/// than kKeepMargin (relative) and no channel of the axis rises by more than
+/// kRiseAllowed: a fall within the scatter of two replays that differ only
+/// in where the encoder counts fall is not evidence.
+constexpr double kKeepMargin = 0.01;
+constexpr double kRiseAllowed = 0.02;
+
+double keys_sum(const ChannelErrors& e, const std::vector<std::string>& keys) {
+  double s = 0.0;
+  for (const auto& k : keys)
+    if (const auto it = e.nrms.find(k); it != e.nrms.end()) s += it->second;
+  return s;
+}
+
+/// Rows of the fitting part of every fitting run an effect's detector fits
+/// on (interior rows of segments), with the drive's regressors there.
+struct AxisRows {
+  std::vector<std::pair<std::size_t, std::size_t>> at;  ///< (run, row)
+  /// The axis's own motion where its speed is logged (the speed and its
+  /// central difference; the friction acts on it), else the commanded one.
+  std::vector<double> acc, vel, pos, neg, one, dir, x, T;
+  std::vector<double> vel_m;  ///< the logged speed (vel where logged)
+  bool measured_speed{true};
+  std::vector<std::size_t> all, moving;
+  double v_move{0.0}, v_high{0.0}, x_lo{0.0}, x_hi{0.0};
+};
+
+AxisRows axis_rows(const std::vector<RunData>& runs, const AxisFromData& ax) {
+  AxisRows r;
+  const std::size_t i = index(ax.axis);
+  for (const RunData& rd : runs)
+    r.measured_speed = r.measured_speed && rd.run->trace.find(col(ax.axis, "_v_mm_s")) != nullptr;
+  std::vector<double> speeds;
+  for (std::size_t run = 0; run < runs.size(); ++run) {
+    const RunData& rd = runs[run];
+    const auto& t = rd.run->trace;
+    const auto* ch = t.find(ax.channel.column);
+    if (ch == nullptr) continue;
+    const auto* xm = t.find(col(ax.axis, "_mm"));
+    const auto& xs = xm ? *xm : rd.smooth->trace.at(col(ax.axis, "_ref_mm"));
+    const auto* vm = r.measured_speed ? t.find(col(ax.axis, "_v_mm_s")) : nullptr;
+    const double dt = rd.run->sample_period_s;
+    r.v_move = std::max(r.v_move, rd.v_move[i]);
+    for (std::size_t k = 0; k < rd.n_fit; ++k) {
+      if (!rd.interior[k]) continue;
+      const double v = vm ? (*vm)[k] : rd.kin[i].v_mm_per_s[k];
+      const int d = direction(v, rd.v_move[i]);
+      r.at.emplace_back(run, k);
+      r.acc.push_back(vm ? ((*vm)[k + 1] - (*vm)[k - 1]) / (2.0 * dt) : rd.kin[i].a_mm_per_s2[k]);
+      r.vel.push_back(v);
+      r.pos.push_back(d > 0 ? 1.0 : 0.0);
+      r.neg.push_back(d < 0 ? -1.0 : 0.0);
+      r.one.push_back(1.0);
+      r.dir.push_back(d);
+      r.x.push_back(xs[k]);
+      r.T.push_back((*ch)[k]);
+      r.vel_m.push_back(v);
+      r.all.push_back(r.all.size());
+      if (d != 0) {
+        r.moving.push_back(r.all.back());
+        speeds.push_back(v);
+      }
+    }
+  }
+  r.v_high = percentile_abs(speeds, 0.99);
+  if (!r.moving.empty()) {
+    r.x_lo = r.x_hi = r.x[r.moving.front()];
+    for (std::size_t k : r.moving) {
+      r.x_lo = std::min(r.x_lo, r.x[k]);
+      r.x_hi = std::max(r.x_hi, r.x[k]);
+    }
+  }
+  return r;
+}
+
+/// The drive refitted with an effect: J and B stay; the Coulomb levels and
+/// the constant load move by what fitting the effect beside them moves them
+/// (the joint fit against the same fit without it, both with the drive's
+/// columns a, v, [v > 0], -[v < 0], 1 first), since a Coulomb level fitted
+/// without the effect takes up part of it.
+struct DriveRefit {
+  double J{0.0}, B{0.0}, Tc_pos{0.0}, Tc_neg{0.0}, c{0.0};
+};
+DriveRefit drive_moved(const feeddrive::DriveParams& cur, const LsqResult& joint, const LsqResult& without) {
+  const double c0 = cur.effects.constant_load.enabled ? cur.effects.constant_load.torque_Nm : 0.0;
+  return {cur.J_kg_m2, cur.B_kg_m2_per_s, std::max(cur.Tc_pos_Nm + joint.theta[2] - without.theta[2], 0.0),
+          std::max(cur.Tc_neg_Nm + joint.theta[3] - without.theta[3], 0.0), c0 + joint.theta[4] - without.theta[4]};
+}
+
+/// A candidate: the effect, one or more parameter sets (the fitting rows'
+/// replay chooses among them), the drive refitted with each, the loop
+/// gains it carries, and the torque it adds at the detector's rows (taken
+/// out of the torque the later detectors fit, where kept).
+struct Trial {
+  std::string effect;
+  std::vector<std::map<std::string, double>> sets;
+  std::vector<DriveRefit> drives;  ///< one per set, or empty: the drive stays
+  std::optional<controller::CascadeGains> gains;
+  std::string evidence;
+  /// The channels (suffixes of the axis's keys: "torque", "_err_mm") where
+  /// the catalogue says the effect shows: their held-out NRMS must fall.
+  std::vector<std::string> judge;
+  std::function<double(std::size_t row, const std::map<std::string, double>& p, const DriveRefit* d)> torque;
+};
+
+sim::MachineDefinition with_trial(const sim::MachineDefinition& base, Axis a, const Trial& t, std::size_t set) {
+  sim::MachineDefinition m = base;
+  sim::AxisDefinition& def = m.axes[index(a)];
+  if (!t.drives.empty()) {
+    const DriveRefit& d = t.drives[set];
+    def.drive.J_kg_m2 = d.J;
+    def.drive.B_kg_m2_per_s = d.B;
+    def.drive.Tc_pos_Nm = d.Tc_pos;
+    def.drive.Tc_neg_Nm = d.Tc_neg;
+    def.drive.effects.constant_load.enabled = d.c != 0.0;
+    def.drive.effects.constant_load.torque_Nm = d.c;
+  }
+  if (t.gains) def.loop.cascade = *t.gains;
+  // Both describe the friction at low speed: the drive holds one.
+  if (t.effect == "stribeck") def.drive.effects.smooth_friction.enabled = false;
+  for (const auto& [name, value] : t.sets[set]) {
+    const sim::AxisParamSpec* spec = sim::find_axis_param(t.effect + "." + name);
+    if (spec == nullptr) throw InternalError(fmt::format("calibrate: no machine parameter {}.{}", t.effect, name));
+    sim::set_axis_param(def, *spec, value);
+  }
+  return m;
+}
+
+double t_of(const LsqResult& ls, std::size_t j) {
+  return ls.stderr_theta[j] > 0.0 ? ls.theta[j] / ls.stderr_theta[j] : 0.0;
+}
+
+/// t of a pair of columns (a sine and a cosine): the RMS of their t values.
+double t_pair(const LsqResult& ls, std::size_t j) {
+  return std::sqrt(0.5 * (std::pow(t_of(ls, j), 2) + std::pow(t_of(ls, j + 1), 2)));
+}
+
+/// What a detector needs to reach before its candidate is replayed: the
+/// fitted size over its standard error (the residual's correlation over
+/// 10 ms of rows counted), high enough that a scan over hundreds of periods
+/// or speeds does not pass on noise alone.
+constexpr double kMinT = 8.0;
+
+void search_catalogue_effects(DataCalibration& out, const std::vector<RunData>& runs) {
+  const double dt = runs.front().run->sample_period_s;
+  // The measured positions' own step (the reference may be logged finer).
+  double q = 0.0;
+  for (int d = 0; d <= 6 && q == 0.0; ++d) {
+    const double step = std::pow(10.0, -d);
+    bool all = true;
+    for (const RunData& rd : runs)
+      for (Axis a : out.axes)
+        if (const auto* x = rd.run->trace.find(col(a, "_mm")))
+          for (double v : *x) all = all && is_multiple(v, step);
+    if (all) q = step;
+  }
+  if (q == 0.0) q = out.identified.encoder_resolution_mm;
+  q = std::max(q, out.rounding.kind == PositionRounding::Kind::kSignificant ? out.rounding.quantum_mm : 0.0);
+  const bool fast = dt <= 2e-3 + 1e-12, fine = q <= 0.005;
+  const double corr = std::max(1.0, 0.01 / dt);
+  FitRunErrors current = errors_on_fit_runs(runs, out.final_machine, out.axes, out.rounding, out.replays);
+  if (!current.ok) return;
+  for (const AxisFromData& ax : out.axis) {
+    if (!ax.identified) continue;
+    const Axis a = ax.axis;
+    const std::size_t ai = index(a);
+    AxisRows rows = axis_rows(runs, ax);
+    if (rows.moving.size() < 200) continue;
+    const auto keys = axis_keys(ax);
+    const std::vector<const std::vector<double>*> base_cols{&rows.acc, &rows.vel, &rows.pos, &rows.neg, &rows.one};
+    auto with_base = [&](std::vector<const std::vector<double>*> extra) {
+      std::vector<const std::vector<double>*> c = base_cols;
+      c.insert(c.end(), extra.begin(), extra.end());
+      return c;
+    };
+
+    auto attempt = [&](const Trial& t) {
+      DataEffect eff;
+      eff.effect = t.effect;
+      eff.axis = a;
+      eff.evidence = t.evidence;
+      std::size_t best = 0;
+      FitRunErrors best_e;
+      double best_fit = 1e300;
+      for (std::size_t s = 0; s < t.sets.size(); ++s) {
+        FitRunErrors e;
+        try {
+          e = errors_on_fit_runs(runs, with_trial(out.final_machine, a, t, s), out.axes, out.rounding, out.replays);
+        } catch (const Error&) {
+          continue;
+        }
+        if (!e.ok || !e.fit.nrms.count(ax.channel.column)) continue;
+        const double f = keys_sum(e.fit, keys);
+        if (f < best_fit) {
+          best_fit = f;
+          best = s;
+          best_e = std::move(e);
+        }
+      }
+      for (const auto& [k, v] : t.sets[best]) eff.params[k] = v;
+      for (const auto& k : keys)
+        if (const auto it = current.held.nrms.find(k); it != current.held.nrms.end()) eff.before_channels[k] = it->second;
+      eff.before = eff.before_channels.count(ax.channel.column) ? eff.before_channels.at(ax.channel.column) : 0.0;
+      eff.after = eff.before;
+      if (best_e.ok) {
+        bool no_rise = true;
+        for (const auto& [k, b] : eff.before_channels) {
+          const auto it = best_e.held.nrms.find(k);
+          if (it == best_e.held.nrms.end()) {
+            no_rise = false;
+            continue;
+          }
+          eff.after_channels[k] = it->second;
+          no_rise = no_rise && it->second <= b * (1.0 + kRiseAllowed);
+        }
+        eff.after = eff.after_channels.count(ax.channel.column) ? eff.after_channels.at(ax.channel.column) : eff.before;
+        std::vector<std::string> jk;
+        for (const auto& j : t.judge) jk.push_back(j == "torque" ? ax.channel.column : col(a, j.c_str()));
+        const double sb = keys_sum(current.held, jk), sa = keys_sum(best_e.held, jk);
+        eff.kept = no_rise && sa < (1.0 - kKeepMargin) * sb;
+        eff.evidence += fmt::format("; held-out NRMS of {} {:.4g} -> {:.4g}{}", fmt::join(jk, " + "), sb, sa,
+                                    eff.kept ? "" : " (not kept)");
+      } else {
+        eff.evidence += "; the replay with it failed (not kept)";
+      }
+      if (eff.kept) {
+        if (t.effect == "stribeck" && out.final_machine.axes[ai].drive.effects.smooth_friction.enabled)
+          for (DataEffect& other : out.effects)
+            if (other.effect == "smooth_friction" && other.axis == a && other.kept) {
+              other.kept = false;
+              other.evidence += "; replaced by stribeck, which lowers the held-out error further";
+            }
+        out.final_machine = with_trial(out.final_machine, a, t, best);
+        if (t.torque) {
+          const DriveRefit* d = t.drives.empty() ? nullptr : &t.drives[best];
+          for (std::size_t k : rows.all) rows.T[k] -= t.torque(k, t.sets[best], d);
+        }
+        current = std::move(best_e);
+      }
+      out.effects.push_back(std::move(eff));
+    };
+
+    // The channel the replay gives at the detector's rows.
+    auto model_at = [&](std::size_t k) {
+      const auto [run, row] = rows.at[k];
+      const auto* m = model_channel(current.replays[run], a, ax.channel, true);
+      return m ? (*m)[row] : 0.0;
+    };
+
+    // delay: a torque that follows the loop's command late.
+    if (fast) {
+      std::size_t lag = 0;
+      std::optional<controller::CascadeGains> gains;
+      std::string why;
+      if (ax.velocity_loop_from_data) {
+        lag = ax.torque_lag_samples;
+        gains = ax.gains_at_lag;
+        why = fmt::format("the logged torque follows the PI law on the logged speed error best {} samples late "
+                          "(the law refitted at that lag: Kvp {:.4g}, Tn {:.4g} s)",
+                          lag, ax.gains_at_lag.Kvp_torque_s_per_rad, ax.gains_at_lag.Tn_s);
+      } else {
+        const auto max_lag = static_cast<std::size_t>(std::clamp(std::lround(0.01 / dt), 1L, 10L));
+        std::vector<double> mse(max_lag + 1, 0.0);
+        for (std::size_t L = 0; L <= max_lag; ++L)
+          for (std::size_t k : rows.all) {
+            const auto [run, row] = rows.at[k];
+            if (row < L) continue;
+            const auto* m = model_channel(current.replays[run], a, ax.channel, true);
+            const double d = rows.T[k] - (m ? (*m)[row - L] : 0.0);
+            mse[L] += d * d;
+          }
+        const auto it = std::min_element(mse.begin(), mse.end());
+        lag = static_cast<std::size_t>(it - mse.begin());
+        if (lag > 0 && *it < 0.8 * mse[0])
+          why = fmt::format("the logged torque matches the replay's {} samples later (mean square {:.3g} of {:.3g} "
+                            "at no lag)",
+                            lag, *it / static_cast<double>(rows.all.size()), mse[0] / static_cast<double>(rows.all.size()));
+        else
+          lag = 0;
+      }
+      if (lag > 0) {
+        Trial t;
+        t.effect = "delay";
+        t.sets = {{{"delay_s", static_cast<double>(lag) * dt}}};
+        t.gains = gains;
+        t.evidence = why;
+        t.judge = {"torque", "_err_mm"};
+        attempt(t);
+      }
+    }
+
+    // current_saturation: the log's torque clips where the replay's goes beyond.
+    {
+      double log_max = 0.0, model_max = 0.0;
+      for (std::size_t k : rows.all) {
+        const auto [run, row] = rows.at[k];
+        log_max = std::max(log_max, std::abs(runs[run].run->trace.at(ax.channel.column)[row]));
+        model_max = std::max(model_max, std::abs(model_at(k)));
+      }
+      std::vector<double> top;
+      for (std::size_t k : rows.all) {
+        const auto [run, row] = rows.at[k];
+        const double v = std::abs(runs[run].run->trace.at(ax.channel.column)[row]);
+        if (v >= 0.98 * log_max) top.push_back(v);
+      }
+      if (log_max > 0.0 && model_max > 1.05 * log_max && top.size() >= 10) {
+        std::nth_element(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(top.size() / 2), top.end());
+        const double level = top[top.size() / 2];
+        Trial t;
+        t.effect = "current_saturation";
+        t.sets = {{{"i_max_A", level}}};
+        t.judge = {"torque", "_err_mm"};
+        t.evidence = fmt::format("the log's {} holds {} samples within 2 % of its largest value {:.4g} while the "
+                                 "replay asks for up to {:.4g}: a limit at {:.4g} (in the channel's unit)",
+                                 ax.channel.column, top.size(), log_max, model_max, level);
+        attempt(t);
+      }
+    }
+
+    // stribeck: friction above the Coulomb level at low speed, the drive
+    // refitted with the curve, T = J a + B v + Tc_dir [dir] (1 - g) + Ts sgn g + c, g = exp(-(v/ws)^2).
+    {
+      const LsqResult base = least_squares(base_cols, rows.T, rows.all, corr);
+      std::vector<double> p1(rows.all.size()), n1(rows.all.size()), sg(rows.all.size());
+      auto fit_at = [&](double ws) {
+        for (std::size_t k : rows.all) {
+          const double g = std::exp(-std::pow(rows.vel[k] / ws, 2));
+          p1[k] = rows.pos[k] * (1.0 - g);
+          n1[k] = rows.neg[k] * (1.0 - g);
+          sg[k] = rows.dir[k] * g;
+        }
+        return least_squares({&rows.acc, &rows.vel, &p1, &n1, &rows.one, &sg}, rows.T, rows.all, corr);
+      };
+      double best_ws = 0.0, best_res = base.ok ? base.residual_rms : 0.0;
+      LsqResult best;
+      auto try_ws = [&](double ws) {
+        const LsqResult ls = fit_at(ws);
+        if (ls.ok && ls.residual_rms < best_res) {
+          best_res = ls.residual_rms;
+          best_ws = ws;
+          best = ls;
+        }
+      };
+      // Steps of 1.35, then of 1.02 about the best (the levels are linear
+      // given ws, so the scan is the whole search).
+      for (double ws = rows.v_move; base.ok && ws < 0.5 * rows.v_high; ws *= 1.35) try_ws(ws);
+      if (best_ws > 0.0) {
+        const double w0 = best_ws;
+        for (double ws = w0 / 1.35; ws <= w0 * 1.35; ws *= 1.02) try_ws(ws);
+      }
+      if (best_ws > 0.0) {
+        const double Ts = best.theta[5], Tc_mean = 0.5 * (best.theta[2] + best.theta[3]);
+        const double t_ex = best.stderr_theta[5] > 0.0 ? (Ts - Tc_mean) / best.stderr_theta[5] : 0.0;
+        if (t_ex >= kMinT && best_res < 0.99 * base.residual_rms) {
+          Trial t;
+          t.effect = "stribeck";
+          t.judge = {"torque", "_err_mm"};
+          for (double f : {0.7, 1.0, 1.4}) {
+            const LsqResult ls = fit_at(f * best_ws);
+            if (!ls.ok) continue;
+            const DriveRefit d = drive_moved(out.final_machine.axes[ai].drive, ls, base);
+            // The breakaway level as fitted on the axis's own motion.
+            const double Ts_set = ls.theta[5];
+            if (!(Ts_set > std::max(d.Tc_pos, d.Tc_neg))) continue;
+            t.sets.push_back({{"Ts_static", Ts_set}, {"ws", f * best_ws}});
+            t.drives.push_back(d);
+          }
+          t.evidence = fmt::format("friction rising to {:.4g} (t = {:.1f} over the Coulomb mean {:.4g}) below "
+                                   "{:.3g} mm/s cuts the fitting rows' torque residual from {:.4g} to {:.4g}",
+                                   Ts, t_ex, Tc_mean, best_ws, base.residual_rms, best_res);
+          t.torque = [&rows](std::size_t k, const std::map<std::string, double>& p, const DriveRefit* d) {
+            const double g = std::exp(-std::pow(rows.vel[k] / p.at("ws"), 2));
+            const double Tc = rows.dir[k] > 0 ? d->Tc_pos : d->Tc_neg;
+            return rows.dir[k] * (p.at("Ts_static") - Tc) * g;
+          };
+          if (!t.sets.empty()) attempt(t);
+        }
+      }
+    }
+
+    // position_dependent_friction: the base fit's residual, signed by the
+    // direction of motion, averaged in 60 bins along the travel; the band of
+    // bins with the largest excess, fitted with the drive.
+    {
+      // On moving rows the constant is the mean of the two Coulomb columns.
+      const std::vector<const std::vector<double>*> moving_cols{&rows.acc, &rows.vel, &rows.pos, &rows.neg};
+      const LsqResult b = least_squares(moving_cols, rows.T, rows.moving, corr);
+      if (b.ok && rows.x_hi > rows.x_lo) {
+        std::vector<double> rho(rows.all.size(), 0.0);
+        for (std::size_t k : rows.moving) {
+          double pred = 0.0;
+          for (std::size_t j = 0; j < moving_cols.size(); ++j) pred += (*moving_cols[j])[k] * b.theta[j];
+          rho[k] = (rows.T[k] - pred) * rows.dir[k];
+        }
+        constexpr std::size_t kBins = 60;
+        const Bins bins = bin_means(rows.x, rho, rows.moving, rows.x_lo, rows.x_hi, kBins);
+        const double min_rows = std::max(200.0, 0.02 * static_cast<double>(rows.moving.size()));
+        double best = 0.0;
+        std::size_t bi = 0, bj = 0;
+        for (std::size_t i = 0; i < kBins; ++i) {
+          double sum = 0.0, cnt = 0.0;
+          for (std::size_t j = i; j < kBins && j - i + 1 < (3 * kBins) / 4; ++j) {
+            sum += bins.mean[j] * static_cast<double>(bins.count[j]);
+            cnt += static_cast<double>(bins.count[j]);
+            if (cnt < min_rows || sum <= 0.0) continue;
+            if (sum * sum / cnt > best) {
+              best = sum * sum / cnt;
+              bi = i;
+              bj = j;
+            }
+          }
+        }
+        if (best > 0.0) {
+          const double w = (rows.x_hi - rows.x_lo) / static_cast<double>(kBins);
+          const double x0 = rows.x_lo + w * static_cast<double>(bi), x1 = rows.x_lo + w * static_cast<double>(bj + 1);
+          std::vector<double> psi(rows.all.size(), 0.0);
+          for (std::size_t k : rows.all)
+            if (rows.x[k] >= x0 && rows.x[k] <= x1) psi[k] = rows.dir[k];
+          const LsqResult f = least_squares(with_base({&psi}), rows.T, rows.all, corr);
+          const LsqResult f0 = least_squares(base_cols, rows.T, rows.all, corr);
+          if (f.ok && f0.ok && f.theta[5] > 0.0 && t_of(f, 5) >= kMinT) {
+            Trial t;
+            t.effect = "position_dependent_friction";
+            t.sets = {{{"dTc_Nm", f.theta[5]}, {"x_start_mm", x0}, {"x_end_mm", x1}}};
+            t.drives = {drive_moved(out.final_machine.axes[ai].drive, f, f0)};
+            t.judge = {"torque"};
+            t.evidence = fmt::format("friction {:+.4g} (t = {:.1f}) between x = {:.4g} and {:.4g} mm, in the "
+                                     "channel's unit",
+                                     f.theta[5], t_of(f, 5), x0, x1);
+            t.torque = [&rows](std::size_t k, const std::map<std::string, double>& p, const DriveRefit*) {
+              return rows.x[k] >= p.at("x_start_mm") && rows.x[k] <= p.at("x_end_mm") ? p.at("dTc_Nm") * rows.dir[k]
+                                                                                        : 0.0;
+            };
+            attempt(t);
+          }
+        }
+      }
+    }
+
+    // A scan of a period over [P_min, P_max] (steps of 1.5 %, then refined
+    // to 0.1 % and 0.01 % about the best): the period whose fit leaves the
+    // smallest residual.
+    auto scan_period = [](double P_min, double P_max, const std::function<LsqResult(double)>& fit) {
+      std::pair<double, LsqResult> best{0.0, LsqResult{}};
+      double best_res = 1e300;
+      auto one = [&](double P) {
+        LsqResult ls = fit(P);
+        if (ls.ok && ls.residual_rms < best_res) {
+          best_res = ls.residual_rms;
+          best = {P, std::move(ls)};
+        }
+      };
+      for (double P = P_min; P <= P_max; P *= 1.015) one(P);
+      for (const auto& [span, step] : {std::pair{1.015, 1.001}, std::pair{1.001, 1.0001}}) {
+        if (best.first <= 0.0) break;
+        const double P0 = best.first;
+        for (double P = P0 / span; P <= std::min(P_max, P0 * span); P *= step) one(P);
+      }
+      return best;
+    };
+
+    // cogging: a torque ripple periodic in the motor angle (x / rg, rg = 1
+    // mm/rad here), fitted with the drive on the axis's own motion (its
+    // logged speed, where there is one: a ripple the loop does not follow
+    // shows in the speed, not in the commanded motion).
+    if (fast) {
+      const double P_min = std::max(0.1, 8.0 * dt * rows.v_high), P_max = std::min(40.0, (rows.x_hi - rows.x_lo) / 3.0);
+      std::vector<double> sn(rows.all.size()), cs(rows.all.size());
+      const std::vector<const std::vector<double>*> cols{&rows.acc, &rows.vel, &rows.pos, &rows.neg, &sn, &cs};
+      auto fit = [&](double P) {
+        for (std::size_t k : rows.all) {
+          sn[k] = std::sin(2.0 * M_PI * rows.x[k] / P);
+          cs[k] = std::cos(2.0 * M_PI * rows.x[k] / P);
+        }
+        return least_squares(cols, rows.T, rows.moving, corr);
+      };
+      const LsqResult base = least_squares({&rows.acc, &rows.vel, &rows.pos, &rows.neg}, rows.T, rows.moving, corr);
+      if (base.ok && P_max > P_min) {
+        const auto [P, ls] = scan_period(P_min, P_max, fit);
+        if (P > 0.0 && t_pair(ls, 4) >= kMinT && ls.residual_rms < 0.98 * base.residual_rms) {
+          const double A = std::hypot(ls.theta[4], ls.theta[5]), phase = std::atan2(ls.theta[5], ls.theta[4]);
+          Trial t;
+          t.effect = "cogging";
+          t.judge = {"torque"};
+          t.sets = {{{"amplitude_Nm", A}, {"cycles_per_rev", 2.0 * M_PI / P}, {"phase_rad", phase}}};
+          t.evidence = fmt::format("a ripple of {:.4g} (in the channel's unit) with a period of {:.4g} mm of travel "
+                                   "(t = {:.1f}) cuts the moving rows' torque residual from {:.4g} to {:.4g}",
+                                   A, P, t_pair(ls, 4), base.residual_rms, ls.residual_rms);
+          t.torque = [&rows](std::size_t k, const std::map<std::string, double>& p, const DriveRefit*) {
+            return p.at("amplitude_Nm") * std::sin(p.at("cycles_per_rev") * rows.x[k] + p.at("phase_rad"));
+          };
+          attempt(t);
+        }
+      }
+    }
+
+    // screw_pitch_error: the encoder reads x + A sin(2 pi x / P + phase)
+    // while the motor moves x; the logged motor speed then differs from the
+    // speed of the logged position by A (2 pi / P) v cos(2 pi x / P + phase).
+    // Regressed on that with the speed, the acceleration and a constant as
+    // nuisances (a logged speed filtered or late).
+    bool logs_x = true;
+    for (const RunData& rd : runs) logs_x = logs_x && rd.run->trace.find(col(a, "_mm")) != nullptr;
+    if (fast && fine && rows.measured_speed && logs_x) {
+      std::vector<double> r(rows.all.size()), vd(rows.all.size()), ad(rows.all.size(), 0.0);
+      for (std::size_t k : rows.all) {
+        const auto [run, row] = rows.at[k];
+        const auto& xm = runs[run].run->trace.at(col(a, "_mm"));
+        vd[k] = (xm[row + 1] - xm[row - 1]) / (2.0 * dt);
+        r[k] = rows.vel_m[k] - vd[k];
+        ad[k] = rows.acc[k];
+      }
+      std::vector<double> c1(rows.all.size()), c2(rows.all.size());
+      auto fit = [&](double P) {
+        const double w = 2.0 * M_PI / P;
+        for (std::size_t k : rows.all) {
+          c1[k] = -w * vd[k] * std::cos(w * rows.x[k]);
+          c2[k] = w * vd[k] * std::sin(w * rows.x[k]);
+        }
+        return least_squares({&rows.one, &vd, &ad, &c1, &c2}, r, rows.moving, corr);
+      };
+      const double P_min = std::max(0.5, 8.0 * dt * rows.v_high), P_max = (rows.x_hi - rows.x_lo) / 2.0;
+      if (P_max > P_min) {
+        const auto [P, ls] = scan_period(P_min, P_max, fit);
+        const double A = P > 0.0 ? std::hypot(ls.theta[3], ls.theta[4]) : 0.0;
+        if (P > 0.0 && t_pair(ls, 3) >= kMinT && A >= 0.5 * q) {
+          Trial t;
+          t.effect = "screw_pitch_error";
+          t.judge = {"_err_mm"};
+          t.sets = {{{"amplitude_mm", A}, {"period_mm", P}, {"phase_rad", std::atan2(ls.theta[4], ls.theta[3])}}};
+          t.evidence = fmt::format("the logged speed differs from the speed of the logged position as a lead error "
+                                   "of {:.4g} mm with a period of {:.4g} mm would make it (t = {:.1f})",
+                                   A, P, t_pair(ls, 3));
+          attempt(t);
+        }
+      }
+    }
+
+    // backlash, where a fast log has the motor's speed beside the encoder's
+    // position (a linear scale on the table, the loop closed across the
+    // gap): the motor's travel (the logged speed integrated) runs ahead of
+    // the table by half the gap while it pushes one way and behind by half
+    // while it pushes the other, so across each reversal of the command
+    // their difference steps by the gap, signed by the new direction. Read
+    // over the 50 ms of motion before the stop and 30 to 80 ms into the new
+    // move (the gap crossed at any acceleration over 100 mm/s^2), where the
+    // motor's speed has the direction of each; the median over the fitting
+    // part's reversals is the gap. A run without a gap steps by the
+    // encoder's rounding and the integration's drift, well under 3 counts
+    // (and so does a log whose speed is the encoder's own, derived from the
+    // position: then the lost motion in the position below is looked for).
+    bool gap_from_speed = false;
+    if (fast && fine && rows.measured_speed && logs_x) {
+      const auto w = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.05 / dt)));
+      const auto skip = static_cast<std::size_t>(std::lround(0.03 / dt));
+      std::vector<double> steps;
+      for (const RunData& rd : runs) {
+        const auto& xm = rd.run->trace.at(col(a, "_mm"));
+        const auto& vm = rd.run->trace.at(col(a, "_v_mm_s"));
+        std::vector<double> d(rd.n_fit, 0.0);
+        std::vector<std::size_t> seg(rd.n_fit, 0);
+        double travel = 0.0;
+        for (std::size_t s = 0; s < rd.segments.size(); ++s)
+          for (std::size_t k = rd.segments[s].begin; k < std::min(rd.segments[s].end, rd.n_fit); ++k) {
+            travel = k == rd.segments[s].begin ? xm[k] : travel + 0.5 * (vm[k] + vm[k - 1]) * dt;
+            d[k] = travel - xm[k];
+            seg[k] = s;
+          }
+        // Mean of d over rows [b, e) whose logged speed has direction `dir`.
+        auto mean_d = [&](std::size_t b, std::size_t e, int dir, std::size_t s) {
+          double sum = 0.0;
+          std::size_t n = 0;
+          for (std::size_t k = b; k < e; ++k)
+            if (seg[k] == s && rd.interior[k] && direction(vm[k], rd.v_move[ai]) == dir) {
+              sum += d[k];
+              ++n;
+            }
+          return n >= w / 2 ? std::optional<double>(sum / static_cast<double>(n)) : std::nullopt;
+        };
+        int last = 0;
+        std::size_t last_end = 0;
+        for (std::size_t k = 0; k < rd.n_fit; ++k) {
+          const int dr = direction(rd.kin[ai].v_mm_per_s[k], rd.v_move[ai]);
+          if (dr == 0) continue;
+          if (last != 0 && dr != last && last_end + 1 >= w && k + skip + w <= rd.n_fit && seg[last_end] == seg[k]) {
+            const auto before = mean_d(last_end + 1 - w, last_end + 1, last, seg[k]);
+            const auto after = mean_d(k + skip, k + skip + w, dr, seg[k]);
+            if (before && after) steps.push_back(dr * (*after - *before));
+          }
+          last = dr;
+          last_end = k;
+        }
+      }
+      if (steps.size() >= 4) {
+        std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
+        const double g = steps[steps.size() / 2];
+        // A step beyond 1 mm is no feed drive's gap but a run whose motor
+        // and encoder have parted (a diverging loop, a slipping coupling).
+        if (g >= 3.0 * q && g <= 1.0) {
+          gap_from_speed = true;
+          Trial t;
+          t.effect = "backlash";
+          t.judge = {"_err_mm"};
+          for (double m : {0.85, 1.0, 1.15}) t.sets.push_back({{"gap_mm", m * g}});
+          t.evidence = fmt::format("across {} reversals of the command the motor's travel (the logged speed "
+                                   "integrated) and the logged position part by a median {:.4g} mm ({:.1f} "
+                                   "position quanta), signed by the new direction: a gap of that size (0.85 to "
+                                   "1.15 times it replayed)",
+                                   steps.size(), g, g / q);
+          attempt(t);
+        }
+      }
+    }
+
+    // backlash, from the position: after a reversal of the command the measured position lags
+    // the replay's in the new direction while the motor crosses the gap: the
+    // median over the fitting part's reversals of the peak of that lag in the
+    // 50 ms after each sizes the gap; gaps of 0.5 to 2 times it are replayed.
+    if (fine && !gap_from_speed) {
+      const auto span = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.05 / dt)));
+      std::vector<double> peaks;
+      for (std::size_t run = 0; run < runs.size(); ++run) {
+        const RunData& rd = runs[run];
+        const auto* xm = rd.run->trace.find(col(a, "_mm"));
+        if (xm == nullptr || current.replays[run].x_mm[ai].empty()) continue;
+        const auto& xr = current.replays[run].x_mm[ai];
+        int last = 0;
+        for (std::size_t k = 0; k < rd.n_fit; ++k) {
+          const int d = direction(rd.kin[ai].v_mm_per_s[k], rd.v_move[ai]);
+          if (d == 0) continue;
+          if (last != 0 && d != last && k + span <= rd.n_fit) {
+            double peak = -1e300;
+            for (std::size_t j = k; j < k + span; ++j)
+              if (rd.interior[j]) peak = std::max(peak, d * (xr[j] - (*xm)[j]));
+            if (peak > -1e300) peaks.push_back(peak);
+          }
+          last = d;
+        }
+      }
+      if (peaks.size() >= 4) {
+        std::nth_element(peaks.begin(), peaks.begin() + static_cast<std::ptrdiff_t>(peaks.size() / 2), peaks.end());
+        const double p = peaks[peaks.size() / 2];
+        if (p >= 3.0 * q) {
+          Trial t;
+          t.effect = "backlash";
+          t.judge = {"_err_mm"};
+          for (double m : {0.5, 1.0, 1.5, 2.0, 3.0}) t.sets.push_back({{"gap_mm", m * 2.0 * p}});
+          t.evidence = fmt::format("after a reversal the position lags the replay's by a median peak of {:.4g} mm "
+                                   "({} reversals, {:.1f} position quanta): lost motion of a gap of about {:.4g} mm (0.5 to 3 times it replayed)",
+                                   p, peaks.size(), p / q, 2.0 * p);
+          attempt(t);
+        }
+      }
+    }
+  }
+}
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// Calibration
+
+DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const std::vector<MeasuredRun>& validate,
+                                    const sim::MachineDefinition& nominal, const DataCalibrationOptions& options) {
+  if (fit.empty()) throw ConfigError("calibrate: no run to fit");
+  DataCalibration out;
+  out.fit_fraction = options.fit_fraction;
+  out.axes = fit.front().axes;
+  for (const auto& r : fit)
+    if (r.axes != out.axes)
+      throw ConfigError(fmt::format("{}: the runs calibrated together must log the same axes ({} logs others)",
+                                    fit.front().dir.string(), r.dir.string()));
+  for (const auto& r : fit)
+    for (const auto& n : r.notes) out.notes.push_back(n);
+
+  // Rounding: the coarsest all fitting runs agree with.
+  out.rounding = detect_rounding(fit.front());
+  for (std::size_t i = 1; i < fit.size(); ++i) {
+    const PositionRounding ri = detect_rounding(fit[i]);
+    if (ri.quantum_mm > out.rounding.quantum_mm) out.rounding = ri;
+  }
+  out.notes.push_back(out.rounding.describe() + (out.rounding.quantum_mm > 0.01
+                                                     ? ": a display rounding, not the servo's encoder; the twin's "
+                                                       "loop closes on a 1 um encoder and its logged positions are "
+                                                       "rounded as the log's"
+                                                     : ": used as the replay's encoder"));
+
+  // Controller period.
+  const MeasuredRun& r0 = fit.front();
+  double Ts = options.default_controller_period_s;
+  if (r0.meta.controller_period_s) {
+    Ts = *r0.meta.controller_period_s;
+    out.notes.push_back(fmt::format("controller period {} s from meta.json", Ts));
+  } else if (r0.sample_period_s <= 1e-3 + 1e-12) {
+    Ts = r0.sample_period_s;
+    out.notes.push_back(fmt::format("controller period not stated: the log's own period {} s is taken", Ts));
+  } else {
+    out.notes.push_back(fmt::format("controller period not stated and the log samples every {} s: the twin replays at "
+                                    "Ts = {} s, the reference between samples rebuilt by a monotone cubic",
+                                    r0.sample_period_s, Ts));
+  }
+
+  std::vector<RunData> runs;
+  for (const auto& r : fit) runs.push_back(prepare_run(r, out.axes, out.rounding, options.fit_fraction, out.notes));
+  const Fitter fitter{runs};
+
+  // The machine: cascade, drives in the channel's unit.
+  sim::MachineDefinition m;
+  m.name = "identified";
+  m.source = "twin calibrate (from data)";
+  m.Ts_s = Ts;
+  m.encoder_resolution_mm = out.rounding.quantum_mm > 0.0 && out.rounding.quantum_mm <= 0.01 &&
+                                    out.rounding.kind == PositionRounding::Kind::kDecimals
+                                ? out.rounding.quantum_mm
+                                : 0.001;
+  sim::set_machine_loop_law(m, controller::LoopLaw::kCascade);
+
+  for (Axis a : out.axes) {
+    AxisFromData ax;
+    ax.axis = a;
+    ax.channel = torque_channel(r0, a);
+    const std::size_t i = index(a);
+    // The loop: vcmd regression where logged, else the lag of the position.
+    double num = 0.0, den = 0.0;
+    std::vector<double> e_col, v_col, vc_col;
+    bool have_vcmd = true, have_x = true;
+    for (const auto& rd : runs) {
+      have_vcmd = have_vcmd && rd.run->trace.find(col(a, "_vcmd_mm_s")) != nullptr;
+      have_x = have_x && rd.run->trace.find(col(a, "_mm")) != nullptr;
+    }
+    if (have_vcmd && have_x) {
+      std::vector<double> e, vr, vc;
+      std::vector<std::size_t> rows;
+      fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
+        const auto& t = runs[r].run->trace;
+        const auto& ref = t.at(col(a, "_ref_mm"));
+        e.push_back(ref[k] - t.at(col(a, "_mm"))[k]);
+        // The law's own speed: the backward difference of the reference.
+        vr.push_back((ref[k] - ref[k - 1]) / runs[r].run->sample_period_s);
+        vc.push_back(t.at(col(a, "_vcmd_mm_s"))[k]);
+        rows.push_back(rows.size());
+      });
+      const LsqResult ls = least_squares({&e, &vr}, vc, rows);
+      if (ls.ok && ls.theta[0] > 0.0) {
+        ax.gains.Kv_per_s = ls.theta[0];
+        ax.gains.kff = std::clamp(ls.theta[1], 0.0, 1.5);
+        ax.lag_s = (1.0 - ax.gains.kff) / ax.gains.Kv_per_s;
+        double vrms = 0.0;
+        for (double x : vc) vrms += x * x;
+        vrms = std::sqrt(vrms / static_cast<double>(std::max<std::size_t>(1, vc.size())));
+        ax.loop_source = fmt::format("the logged velocity command against the following error and the command's speed "
+                                     "(residual {:.3g} mm/s against an RMS of {:.3g} mm/s)",
+                                     ls.residual_rms, vrms);
+      }
+    }
+    if (ax.loop_source.empty() && have_x) {
+      fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
+        const double v = runs[r].kin[i].v_mm_per_s[k];
+        if (direction(v, runs[r].v_move[i]) == 0) return;
+        const auto& t = runs[r].run->trace;
+        num += (v > 0 ? 1.0 : -1.0) * (t.at(col(a, "_ref_mm"))[k] - t.at(col(a, "_mm"))[k]);
+        den += std::abs(v);
+      });
+      ax.lag_s = den > 0.0 ? num / den : 0.0;
+      if (ax.lag_s > 1e-4) {
+        ax.gains.Kv_per_s = 1.0 / ax.lag_s;
+        ax.gains.kff = 0.0;
+        ax.loop_source = fmt::format("the lag of the position behind the command ({:.4g} ms, the mean of the rounded "
+                                     "following error over the speed); a P loop without feedforward assumed",
+                                     1e3 * ax.lag_s);
+      }
+    }
+    if (ax.loop_source.empty()) {
+      ax.gains.Kv_per_s = 1.0 / std::max(10.0 * Ts, 0.01);
+      ax.loop_source = fmt::format("not seen in the data ({}); Kv = {:.4g} 1/s assumed",
+                                   have_x ? "the position does not lag the command measurably" : "no position logged",
+                                   ax.gains.Kv_per_s);
+    }
+
+    // The drive, in the channel's unit.
+    if (!ax.channel.present()) {
+      ax.note = fmt::format("axis {}: no torque, current or command channel: the drive is not identified and the axis is "
+                            "not replayed",
+                            axis_name(a));
+      out.notes.push_back(ax.note);
+      out.axis.push_back(ax);
+      continue;
+    }
+    // The axis's own motion where a fast log has its speed (the torque
+    // accelerates the axis, not the command: under a loop whose torque
+    // overshoots at every change of acceleration, J fitted on the commanded
+    // acceleration comes out 17 % low on the truth runs of the tests), else
+    // the commanded kinematics (the logged positions are often too coarse to
+    // differentiate).
+    bool own_speed = r0.sample_period_s <= 2e-3 + 1e-12;
+    for (const auto& rd : runs) own_speed = own_speed && rd.run->trace.find(col(a, "_v_mm_s")) != nullptr;
+    std::vector<double> acc, vel, pos, neg, one, T;
+    std::vector<std::size_t> rows;
+    double a2 = 0.0, T2 = 0.0;
+    fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
+      const auto* ch = runs[r].run->trace.find(ax.channel.column);
+      if (ch == nullptr) return;
+      const auto* vm = own_speed ? runs[r].run->trace.find(col(a, "_v_mm_s")) : nullptr;
+      if (vm != nullptr && (k == 0 || k + 1 >= vm->size())) return;
+      const double v = vm ? (*vm)[k] : runs[r].kin[i].v_mm_per_s[k];
+      const int d = direction(v, runs[r].v_move[i]);
+      acc.push_back(vm ? ((*vm)[k + 1] - (*vm)[k - 1]) / (2.0 * runs[r].run->sample_period_s)
+                       : runs[r].kin[i].a_mm_per_s2[k]);
+      vel.push_back(v);
+      pos.push_back(d > 0 ? 1.0 : 0.0);
+      neg.push_back(d < 0 ? -1.0 : 0.0);
+      one.push_back(1.0);
+      T.push_back((*ch)[k]);
+      a2 += acc.back() * acc.back();
+      T2 += T.back() * T.back();
+      rows.push_back(rows.size());
+    });
+    const bool moves_pos = std::any_of(pos.begin(), pos.end(), [](double x) { return x != 0.0; });
+    const bool moves_neg = std::any_of(neg.begin(), neg.end(), [](double x) { return x != 0.0; });
+    std::vector<const std::vector<double>*> X{&acc, &vel};
+    if (moves_pos) X.push_back(&pos);
+    if (moves_neg) X.push_back(&neg);
+    X.push_back(&one);
+    const LsqResult ls = least_squares(X, T, rows);
+    ax.fit_rows = rows.size();
+    if (!ls.ok || !(moves_pos || moves_neg)) {
+      ax.note = fmt::format("axis {}: the drive could not be identified ({} rows, {}); the axis is not replayed",
+                            axis_name(a), rows.size(), moves_pos || moves_neg ? "rank deficient" : "the axis does not move");
+      out.notes.push_back(ax.note);
+      out.axis.push_back(ax);
+      continue;
+    }
+    std::size_t j = 0;
+    ax.J = ls.theta[j];
+    ax.J_se = ls.stderr_theta[j++];
+    ax.B = ls.theta[j];
+    ax.B_se = ls.stderr_theta[j++];
+    if (moves_pos) {
+      ax.Tc_pos = ls.theta[j];
+      ax.Tc_pos_se = ls.stderr_theta[j++];
+    }
+    if (moves_neg) {
+      ax.Tc_neg = ls.theta[j];
+      ax.Tc_neg_se = ls.stderr_theta[j++];
+    }
+    ax.c = ls.theta[j];
+    ax.c_se = ls.stderr_theta[j];
+    if (!moves_pos) ax.Tc_pos = ax.Tc_neg;
+    if (!moves_neg) ax.Tc_neg = ax.Tc_pos;
+    std::vector<std::string> clamped;
+    // Physical floors: an inertia the fixed-step drive integrates (B Ts / J <= 0.5)
+    // and that 1 % of the torque RMS accelerates at most at the run's RMS acceleration.
+    const double a_rms = std::sqrt(a2 / static_cast<double>(rows.size()));
+    const double T_rms = std::sqrt(T2 / static_cast<double>(rows.size()));
+    const double J_floor = std::max({2.0 * std::max(ax.B, 0.0) * Ts, a_rms > 0.0 ? 0.01 * T_rms / a_rms : 0.0, 1e-9});
+    if (ax.J < J_floor) {
+      clamped.push_back(fmt::format("J {:.4g} raised to {:.4g} (the log's accelerations do not resolve it)", ax.J, J_floor));
+      ax.J = J_floor;
+    }
+    if (ax.B < 0.0) {
+      clamped.push_back(fmt::format("B {:.4g} set to 0", ax.B));
+      ax.B = 0.0;
+    }
+    for (double* tc : {&ax.Tc_pos, &ax.Tc_neg})
+      if (*tc < 0.0) {
+        clamped.push_back(fmt::format("a Coulomb level {:.4g} set to 0", *tc));
+        *tc = 0.0;
+      }
+    ax.identified = true;
+    ax.note = clamped.empty() ? "" : fmt::format("axis {}: {}", axis_name(a), fmt::join(clamped, "; "));
+    if (!ax.note.empty()) out.notes.push_back(ax.note);
+
+    // The velocity loop: from the logged torque against the speed error where
+    // both speeds are logged at the loop's rate, else well above the position loop.
+    const double wv = std::min(std::max(5.0 * ax.gains.Kv_per_s, 2.0 * M_PI * 20.0), 0.3 / Ts);
+    ax.gains.Kvp_torque_s_per_rad = ax.J * wv;
+    ax.gains.Tn_s = 4.0 / wv;
+    ax.gains.tau_i_s = 0.0;
+    ax.gains.T_max = 1e9;
+    bool vel_from_data = false;
+    if (have_vcmd && r0.sample_period_s <= 2e-3 + 1e-12) {
+      bool have_v = true;
+      for (const auto& rd : runs) have_v = have_v && rd.run->trace.find(col(a, "_v_mm_s")) != nullptr;
+      if (have_v) {
+        const VelocityLoopFit vl = fit_velocity_loop(runs, a, ax.channel.column, 0);
+        if (vl.ls.ok && vl.ls.theta[0] > 0.0 && vl.ls.theta[1] >= 0.0 && vl.ls.residual_rms < 0.3 * vl.T_rms) {
+          ax.gains.Kvp_torque_s_per_rad = vl.ls.theta[0];
+          ax.gains.Tn_s = vl.ls.theta[1] > 0.0 ? vl.ls.theta[0] / vl.ls.theta[1] : 0.0;
+          vel_from_data = true;
+          ax.velocity_loop_from_data = true;
+          ax.loop_source += fmt::format("; velocity loop from the logged torque against the speed error (residual "
+                                        "{:.3g} of an RMS {:.3g})",
+                                        vl.ls.residual_rms, vl.T_rms);
+          // The same law a few samples later: a torque that follows its
+          // command late (a delay beyond the loop) fits best at that lag.
+          ax.gains_at_lag = ax.gains;
+          double best = vl.ls.residual_rms;
+          const auto max_lag = static_cast<std::size_t>(std::clamp(std::lround(0.01 / r0.sample_period_s), 1L, 10L));
+          for (std::size_t lag = 1; lag <= max_lag; ++lag) {
+            const VelocityLoopFit vlag = fit_velocity_loop(runs, a, ax.channel.column, lag);
+            if (!(vlag.ls.ok && vlag.ls.theta[0] > 0.0 && vlag.ls.theta[1] >= 0.0 && vlag.ls.residual_rms < best))
+              continue;
+            best = vlag.ls.residual_rms;
+            ax.torque_lag_samples = lag;
+            ax.gains_at_lag.Kvp_torque_s_per_rad = vlag.ls.theta[0];
+            ax.gains_at_lag.Tn_s = vlag.ls.theta[1] > 0.0 ? vlag.ls.theta[0] / vlag.ls.theta[1] : 0.0;
+          }
+          // A lag that lowers the residual by less than a fifth is the law's own noise.
+          if (ax.torque_lag_samples > 0 && best > 0.8 * vl.ls.residual_rms) {
+            ax.torque_lag_samples = 0;
+            ax.gains_at_lag = ax.gains;
+          }
+        }
+      }
+    }
+    if (!vel_from_data)
+      ax.loop_source += fmt::format("; the velocity loop is not seen directly in this log: its bandwidth starts at "
+                                    "{:.3g} rad/s ({:.3g} times Kv) with Tn = 4 / that",
+                                    wv, wv / ax.gains.Kv_per_s);
+
+    sim::AxisDefinition& def = m.axes[i];
+    def.present = true;
+    def.drive = feeddrive::DriveParams{};
+    def.drive.Ka_A_per_V = 1.0;
+    def.drive.Kt_Nm_per_A = 1.0;
+    def.drive.rg_mm_per_rad = 1.0;
+    def.drive.J_kg_m2 = ax.J;
+    def.drive.B_kg_m2_per_s = ax.B;
+    def.drive.Tc_pos_Nm = ax.Tc_pos;
+    def.drive.Tc_neg_Nm = ax.Tc_neg;
+    def.drive.effects.constant_load.enabled = ax.c != 0.0;
+    def.drive.effects.constant_load.torque_Nm = ax.c;
+    def.loop.law = controller::LoopLaw::kCascade;
+    def.loop.cascade = ax.gains;
+    def.loop.Ts_s = Ts;
+    def.following_error_limit_mm = 1e3;
+    out.axis.push_back(ax);
+  }
+  sim::set_machine_loop_law(m, controller::LoopLaw::kCascade);
+  for (Axis a : kAllAxes)
+    if (!m.axes[index(a)].present) m.axes[index(a)] = sim::AxisDefinition{};
+  if (m.present_axes().empty())
+    throw ConfigError(fmt::format("{}: no axis could be identified: {}", r0.dir.string(),
+                                  out.axis.empty() ? std::string("no axis") : out.axis.front().note));
+  sim::set_machine_loop_law(m, controller::LoopLaw::kCascade);
+  m.validate();
+  out.identified = m;
+  out.final_machine = m;
+
+  // What a log of this rate and resolution cannot show.
+  const double dt = r0.sample_period_s;
+  const double q = out.rounding.quantum_mm;
+  if (dt > 2e-3) {
+    out.skipped.emplace_back("delay", fmt::format("a delay of a few loop periods is far below the {:g} s sample "
+                                                  "period: it cannot be told from the loop's lag",
+                                                  dt));
+    out.skipped.emplace_back("compliance", fmt::format("a resonance above the Nyquist frequency {:.3g} Hz of the log "
+                                                       "cannot be seen",
+                                                       0.5 / dt));
+    out.skipped.emplace_back("cogging", fmt::format("a ripple periodic in motor angle needs several samples per "
+                                                    "period; at {:g} s per sample it aliases",
+                                                    dt));
+  }
+  if (dt <= 2e-3 + 1e-12)
+    out.skipped.emplace_back("compliance", "not searched on a machine identified from data: its drive is one inertia "
+                                           "in the log's unit, and a two-mass resonance needs the split of that "
+                                           "inertia and a stiffness the replay of a cascade loop does not resolve");
+  if (dt <= 2e-3 + 1e-12 && q <= 0.005) {
+    bool speed = true;
+    for (Axis a : out.axes)
+      for (const MeasuredRun& r : fit) speed = speed && r.trace.find(col(a, "_v_mm_s")) != nullptr;
+    if (!speed)
+      out.skipped.emplace_back("screw_pitch_error", "a lead error moves the encoder and not the motor: it is told "
+                                                    "from the logged motor speed against the speed of the logged "
+                                                    "position, and this log has no speed column");
+  }
+  if (q > 0.005) {
+    out.skipped.emplace_back("screw_pitch_error", fmt::format("a lead error of microns is below the log's position "
+                                                              "quantum {:g} mm",
+                                                              q));
+    out.skipped.emplace_back("backlash", fmt::format("lost motion at reversals below the log's position quantum "
+                                                     "{:g} mm is not seen in the position",
+                                                     q));
+  }
+
+  // Replays and errors.
+  auto errors_on = [&](const sim::MachineDefinition& machine, const RunData& rd, std::size_t from, std::size_t to,
+                       bool same_unit, ReplayResult* keep, ChannelErrors& dst, PoolSet* pooled) {
+    PoolSet pools;
+    std::vector<char> cmp;
+    try {
+      ReplayResult rr = replay_segments(*rd.smooth, machine, rd.segments, out.rounding, &cmp);
+      ++out.replays;
+      for (std::size_t k = 0; k < cmp.size(); ++k) cmp[k] = static_cast<char>(cmp[k] && rd.interior[k]);
+      std::map<std::string, std::string> nc;
+      add_errors(pools, *rd.run, rr, cmp, out.axes, from, to, same_unit,
+                 sim::machine_loop_law(machine) == controller::LoopLaw::kCascade, &nc);
+      dst = errors_from(pools);
+      for (auto& [k, why] : nc) dst.not_computed[k] = why;
+      if (keep) *keep = std::move(rr);
+      if (pooled)
+        for (const auto& [k, p] : pools) (*pooled)[k].add(p);
+    } catch (const Error& e) {
+      for (Axis a : out.axes) {
+        dst.not_computed[col(a, "_err_mm")] = fmt::format("the replay failed: {}", e.what());
+        const TorqueChannel ch = torque_channel(*rd.run, a);
+        if (ch.present()) dst.not_computed[ch.column] = fmt::format("the replay failed: {}", e.what());
+      }
+    }
+  };
+
+  // The velocity loop where the log cannot show it: its bandwidth and
+  // integral time still shape what the current does where the axis stops
+  // (the torque the integral holds against friction), which the fitting rows
+  // show. A small grid around the default, chosen per axis on the fitting
+  // rows of the fitting runs; the held-out rows judge it like everything else.
+  {
+    struct Choice {
+      double score{1e300};
+      double Kvp{0.0}, Tn{0.0};
+    };
+    AxisArray<Choice> best{};
+    bool any = false;
+    for (const AxisFromData& ax : out.axis) any = any || (ax.identified && !ax.velocity_loop_from_data);
+    const std::vector<double> wv_factors{0.25, 0.5, 1.0, 2.0};
+    const std::vector<double> tn_factors{0.0, 2.0, 4.0, 16.0};
+    for (double fw : any ? wv_factors : std::vector<double>{}) {
+      for (double ft : tn_factors) {
+        sim::MachineDefinition trial = out.identified;
+        for (const AxisFromData& ax : out.axis) {
+          if (!ax.identified || ax.velocity_loop_from_data) continue;
+          auto& g = trial.axes[index(ax.axis)].loop.cascade;
+          const double wv = fw * ax.gains.Kvp_torque_s_per_rad / ax.J;
+          g.Kvp_torque_s_per_rad = ax.J * wv;
+          g.Tn_s = ft > 0.0 ? ft / wv : 0.0;
+        }
+        PoolSet pools;
+        for (const RunData& rd : runs) {
+          ChannelErrors ignored;
+          errors_on(trial, rd, 0, rd.n_fit, true, nullptr, ignored, &pools);
+        }
+        const ChannelErrors e = errors_from(pools);
+        for (const AxisFromData& ax : out.axis) {
+          if (!ax.identified || ax.velocity_loop_from_data) continue;
+          const auto it = e.nrms.find(ax.channel.column);
+          if (it == e.nrms.end() || !(it->second < best[index(ax.axis)].score)) continue;
+          const auto& g = trial.axes[index(ax.axis)].loop.cascade;
+          best[index(ax.axis)] = {it->second, g.Kvp_torque_s_per_rad, g.Tn_s};
+        }
+      }
+    }
+    for (AxisFromData& ax : out.axis) {
+      const Choice& c = best[index(ax.axis)];
+      if (!ax.identified || ax.velocity_loop_from_data || c.score >= 1e300) continue;
+      ax.gains.Kvp_torque_s_per_rad = c.Kvp;
+      ax.gains.Tn_s = c.Tn;
+      out.identified.axes[index(ax.axis)].loop.cascade = ax.gains;
+      ax.loop_source += fmt::format("; chosen on the fitting rows among 16 velocity loops: Kvp {:.4g}, Tn {:.4g} s "
+                                    "(fitting-row NRMS {:.4g})",
+                                    c.Kvp, c.Tn, c.score);
+    }
+    out.final_machine = out.identified;
+  }
+
+  // Friction that relaxes at rest (smooth_friction). A stopped axis with
+  // stick/slip friction holds the Coulomb level of its last direction (the
+  // velocity loop winds up to the breakaway torque and the axis creeps until
+  // its error is within a count); real drives hold a torque spread about
+  // zero. The speed scale is chosen per axis on the fitting rows among three
+  // multiples of the axis's moving threshold; it is kept where it lowers the
+  // held-out error of the fitting runs (the rule every added effect follows).
+  {
+    auto fit_rows_nrms = [&](const sim::MachineDefinition& machine) {
+      PoolSet pools;
+      for (const RunData& rd : runs) {
+        ChannelErrors ignored;
+        errors_on(machine, rd, 0, rd.n_fit, true, nullptr, ignored, &pools);
+      }
+      return errors_from(pools);
+    };
+    auto held_out_nrms = [&](const sim::MachineDefinition& machine) {
+      PoolSet pools;
+      for (const RunData& rd : runs) {
+        ChannelErrors ignored;
+        errors_on(machine, rd, rd.n_fit, rd.n, true, nullptr, ignored, &pools);
+      }
+      return errors_from(pools);
+    };
+    auto with_smooth = [&](const sim::MachineDefinition& base, Axis a, double ws) {
+      sim::MachineDefinition trial = base;
+      auto& fx = trial.axes[index(a)].drive.effects.smooth_friction;
+      fx.enabled = true;
+      fx.ws_rad_per_s = ws;
+      return trial;
+    };
+    const ChannelErrors base_fit = fit_rows_nrms(out.identified);
+    const ChannelErrors base_held = held_out_nrms(out.identified);
+    sim::MachineDefinition final_machine = out.identified;
+    // The signature first: on the fitting rows where the command has stood
+    // still for 0.2 s, the torque the log holds off
+    // the constant load, against what the identified stick/slip model holds
+    // there. Stick/slip holds whatever it stopped at, up to the Coulomb
+    // level; friction that relaxes lets the loop bring it to the load.
+    const FitRunErrors id_replay = errors_on_fit_runs(runs, out.identified, out.axes, out.rounding, out.replays);
+    for (const AxisFromData& ax : out.axis) {
+      if (!ax.identified) continue;
+      const std::string key = ax.channel.column;
+      const auto bf = base_fit.nrms.find(key);
+      const auto bh = base_held.nrms.find(key);
+      if (bf == base_fit.nrms.end() || bh == base_held.nrms.end()) continue;
+      double held_log = 0.0, held_model = 0.0;
+      std::size_t rest_rows = 0;
+      for (std::size_t r = 0; id_replay.ok && r < runs.size(); ++r) {
+        const RunData& rd = runs[r];
+        const auto& T = rd.run->trace.at(key);
+        const auto* Tm = model_channel(id_replay.replays[r], ax.axis, ax.channel, true);
+        if (Tm == nullptr) continue;
+        const auto settle = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.2 / rd.run->sample_period_s)));
+        std::size_t still = 0;
+        for (std::size_t k = 0; k < rd.n_fit; ++k) {
+          still = direction(rd.kin[index(ax.axis)].v_mm_per_s[k], rd.v_move[index(ax.axis)]) == 0 ? still + 1 : 0;
+          if (still < settle || !rd.interior[k]) continue;
+          held_log += std::abs(T[k] - ax.c);
+          held_model += std::abs((*Tm)[k] - ax.c);
+          ++rest_rows;
+        }
+      }
+      if (rest_rows > 0) {
+        held_log /= static_cast<double>(rest_rows);
+        held_model /= static_cast<double>(rest_rows);
+      }
+      // Where the log samples slower than 2 ms, a rest period is a handful of
+      // samples of a loop that still settles: the signature is not read there,
+      // and the replay rule alone decides.
+      const bool resolves_rest = runs.front().run->sample_period_s <= 2e-3 + 1e-12;
+      if (resolves_rest && !(rest_rows >= 10 && held_log < 0.5 * held_model)) {
+        DataEffect eff;
+        eff.effect = "smooth_friction";
+        eff.axis = ax.axis;
+        eff.before = eff.after = bh->second;
+        eff.evidence = rest_rows < 10
+                           ? fmt::format("not tried: {} fitting rows at rest, too few to see what the axis holds there",
+                                         rest_rows)
+                           : fmt::format("not tried: at rest the log holds {:.4g} off the constant load on average, "
+                                         "the stick/slip model {:.4g}: the held torque does not relax",
+                                         held_log, held_model);
+        out.effects.push_back(eff);
+        continue;
+      }
+      // rg = 1 mm/rad in a machine identified from data: rad/s are mm/s.
+      double v_move = 0.0;
+      for (const RunData& rd : runs) v_move = std::max(v_move, rd.v_move[index(ax.axis)]);
+      double best_ws = 0.0, best_fit = bf->second;
+      for (double f : {0.1, 0.3, 1.0}) {
+        const ChannelErrors e = fit_rows_nrms(with_smooth(out.identified, ax.axis, f * v_move));
+        const auto it = e.nrms.find(key);
+        if (it != e.nrms.end() && it->second < best_fit) {
+          best_fit = it->second;
+          best_ws = f * v_move;
+        }
+      }
+      DataEffect eff;
+      eff.effect = "smooth_friction";
+      eff.axis = ax.axis;
+      eff.before = bh->second;
+      eff.after = bh->second;
+      if (best_ws <= 0.0) {
+        eff.evidence = fmt::format("no speed scale lowers the fitting rows' {} error ({:.4g})", key, bf->second);
+        out.effects.push_back(eff);
+        continue;
+      }
+      eff.params["ws"] = best_ws;
+      const ChannelErrors held = held_out_nrms(with_smooth(out.identified, ax.axis, best_ws));
+      const auto hh = held.nrms.find(key);
+      eff.after = hh != held.nrms.end() ? hh->second : bh->second;
+      eff.kept = eff.after < eff.before;
+      eff.evidence = fmt::format(
+          "a stopped axis holds {:.4g} off the constant load in the log (mean over its rest rows), the stick/slip "
+          "model {:.4g}: friction "
+          "smoothed below {:.3g} mm/s takes the {} error from {:.4g} to {:.4g} on the fitting rows and from {:.4g} "
+          "to {:.4g} on the held-out rows{}",
+          held_log, held_model, best_ws, key, bf->second, best_fit, eff.before, eff.after, eff.kept ? "" : " (not kept)");
+      if (eff.kept) final_machine = with_smooth(final_machine, ax.axis, best_ws);
+      out.effects.push_back(eff);
+    }
+    out.final_machine = final_machine;
+  }
+
+  // The catalogue effects the log's rate and resolution can show, each
+  // detected on the residual of the machine so far, replayed, and kept only
+  // where the held-out error falls.
+  search_catalogue_effects(out, runs);
+
+  // Baselines fitted on the fitting rows: the rigid-body regression per axis.
+  AxisArray<Regression> reg{};
+  for (const AxisFromData& ax : out.axis) {
+    const std::size_t i = index(ax.axis);
+    std::vector<double> acc, sg, vel, one, T;
+    std::vector<std::size_t> rows;
+    double num = 0.0, den = 0.0;
+    fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
+      const double v = runs[r].kin[i].v_mm_per_s[k];
+      const auto& t = runs[r].run->trace;
+      if (const auto* x = t.find(col(ax.axis, "_mm"))) {
+        num += v * (t.at(col(ax.axis, "_ref_mm"))[k] - (*x)[k]);
+        den += v * v;
+      }
+      const auto* ch = ax.channel.present() ? t.find(ax.channel.column) : nullptr;
+      if (ch == nullptr) return;
+      acc.push_back(runs[r].kin[i].a_mm_per_s2[k]);
+      sg.push_back(direction(v, runs[r].v_move[i]));
+      vel.push_back(v);
+      one.push_back(1.0);
+      T.push_back((*ch)[k]);
+      rows.push_back(rows.size());
+    });
+    reg[i].lag_s = den > 0.0 ? num / den : 0.0;
+    const LsqResult ls = least_squares({&acc, &sg, &vel, &one}, T, rows);
+    reg[i].ok = ls.ok;
+    reg[i].theta = ls.theta;
+  }
+  auto baselines = [&](const RunData& rd, std::size_t from, std::size_t to, ChannelErrors& zero, ChannelErrors& regr,
+                       PoolSet* pz, PoolSet* pr) {
+    PoolSet z, g;
+    for (const AxisFromData& ax : out.axis) {
+      const std::size_t i = index(ax.axis);
+      const auto& t = rd.run->trace;
+      const auto& ref = t.at(col(ax.axis, "_ref_mm"));
+      const auto& kin = rd.kin[i];
+      if (const auto* x = t.find(col(ax.axis, "_mm"))) {
+        Pool& pz1 = z[col(ax.axis, "_err_mm")];
+        Pool& pg1 = g[col(ax.axis, "_err_mm")];
+        for (std::size_t k = from; k < to; ++k) {
+          if (!rd.interior[k]) continue;
+          const double e = ref[k] - (*x)[k];
+          pz1.add(e, 0.0);
+          const double ref_smooth = rd.smooth->trace.at(col(ax.axis, "_ref_mm"))[k];
+          pg1.add(e, ref[k] - out.rounding.round(ref_smooth - reg[i].lag_s * kin.v_mm_per_s[k]));
+        }
+      }
+      if (const auto* vc = t.find(col(ax.axis, "_vcmd_mm_s"))) {
+        Pool& pz3 = z[col(ax.axis, "_vcmd_mm_s")];
+        for (std::size_t k = from; k < to; ++k)
+          if (rd.interior[k]) pz3.add((*vc)[k], 0.0);
+      }
+      const TorqueChannel ch = torque_channel(*rd.run, ax.axis);
+      if (!ch.present()) continue;
+      const auto& meas = t.at(ch.column);
+      Pool& pz2 = z[ch.column];
+      Pool& pg2 = g[ch.column];
+      for (std::size_t k = from; k < to; ++k) {
+        if (!rd.interior[k]) continue;
+        pz2.add(meas[k], 0.0);
+        if (!reg[i].ok) continue;
+        const double v = kin.v_mm_per_s[k];
+        const double pred = reg[i].theta[0] * kin.a_mm_per_s2[k] + reg[i].theta[1] * direction(v, rd.v_move[i]) +
+                            reg[i].theta[2] * v + reg[i].theta[3];
+        pg2.add(meas[k], pred);
+      }
+    }
+    zero = errors_from(z);
+    regr = errors_from(g);
+    if (pz)
+      for (const auto& [k, p] : z) (*pz)[k].add(p);
+    if (pr)
+      for (const auto& [k, p] : g) (*pr)[k].add(p);
+  };
+
+  // The model and the baselines are compared on the same rows: the interior
+  // rows of the replayed segments.
+  PoolSet pool_nom, pool_id, pool_cal, pool_zero, pool_reg;
+  auto pooled_errors = [](const PoolSet& pools, const std::vector<RunErrors>& list, ChannelErrors RunErrors::*which) {
+    ChannelErrors e = errors_from(pools);
+    for (const RunErrors& re : list)
+      for (const auto& [k, why] : (re.*which).not_computed)
+        if (!e.nrms.count(k)) e.not_computed[k] = fmt::format("{}: {}", re.run, why);
+    return e;
+  };
+  auto pool_runs = [&](const std::vector<RunErrors>& list, RunErrors& dst) {
+    dst.run = "pooled";
+    for (const RunErrors& re : list) {
+      dst.rows += re.rows;
+      dst.rows_compared += re.rows_compared;
+    }
+    dst.identified = pooled_errors(pool_id, list, &RunErrors::identified);
+    dst.calibrated = pooled_errors(pool_cal, list, &RunErrors::calibrated);
+    dst.nominal = pooled_errors(pool_nom, list, &RunErrors::nominal);
+    dst.zero = pooled_errors(pool_zero, list, &RunErrors::zero);
+    dst.regression = pooled_errors(pool_reg, list, &RunErrors::regression);
+  };
+  for (std::size_t r = 0; r < runs.size(); ++r) {
+    RunErrors re;
+    re.run = runs[r].run->dir.string();
+    re.rows = runs[r].n;
+    const std::size_t from = runs[r].n_fit, to = runs[r].n;
+    for (std::size_t k = from; k < to; ++k) re.rows_compared += runs[r].interior[k] ? 1 : 0;
+    errors_on(out.identified, runs[r], from, to, true, r == 0 ? &out.replay_before : nullptr, re.identified, &pool_id);
+    errors_on(out.final_machine, runs[r], from, to, true, r == 0 ? &out.replay_after : nullptr, re.calibrated,
+              &pool_cal);
+    errors_on(nominal, runs[r], from, to, false, nullptr, re.nominal, &pool_nom);
+    baselines(runs[r], from, to, re.zero, re.regression, &pool_zero, &pool_reg);
+    out.fit_runs.push_back(std::move(re));
+  }
+  pool_runs(out.fit_runs, out.pooled_fit);
+
+  for (auto* p : {&pool_nom, &pool_id, &pool_cal, &pool_zero, &pool_reg}) p->clear();
+  for (const MeasuredRun& v : validate) {
+    std::vector<std::string> vnotes;
+    RunData rd = prepare_run(v, out.axes, out.rounding, 0.0, vnotes);
+    for (auto& n : vnotes) out.notes.push_back(n);
+    RunErrors re;
+    re.run = v.dir.string();
+    re.rows = rd.n;
+    for (std::size_t k = 0; k < rd.n; ++k) re.rows_compared += rd.interior[k] ? 1 : 0;
+    errors_on(out.final_machine, rd, 0, rd.n, true, nullptr, re.calibrated, &pool_cal);
+    errors_on(out.identified, rd, 0, rd.n, true, nullptr, re.identified, &pool_id);
+    errors_on(nominal, rd, 0, rd.n, false, nullptr, re.nominal, &pool_nom);
+    baselines(rd, 0, rd.n, re.zero, re.regression, &pool_zero, &pool_reg);
+    out.validation_runs.push_back(std::move(re));
+  }
+  if (!out.validation_runs.empty()) pool_runs(out.validation_runs, out.pooled_validation);
+  return out;
+}
+
+RunErrors evaluate_machine_on_run(const MeasuredRun& run, const sim::MachineDefinition& machine, ReplayResult* replay,
+                                  std::vector<std::string>* notes) {
+  std::vector<std::string> local;
+  std::vector<std::string>& nt = notes ? *notes : local;
+  std::vector<Axis> axes;
+  for (Axis a : run.axes)
+    if (machine.axes[index(a)].present) axes.push_back(a);
+  if (axes.empty()) throw ConfigError(fmt::format("{}: machine {} defines none of the run's axes", run.dir.string(), machine.name));
+  const PositionRounding rounding = detect_rounding(run);
+  nt.push_back(rounding.describe());
+  const RunData rd = prepare_run(run, axes, rounding, 0.0, nt);
+  RunErrors re;
+  re.run = run.dir.string();
+  re.rows = rd.n;
+  std::vector<char> cmp;
+  ReplayResult rr = replay_segments(*rd.smooth, machine, rd.segments, rounding, &cmp);
+  for (std::size_t k = 0; k < cmp.size(); ++k) cmp[k] = static_cast<char>(cmp[k] && rd.interior[k]);
+  for (std::size_t k = 0; k < rd.n; ++k) re.rows_compared += rd.interior[k] ? 1 : 0;
+  PoolSet pools, zero;
+  const bool has_vcmd = sim::machine_loop_law(machine) == controller::LoopLaw::kCascade;
+  add_errors(pools, run, rr, cmp, axes, 0, rd.n, true, has_vcmd, nullptr);
+  add_errors(zero, run, rr, cmp, axes, 0, rd.n, true, has_vcmd, nullptr);
+  for (auto& [k, p] : zero) p.res2 = p.meas2;
+  re.calibrated = errors_from(pools);
+  re.identified = re.calibrated;
+  re.zero = errors_from(zero);
+  if (replay) *replay = std::move(rr);
+  return re;
+}
+
+void write_data_trace(const std::filesystem::path& path, const MeasuredRun& run, const ReplayResult& rr) {
+  std::vector<std::string> names{"t_s"};
+  std::vector<const std::vector<double>*> cols{&rr.t_s};
+  for (Axis a : rr.axes) {
+    const std::size_t i = index(a);
+    if (rr.x_mm[i].empty()) continue;
+    const std::string n(axis_name(a));
+    names.insert(names.end(), {n + "_ref_mm", n + "_mm"});
+    cols.insert(cols.end(), {&rr.x_ref_mm[i], &rr.x_mm[i]});
+    const TorqueChannel ch = torque_channel(run, a);
+    if (ch.present()) {
+      names.push_back(ch.column);
+      cols.push_back(ch.unit == "A" ? &rr.i_A[i] : (ch.unit == "V" ? &rr.u_V[i] : &rr.Tm[i]));
+    }
+    names.push_back(n + "_vcmd_mm_s");
+    cols.push_back(&rr.vcmd_mm_per_s[i]);
+  }
+  io::TraceWriter w(path, names);
+  std::vector<double> row(cols.size());
+  for (std::size_t k = 0; k < rr.t_s.size(); ++k) {
+    for (std::size_t c = 0; c < cols.size(); ++c) row[c] = (*cols[c])[k];
+    w.write_row(row);
+  }
+  w.commit();
+}
+
+// ---------------------------------------------------------------------------
+// Reports
+
+namespace {
+
+nlohmann::json run_errors_json(const RunErrors& e) {
+  nlohmann::json j;
+  j["run"] = e.run;
+  j["rows"] = e.rows;
+  j["rows_compared"] = e.rows_compared;
+  j["error_nominal"] = e.nominal.to_json();
+  j["error_calibrated"] = e.calibrated.to_json();
+  j["baseline"] = {{"zero", e.zero.to_json()}, {"rigid_body_regression", e.regression.to_json()}};
+  nlohmann::json why = nlohmann::json::object();
+  for (const auto* ce : {&e.nominal, &e.calibrated, &e.regression})
+    for (const auto& [k, w] : ce->not_computed) why[k] = w;
+  if (!why.empty()) j["not_computed"] = why;
+  return j;
+}
+
+/// Pooled over the fitting runs' held-out rows, from the per-run figures and
+/// their compared rows (an approximation only where runs differ in level; the
+/// per-run figures are exact and listed too).
+
+}  // namespace
+
+nlohmann::json data_calibration_report_json(const DataCalibration& r) {
+  nlohmann::json j;
+  nlohmann::json params = nlohmann::json::object();
+  for (const AxisFromData& ax : r.axis) {
+    nlohmann::json p;
+    p["controller"] = "cascade";
+    p["torque_channel"] = ax.channel.present() ? nlohmann::json(ax.channel.column) : nlohmann::json(nullptr);
+    p["torque_unit"] = ax.channel.present() ? nlohmann::json(ax.channel.unit) : nlohmann::json(nullptr);
+    p["lag_s"] = ax.lag_s;
+    p["Kv"] = ax.gains.Kv_per_s;
+    p["kff"] = ax.gains.kff;
+    p["loop_source"] = ax.loop_source;
+    if (ax.identified) {
+      p["Kvp"] = ax.gains.Kvp_torque_s_per_rad;
+      p["Tn"] = ax.gains.Tn_s;
+      p["J"] = ax.J;
+      p["B"] = ax.B;
+      p["Tc_pos"] = ax.Tc_pos;
+      p["Tc_neg"] = ax.Tc_neg;
+      p["constant_load"] = ax.c;
+      p["stderr"] = {{"J", ax.J_se}, {"B", ax.B_se}, {"Tc_pos", ax.Tc_pos_se}, {"Tc_neg", ax.Tc_neg_se},
+                     {"constant_load", ax.c_se}};
+      p["units"] = fmt::format("J {0} s^2/mm, B {0} s/mm, Tc and constant_load {0} (rg = 1 mm/rad, Kt = Ka = 1)",
+                               ax.channel.unit);
+      p["fit_rows"] = ax.fit_rows;
+    } else {
+      p["not_identified"] = ax.note;
+    }
+    params[std::string(axis_name(ax.axis))] = p;
+  }
+  j["parameters_identified"] = params;
+  j["effects_added"] = nlohmann::json::array();
+  for (const auto& e : r.effects)
+    if (e.kept)
+      j["effects_added"].push_back(
+          {{"effect", e.effect}, {"axis", axis_name(e.axis)}, {"params", e.params}, {"evidence", e.evidence}});
+  j["error_before"] = r.pooled_fit.identified.to_json();
+  j["error_after"] = r.pooled_fit.calibrated.to_json();
+  j["validation"] = fmt::format(
+      "normalised RMS on the last {:.0f} % of the rows of each fitting run (not used for fitting), interior rows of "
+      "each stitched segment only; currents and torques unfiltered in their own unit (the log's rate is below 400 Hz "
+      "or the channel is not u), positions of the twin rounded as the log's",
+      100.0 * (1.0 - r.fit_fraction));
+  j["baseline"] = {{"zero", r.pooled_fit.zero.to_json()},
+                   {"rigid_body_regression", r.pooled_fit.regression.to_json()}};
+  j["fit_runs"] = nlohmann::json::array();
+  for (const auto& e : r.fit_runs) j["fit_runs"].push_back(run_errors_json(e));
+  j["validation_runs"] = nlohmann::json::array();
+  for (const auto& e : r.validation_runs) j["validation_runs"].push_back(run_errors_json(e));
+  if (!r.validation_runs.empty()) j["validation_pooled"] = run_errors_json(r.pooled_validation);
+  j["effects_skipped"] = nlohmann::json::object();
+  for (const auto& [e, why] : r.skipped) j["effects_skipped"][e] = why;
+  j["effects_tried"] = nlohmann::json::array();
+  for (const auto& e : r.effects) {
+    nlohmann::json t = {{"effect", e.effect}, {"axis", axis_name(e.axis)}, {"params", e.params},
+                        {"before", e.before}, {"after", e.after}, {"kept", e.kept}, {"evidence", e.evidence}};
+    if (!e.before_channels.empty()) {
+      t["held_out_before"] = e.before_channels;
+      t["held_out_after"] = e.after_channels;
+    }
+    j["effects_tried"].push_back(t);
+  }
+  j["notes"] = r.notes;
+  j["replays"] = r.replays;
+  return j;
+}
+
+std::string data_calibration_report_markdown(const DataCalibration& r, const std::string& runs) {
+  std::ostringstream o;
+  o << "# Calibration of " << runs << "\n\n";
+  o << "The runs name no machine the twin ships, so nothing was assumed of the machine: the loop, the drives and "
+       "their units were found from the data alone.\n\n";
+  o << "## What the data holds\n\n";
+  for (const auto& n : r.notes) o << "- " << n << "\n";
+  o << "\n## The machine found\n\n";
+  for (const AxisFromData& ax : r.axis) {
+    o << "### Axis " << axis_name(ax.axis) << "\n\n";
+    o << fmt::format("- Position loop: Kv {:.4g} 1/s, velocity feedforward {:.3g}: the axis lags its command by "
+                     "{:.3g} ms. Found from {}.\n",
+                     ax.gains.Kv_per_s, ax.gains.kff, 1e3 * ax.lag_s, ax.loop_source);
+    if (!ax.identified) {
+      o << "- Drive: " << ax.note << "\n\n";
+      continue;
+    }
+    const std::string u = ax.channel.unit == "raw" ? "(the log's unit)" : ax.channel.unit;
+    o << fmt::format("- Drive, in the unit of {} {}: it takes {:.3g} +- {:.2g} {} to keep moving in +, {:.3g} +- "
+                     "{:.2g} in -, and {:.3g} +- {:.2g} at rest (a constant load); {:.3g} {} per mm/s of speed and "
+                     "{:.3g} {} per mm/s^2 of acceleration.\n\n",
+                     ax.channel.column, u, ax.Tc_pos + ax.c, std::hypot(ax.Tc_pos_se, ax.c_se), u,
+                     -(ax.Tc_neg - ax.c), std::hypot(ax.Tc_neg_se, ax.c_se), ax.c, ax.c_se, ax.B, u, ax.J, u);
+  }
+  auto table = [&](const char* title, const std::vector<RunErrors>& list) {
+    if (list.empty()) return;
+    o << "\n## " << title << "\n\n| run | channel | zero model | rigid-body regression | nominal machine | twin |\n"
+      << "|---|---|---|---|---|---|\n";
+    for (const auto& e : list) {
+      std::vector<std::string> keys;
+      for (const auto& [k, v] : e.zero.nrms) keys.push_back(k);
+      for (const auto& k : keys) {
+        auto get = [&](const ChannelErrors& ce) {
+          const auto it = ce.nrms.find(k);
+          return it == ce.nrms.end() ? std::string("not computed") : fmt::format("{:.4g}", it->second);
+        };
+        o << "| " << e.run << " | " << k << " | " << get(e.zero) << " | " << get(e.regression) << " | "
+          << get(e.nominal) << " | " << get(e.calibrated) << " |\n";
+      }
+    }
+  };
+  table("Held-out errors (normalised RMS, lower is better)", r.fit_runs);
+  table("Other runs (not used for fitting)", r.validation_runs);
+  if (!r.skipped.empty()) {
+    o << "\n## Effects this log cannot show\n\n";
+    for (const auto& [e, why] : r.skipped) o << "- " << e << ": " << why << "\n";
+  }
+  return o.str();
+}
+
+}  // namespace twin::analysis

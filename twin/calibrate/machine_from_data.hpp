@@ -1,0 +1,194 @@
+#pragma once
+/// Calibration of a machine the twin does not know, from real logs
+/// (spec/measured-data.md, "Position loops of real machines"): no FADAL prior.
+///
+/// 1. Data checks, each said in a note: stitched segments (a jump between two
+///    rows larger than the axes move in a sample), the rounding of the logged
+///    positions, dead or missing channels, the channel the torque is logged in
+///    and its unit, the controller period.
+/// 2. The loop: the cascade law of the spec, its position gain Kv (and kff)
+///    from a logged velocity command where there is one, else from the lag of
+///    the position behind the command; the velocity loop from a logged torque
+///    against the velocity error where both speeds are logged, else set well
+///    above the position loop (said).
+/// 3. The drive in the channel's own unit (Kt = Ka = 1, rg = 1 mm/rad):
+///    T = J a + B v + Tc_pos [v > 0] - Tc_neg [v < 0] + c, by least squares on
+///    the commanded kinematics (the logged positions are often too coarse to
+///    differentiate), c as a constant load.
+/// 4. Replay of every segment from its own start, the twin's positions
+///    rounded as the log rounds them; errors on the held-out rows against the
+///    zero model and the rigid-body regression
+///    T = m a_cmd + Fc sgn(v_cmd) + b v_cmd + c fitted on the same rows.
+#include <cstddef>
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "twin/report/replay.hpp"
+
+namespace twin::analysis {
+
+/// Rows [begin, end) of a run logged without a jump.
+struct Segment {
+  std::size_t begin{0}, end{0};
+};
+
+/// The stitched segments of a run: a row starts a new segment where any
+/// axis's reference or position moves by more than the run shows its axes can
+/// move in one sample (3 times the largest step held over three consecutive
+/// samples on any axis, and at least 5 times the position quantum). With
+/// `v_max_mm_per_s` (a known machine's rapid) the limit is that speed's step
+/// with 20 % margin instead. `note` says what was found.
+std::vector<Segment> find_segments(const MeasuredRun& run, double position_quantum_mm,
+                                   std::optional<double> v_max_mm_per_s, std::string* note);
+
+/// How a log rounds its positions.
+struct PositionRounding {
+  enum class Kind { kNone, kDecimals, kSignificant };
+  Kind kind{Kind::kNone};
+  int digits{0};                ///< decimals, or significant figures
+  double quantum_mm{0.0};       ///< decimals: 10^-digits; significant: at the largest |position| of the run
+  double round(double x_mm) const;
+  std::string describe() const;
+};
+/// The coarsest rounding all logged positions (`<a>_ref_mm`, `<a>_mm`) agree with.
+PositionRounding detect_rounding(const MeasuredRun& run);
+
+/// A position logged with a rounding coarser than the motion between two
+/// samples reads as a staircase: the reference stands still for several
+/// samples and then steps by one quantum. The command itself moved smoothly,
+/// crossing the rounding boundary between the last sample of one value and
+/// the first of the next. This rebuilds it: knots at those crossings (the
+/// mid-time, the mid-value) where consecutive values differ by about one
+/// quantum, the samples themselves where they differ by more, flat where
+/// the values turn back or the segment begins or ends, linear in between. A
+/// single row off by more than a quantum between two equal neighbours is
+/// taken as a logging glitch and given their value.
+/// Applied to each segment on its own.
+std::vector<double> dequantize_reference(const std::vector<double>& t_s, const std::vector<double>& r_mm,
+                                         const PositionRounding& rounding);
+
+/// The channel an axis's torque is logged in (first of <a>_torque_Nm,
+/// <a>_torque_raw, <a>_i_A, <a>_u_V that is present), its unit and key for reports.
+struct TorqueChannel {
+  std::string column;  ///< empty: none
+  std::string unit;    ///< "N m", "raw", "A", "V"
+  bool present() const { return !column.empty(); }
+};
+TorqueChannel torque_channel(const MeasuredRun& run, Axis a);
+
+/// Normalised RMS errors of a model on a set of rows, keyed as report.json
+/// keys them (`x_i_A`, `x_err_mm`, ...). A key whose error could not be
+/// computed is absent and its reason is in `not_computed`.
+struct ChannelErrors {
+  std::map<std::string, double> nrms;
+  std::map<std::string, std::string> not_computed;
+  nlohmann::json to_json() const;
+};
+
+/// What was found of one axis.
+struct AxisFromData {
+  Axis axis{Axis::kX};
+  TorqueChannel channel;
+  bool identified{false};
+  std::string loop_source;       ///< how the loop's gains were found
+  bool velocity_loop_from_data{false};  ///< Kvp, Tn from a logged torque against the speed error
+  double lag_s{0.0};             ///< lag of the position behind the command
+  controller::CascadeGains gains;
+  double J{0.0}, B{0.0}, Tc_pos{0.0}, Tc_neg{0.0}, c{0.0};  ///< channel unit, rg = 1 mm/rad
+  double J_se{0.0}, B_se{0.0}, Tc_pos_se{0.0}, Tc_neg_se{0.0}, c_se{0.0};
+  std::size_t fit_rows{0};
+  /// Where the velocity loop is fitted from data: the lag (in samples of the
+  /// log) at which the logged torque follows the PI law on the speed error
+  /// best, and the gains fitted at that lag. A lag beyond 0 is a delay
+  /// candidate (the gains above stay the lag-0 fit).
+  std::size_t torque_lag_samples{0};
+  controller::CascadeGains gains_at_lag;
+  std::string note;
+};
+
+/// An effect tried on the identified model: kept only where it lowers the
+/// held-out error of the axis's channel without raising the tracking error.
+struct DataEffect {
+  std::string effect;  ///< catalogue name
+  Axis axis{Axis::kX};
+  std::map<std::string, double> params;
+  std::string evidence;
+  double before{0.0}, after{0.0};  ///< held-out channel NRMS without / with
+  /// Held-out NRMS of every channel of the axis (torque, tracking error,
+  /// velocity command) without and with the effect (empty for smooth_friction,
+  /// which is judged on the torque channel alone).
+  std::map<std::string, double> before_channels, after_channels;
+  bool kept{false};
+};
+
+struct RunErrors {
+  std::string run;
+  ChannelErrors nominal;      ///< the machine the run names, or the stand-in when it names none
+  ChannelErrors identified;   ///< identified, no effects
+  ChannelErrors calibrated;   ///< final
+  ChannelErrors zero;         ///< the zero model
+  ChannelErrors regression;   ///< rigid-body regression (torque) and first-order lag (tracking), fitted on the fit runs
+  std::size_t rows{0}, rows_compared{0};
+};
+
+struct DataCalibration {
+  sim::MachineDefinition identified;  ///< the cascade machine found, no effects
+  sim::MachineDefinition final_machine;
+  std::vector<Axis> axes;
+  std::vector<AxisFromData> axis;
+  PositionRounding rounding;
+  std::vector<DataEffect> effects;             ///< tried (kept or not)
+  std::vector<std::pair<std::string, std::string>> skipped;  ///< effect, why the data cannot show it
+  std::vector<RunErrors> fit_runs;             ///< held-out rows of each fitting run
+  std::vector<RunErrors> validation_runs;      ///< whole runs not used for fitting
+  /// The fitting runs' held-out rows and the validation runs' rows, each
+  /// pooled over runs: sqrt(sum of squared residuals / sum of squared
+  /// measurements) over all their compared rows.
+  RunErrors pooled_fit, pooled_validation;
+  ReplayResult replay_before, replay_after;    ///< of the first fitting run
+  std::vector<std::string> notes;
+  double fit_fraction{0.6};
+  int replays{0};
+};
+
+struct DataCalibrationOptions {
+  double fit_fraction{0.6};
+  /// The loop period the twin replays at where no run gives it.
+  double default_controller_period_s{1e-3};
+};
+
+/// Calibrates on `fit` (one or more runs of the same machine) and reports on
+/// `validate`. `nominal` is the machine the runs are compared against before
+/// calibration (the named one, or the stand-in with its note).
+DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const std::vector<MeasuredRun>& validate,
+                                    const sim::MachineDefinition& nominal, const DataCalibrationOptions& options = {});
+
+/// Replays `run` on `machine` segment by segment (each from its own start,
+/// never across a jump), the twin's positions rounded as `rounding` says.
+/// Rows of segments too short to replay keep the measured reference and are
+/// flagged in `compared` = 0.
+ReplayResult replay_segments(const MeasuredRun& run, const sim::MachineDefinition& machine,
+                             const std::vector<Segment>& segments, const PositionRounding& rounding,
+                             std::vector<char>* compared);
+
+/// The errors of `machine` (identified by calibrate_from_data, in the log's
+/// torque unit) on the whole of `run`, computed as calibrate's validation
+/// computes them: segments, rounding and reference rebuilt from the run, the
+/// replay kept in `replay`. Only `calibrated` and `zero` are filled.
+RunErrors evaluate_machine_on_run(const MeasuredRun& run, const sim::MachineDefinition& machine, ReplayResult* replay,
+                                  std::vector<std::string>* notes);
+
+/// trace.csv of a replay on a machine identified from data: per axis the
+/// reference, the twin's position (rounded as the log's), its torque in the
+/// run's channel and unit, and the velocity command.
+void write_data_trace(const std::filesystem::path& path, const MeasuredRun& run, const ReplayResult& replay);
+
+nlohmann::json data_calibration_report_json(const DataCalibration& r);
+std::string data_calibration_report_markdown(const DataCalibration& r, const std::string& runs);
+
+}  // namespace twin::analysis

@@ -1,0 +1,445 @@
+#include "twin/report/plots.hpp"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+#include <fmt/format.h>
+
+#include "twin/core/error.hpp"
+
+namespace twin::analysis {
+
+namespace {
+
+bool plain_name(std::string_view name) {
+  if (name.empty() || name.front() == '.') return false;
+  for (char c : name) {
+    const bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' ||
+                    c == '-' || c == '.';
+    if (!ok) return false;
+  }
+  return true;
+}
+
+// The gnuplot executable on PATH, or empty.
+std::string find_gnuplot() {
+  const char* path = std::getenv("PATH");
+  std::string dirs = path != nullptr ? path : "/usr/local/bin:/usr/bin:/bin";
+  std::size_t pos = 0;
+  while (pos <= dirs.size()) {
+    const std::size_t colon = dirs.find(':', pos);
+    std::string dir = dirs.substr(pos, colon == std::string::npos ? std::string::npos : colon - pos);
+    if (dir.empty()) dir = ".";
+    const std::string candidate = dir + "/gnuplot";
+    struct stat st {};
+    if (::stat(candidate.c_str(), &st) == 0 && S_ISREG(st.st_mode) && ::access(candidate.c_str(), X_OK) == 0)
+      return candidate;
+    if (colon == std::string::npos) break;
+    pos = colon + 1;
+  }
+  return {};
+}
+
+// Runs `exe` with argv {"gnuplot", script_name} in `dir`, stdout and stderr to `log_name`.
+// Returns the wait status, or -1 if the process could not be started.
+int exec_gnuplot(const std::string& exe, const std::filesystem::path& dir, const char* script_name,
+                 const char* log_name) {
+  // Block the signals the cleanup handler takes while forking, so that the child
+  // is registered (and killed by the handler) before any of them can arrive.
+  sigset_t block, old;
+  sigemptyset(&block);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaddset(&block, sig);
+  ::sigprocmask(SIG_BLOCK, &block, &old);
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    // Child: only async-signal-safe calls until exec.
+    for (int sig : {SIGINT, SIGTERM, SIGHUP}) ::signal(sig, SIG_DFL);
+    ::sigprocmask(SIG_SETMASK, &old, nullptr);
+    if (::chdir(dir.c_str()) != 0) ::_exit(126);
+    const int in = ::open("/dev/null", O_RDONLY);
+    const int log = ::open(log_name, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (in < 0 || log < 0) ::_exit(126);
+    ::dup2(in, 0);
+    ::dup2(log, 1);
+    ::dup2(log, 2);
+    char arg0[] = "gnuplot";
+    std::array<char*, 3> argv{arg0, const_cast<char*>(script_name), nullptr};
+    ::execv(exe.c_str(), argv.data());
+    ::_exit(127);
+  }
+  if (pid < 0) {
+    ::sigprocmask(SIG_SETMASK, &old, nullptr);
+    return -1;
+  }
+  io::ChildGuard child(pid);
+  ::sigprocmask(SIG_SETMASK, &old, nullptr);
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0) {
+    if (errno != EINTR) return -1;
+  }
+  return status;
+}
+
+}  // namespace
+
+std::string gnuplot_file(std::string_view name) {
+  if (!plain_name(name))
+    throw InternalError(fmt::format("gnuplot: '{}' is not a plain file name", gnuplot_text(name)));
+  return "'" + std::string(name) + "'";
+}
+
+std::string gnuplot_text(std::string_view text) {
+  std::string s = "'";
+  for (char c : text) {
+    const auto u = static_cast<unsigned char>(c);
+    if (c == '\'') s += "''";
+    else if (u < 0x20 || u >= 0x7f) s += '?';
+    else s += c;
+  }
+  return s + "'";
+}
+
+std::string gnuplot_output(std::string_view final_name) {
+  return gnuplot_file(std::string(final_name) + ".tmp.png");
+}
+
+void run_gnuplot(const std::filesystem::path& work_dir, const std::string& script,
+                 const std::vector<std::string>& outputs) {
+  for (const auto& o : outputs) static_cast<void>(gnuplot_file(o));
+  constexpr const char* kScript = "plot-script.gp.tmp";
+  constexpr const char* kLog = "plot-log.txt.tmp";
+  const auto script_path = work_dir / kScript;
+  const auto log_path = work_dir / kLog;
+  std::vector<io::TempPathGuard> guards;
+  guards.emplace_back(script_path);
+  guards.emplace_back(log_path);
+  for (const auto& o : outputs) guards.emplace_back(work_dir / (o + ".tmp.png"));
+  std::error_code ec;
+  auto remove_temporaries = [&] {
+    std::filesystem::remove(script_path, ec);
+    std::filesystem::remove(log_path, ec);
+    for (const auto& o : outputs) std::filesystem::remove(work_dir / (o + ".tmp.png"), ec);
+  };
+  {
+    std::ofstream f(script_path);
+    f << script;
+    if (!f) {
+      remove_temporaries();
+      throw IoError(fmt::format("cannot write {}", script_path.string()));
+    }
+  }
+  const std::string exe = find_gnuplot();
+  const int rc = exe.empty() ? -1 : exec_gnuplot(exe, work_dir, kScript, kLog);
+  std::string first_error;
+  {
+    std::ifstream lf(log_path);
+    for (std::string line; std::getline(lf, line);) {
+      if (line.find("rror") != std::string::npos || line.find("not found") != std::string::npos) {
+        first_error = line;
+        break;
+      }
+    }
+  }
+  const bool ok = rc != -1 && WIFEXITED(rc) && WEXITSTATUS(rc) == 0;
+  for (const auto& o : outputs) {
+    if (!ok || !std::filesystem::exists(work_dir / (o + ".tmp.png"))) {
+      remove_temporaries();
+      throw IoError(fmt::format("gnuplot could not draw {}: {}", o,
+                                exe.empty() ? std::string("gnuplot is not installed (not on PATH)")
+                                : !first_error.empty() ? first_error
+                                : ok                   ? std::string("no output")
+                                                       : std::string("gnuplot failed")));
+    }
+  }
+  for (const auto& o : outputs) {
+    std::filesystem::rename(work_dir / (o + ".tmp.png"), work_dir / o, ec);
+    if (ec) {
+      const std::string msg = ec.message();
+      remove_temporaries();
+      throw IoError(fmt::format("cannot rename {}: {}", (work_dir / (o + ".tmp.png")).string(), msg));
+    }
+  }
+  remove_temporaries();
+}
+
+namespace {
+/// The views of the first corner: the zoom of the time plots, and the XY path
+/// and the force along it of corner_path.png (times in s).
+struct CornerViews {
+  double zoom0_s{0.0}, zoom1_s{0.0};   ///< +-0.25 s or the corner's window, whichever is wider
+  double half_mm{0.0};                  ///< half-width of the XY view: the blend and a little of the lines around it
+  double path0_s{0.0}, path1_s{0.0};   ///< the blend and long enough on either side to leave the XY view
+  double force0_s{0.0}, force1_s{0.0}; ///< force along the path: +-0.5 s
+  /// The hull of all three: the rows the corner views draw.
+  double begin_s() const { return std::min({zoom0_s, path0_s, force0_s}); }
+  double end_s() const { return std::max({zoom1_s, path1_s, force1_s}); }
+};
+
+CornerViews corner_views(const CornerWindow& w) {
+  const controller::Corner& c = w.corner;
+  CornerViews v;
+  v.zoom0_s = std::min(c.t_s - 0.25, w.t_begin_s - 0.05);
+  v.zoom1_s = std::max(c.t_s + 0.25, w.t_end_s + 0.05);
+  v.half_mm = std::max({0.1, 4.0 * c.deviation_mm, 2.0 * c.blend_radius_mm});
+  const double speed = std::max(c.v_ref_mm_per_s, 1e-3);
+  v.path0_s = std::min(c.t_blend_begin_s, c.t_s - 3.0 * v.half_mm / speed) - 0.05;
+  v.path1_s = std::max(c.t_blend_end_s, c.t_s + 3.0 * v.half_mm / speed) + 0.05;
+  v.force0_s = c.t_s - 0.5;
+  v.force1_s = c.t_s + 0.5;
+  return v;
+}
+
+/// corner_path.png: the XY path through a corner and the force along it.
+/// Every number in the script is formatted here; the only file is T.
+std::string corner_path_script(const std::string& T, const controller::Trajectory& traj, const CornerWindow& w,
+                               bool cutting) {
+  const controller::Corner& c = w.corner;
+  const double px = c.p_mm[0], py = c.p_mm[1];
+  const CornerViews views = corner_views(w);
+  const double half_mm = views.half_mm;
+  const double v = std::max(c.v_ref_mm_per_s, 1e-3);
+  const double t0 = views.path0_s, t1 = views.path1_s;
+  const double tf0 = views.force0_s, tf1 = views.force1_s;
+  std::ostringstream g;
+  // The programmed corner: the reference where the blend starts and ends lies
+  // on the programmed moves; the corner point between them.
+  const auto a = traj.at_time(std::max(0.0, c.t_s - 3.0 * half_mm / v)).x_mm;
+  const auto b = traj.at_time(c.t_s + 3.0 * half_mm / v).x_mm;
+  g << "$programmed << EOD\n"
+    << fmt::format("{:.9f},{:.9f}\n{:.9f},{:.9f}\n{:.9f},{:.9f}\n", a[0], a[1], px, py, b[0], b[1]) << "EOD\n";
+  g << "$blend << EOD\n";
+  const double tb0 = c.t_blend_begin_s, tb1 = c.t_blend_end_s;
+  for (int i = 0; i <= 200 && tb1 > tb0; ++i) {
+    const auto x = traj.at_time(tb0 + (tb1 - tb0) * i / 200.0).x_mm;
+    g << fmt::format("{:.9f},{:.9f}\n", x[0], x[1]);
+  }
+  g << "EOD\n";
+  const std::string in_view = fmt::format("(column('t_s') >= {:.6f} && column('t_s') <= {:.6f})", t0, t1);
+  const std::string force = "sqrt(column('fx_avg_N')**2 + column('fy_avg_N')**2 + column('fz_avg_N')**2)";
+  // (Datablocks use the trace's comma separator.)
+  g << "set output " << gnuplot_output("corner_path.png") << "\n"
+    << "unset arrow\nunset label\n"
+    << "set multiplot layout 1,2\n"
+    << "set title " << gnuplot_text(fmt::format("Corner 1, line {}: blend R {:.4f} mm, {:.4f} mm off, {:.0f} mm/min",
+                                                w.line_after, c.blend_radius_mm, c.deviation_mm,
+                                                c.v_ref_mm_per_s * 60.0))
+    << "\n"
+    << "set size ratio -1\nset xlabel 'x [mm]'\nset ylabel 'y [mm]'\n"
+    << fmt::format("set xrange [{:.9f}:{:.9f}]\nset yrange [{:.9f}:{:.9f}]\n", px - half_mm, px + half_mm,
+                   py - half_mm, py + half_mm)
+    << (cutting ? "set cblabel 'force (tick mean) [N]'\nset palette rgb 33,13,10\n" : "unset colorbox\n")
+    << "plot $programmed using 1:2 with linespoints lw 1 dt 2 lc rgb '#999999' title 'programmed', "
+    << "$blend using 1:2 with lines lw 3 lc rgb '#1f77b4' title 'planned blend', " << T << " using ("
+    << in_view << " ? column('x_ref_mm') : NaN):'y_ref_mm' with lines lw 1 lc rgb '#000000' title 'reference', ''"
+    << " using (" << in_view << " ? column('x_true_mm') : NaN):'y_true_mm'"
+    << (cutting ? ":(" + force + ") with lines lw 2 lc palette title 'real (drives), colour: force'"
+                : " with lines lw 2 lc rgb '#d62728' title 'real (drives)'")
+    << "\n"
+    << "set size noratio\nset autoscale x\nset autoscale y\nunset colorbox\n"
+    << "set title " << gnuplot_text("Along the path (negative: before the corner)") << "\n"
+    << "set xlabel 'distance from the corner point [mm]'\n";
+  const std::string dist = fmt::format(
+      "(column('t_s') >= {:.6f} && column('t_s') <= {:.6f} ? sgn(column('t_s') - {:.6f}) * "
+      "sqrt((column('x_true_mm') - {:.9f})**2 + (column('y_true_mm') - {:.9f})**2) : NaN)",
+      tf0, tf1, c.t_s, px, py);
+  if (cutting) {
+    g << "set ylabel 'force [N]'\nset y2label 'engagement [deg]'\nset y2tics\nset ytics nomirror\n"
+      << "set y2range [0:*]\n"
+      << "plot " << T << " using " << dist << ":(" << force
+      << ") with lines lc rgb '#d62728' title 'force (tick mean)', '' using " << dist
+      << ":'engagement_deg' axes x1y2 with lines lc rgb '#ff7f0e' title 'engagement'\n";
+  } else {
+    g << "set ylabel 'feed [mm/min]'\n"
+      << "plot " << T << " using " << dist << ":'feed_ref_mm_per_min' with lines lc rgb '#1f77b4' title 'reference', "
+      << "'' using " << dist << ":'feed_mm_per_min' with lines lc rgb '#d62728' title 'real (drives)'\n";
+  }
+  g << "unset multiplot\nunset y2tics\nunset y2label\nset ytics mirror\nset autoscale\n";
+  return g.str();
+}
+}  // namespace
+
+namespace {
+/// The rows the plots draw, written once so gnuplot does not parse the whole
+/// trace for every curve: `full` holds every n-th of the trace's `rows` data
+/// rows (about 20000, the whole run's view), `window` every row with t_s in
+/// [w0, w1] (the corner views). Both keep the header.
+void write_plot_rows(const std::filesystem::path& trace, std::size_t rows, const std::filesystem::path& full,
+                     const std::filesystem::path& window, double w0, double w1) {
+  const std::size_t every = rows > 20000 ? rows / 20000 : 1;
+  std::ifstream in(trace, std::ios::binary);
+  if (!in) throw IoError(fmt::format("cannot read {} for the plots", trace.string()));
+  std::ofstream f(full, std::ios::binary), w(window, std::ios::binary);
+  std::string line;
+  if (std::getline(in, line)) f << line << '\n', w << line << '\n';
+  for (std::size_t i = 0; std::getline(in, line); ++i) {
+    if (line.empty()) continue;
+    if (i % every == 0) f << line << '\n';
+    if (w1 >= w0) {
+      const double t = std::strtod(line.c_str(), nullptr);
+      if (t >= w0 && t <= w1) w << line << '\n';
+    }
+  }
+  if (!f || !w) throw IoError(fmt::format("cannot write the plots' rows beside {}", trace.string()));
+}
+}  // namespace
+
+std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::string& trace_name,
+                                            std::size_t rows, const std::vector<Axis>& axes, const std::vector<CornerWindow>& corners,
+                                            bool cutting, const controller::Trajectory* trajectory) {
+  std::vector<std::string> outputs{"feedrate.png", "errors.png"};
+  if (cutting) outputs.push_back("forces.png");
+  const bool has_xy = std::find(axes.begin(), axes.end(), Axis::kX) != axes.end() &&
+                      std::find(axes.begin(), axes.end(), Axis::kY) != axes.end();
+  const bool path_view = trajectory != nullptr && !corners.empty() && has_xy;
+  if (path_view) outputs.push_back("corner_path.png");
+  // Full-rate rows only where the first corner's views draw them.
+  const bool corner_view = !corners.empty();
+  const CornerViews views = corner_view ? corner_views(corners.front()) : CornerViews{};
+  const double w0 = corner_view ? views.begin_s() : 1.0, w1 = corner_view ? views.end_s() : 0.0;
+  const auto full_path = results.staging_dir() / "plot-rows-full.csv";
+  const auto window_path = results.staging_dir() / "plot-rows-corner.csv";
+  io::TempPathGuard full_guard(full_path), window_guard(window_path);
+  struct Remove {
+    std::filesystem::path a, b;
+    ~Remove() {
+      std::error_code ec;
+      std::filesystem::remove(a, ec);
+      std::filesystem::remove(b, ec);
+    }
+  } remove_rows{full_path, window_path};
+  write_plot_rows(results.staging_dir() / trace_name, rows, full_path, window_path, w0, w1);
+  const std::string T = gnuplot_file(full_path.filename().string());
+  const std::string W = gnuplot_file(window_path.filename().string());
+  std::ostringstream g;
+  g << "set datafile separator ','\n"
+    << "set terminal pngcairo size 1400,1000 font 'DejaVu Sans,11' noenhanced\n"
+    << "set key outside top center horizontal\n"
+    << "set grid\n"
+    << "set xlabel 'time [s]'\n";
+  std::ostringstream marks;
+  for (std::size_t c = 0; c < corners.size(); ++c) {
+    const double t = corners[c].corner.t_s;
+    marks << fmt::format("set arrow {} from {:.6f}, graph 0 to {:.6f}, graph 1 nohead dt 2 lc rgb '#888888'\n", c + 1,
+                         t, t);
+    marks << fmt::format("set label {} 'corner {}: {:.0f} deg, line {}' at {:.6f}, graph 0.97 rotate by 90 right "
+                         "font ',9'\n",
+                         c + 1, c + 1, corners[c].corner.turn_angle_deg, corners[c].line_after, t);
+  }
+  // The full view draws about 20000 rows a curve (T); the corner zoom every row (W).
+  g << marks.str();
+  // Each figure: the whole run on top and, when the program has corners, the
+  // first corner's window below (+-0.25 s or the window, whichever is wider).
+  const std::string zoom =
+      corner_view ? fmt::format("set xrange [{:.6f}:{:.6f}]\n", views.zoom0_s, views.zoom1_s) : std::string();
+  auto figure = [&](const std::string& out, const std::string& title, const std::string& setup,
+                    const std::string& plot_full, const std::string& plot_zoom) {
+    g << "set output " << gnuplot_output(out) << "\n";
+    if (!zoom.empty()) g << "set multiplot layout 2,1\n";
+    g << setup << "set title " << gnuplot_text(title) << "\nset autoscale x\n" << plot_full << "\n";
+    if (!zoom.empty())
+      g << "set title " << gnuplot_text(title + ", around corner 1") << "\n" << zoom << plot_zoom << "\nunset multiplot\n";
+    g << "set autoscale x\nunset y2tics\nunset y2label\nset ytics mirror\n";
+  };
+  auto feed_plot = [&](const std::string& file) {
+    return "plot " + file +
+           " using 't_s':'feed_programmed_mm_per_min' with lines lw 2 lc rgb '#999999' title 'programmed', '' "
+           "using 't_s':'feed_ref_mm_per_min' with lines lw 2 lc rgb '#1f77b4' title 'interpolator "
+           "reference', '' using 't_s':'feed_mm_per_min' with lines lw 1 lc rgb '#d62728' title "
+           "'real (drives)'";
+  };
+  figure(outputs[0], "Feedrate (dashed lines: corners)", "set ylabel 'feed [mm/min]'\n", feed_plot(T), feed_plot(W));
+  const std::array<const char*, 3> colours{"#1f77b4", "#2ca02c", "#9467bd"};
+  auto error_plot = [&](const std::string& file) {
+    std::string p = "plot ";
+    for (std::size_t i = 0; i < axes.size(); ++i) {
+      const std::string n(axis_name(axes[i]));
+      p += (i ? ", " : "") + file + " using 't_s':(column('" + n + "_err_mm')*1000) with lines lc rgb '" +
+           colours[i % 3] + "' title '" + n + " tracking error'";
+    }
+    return p + ", ''" +
+           " using 't_s':(column('contour_error_mm')*1000) with lines lw 2 lc rgb '#d62728' title 'contour error'";
+  };
+  figure(outputs[1], "Tracking error per axis and contour error", "set ylabel 'error [um]'\n", error_plot(T),
+         error_plot(W));
+  if (cutting) {
+    auto force_plot = [&](const std::string& file) {
+      return "plot " + file + " using 't_s':'fx_avg_N' with lines lc rgb '#1f77b4' title 'fx (tick mean)', ''" +
+             " using 't_s':'fy_avg_N' with lines lc rgb '#2ca02c' title 'fy (tick mean)', ''" +
+             " using 't_s':'fz_avg_N' with lines lc rgb '#9467bd' title 'fz (tick mean)', ''" +
+             " using 't_s':'engagement_deg' axes x1y2 with lines lc rgb '#ff7f0e' title 'engagement'";
+    };
+    figure(outputs[2], "Cutting force on the workpiece and engagement",
+           "set ylabel 'force [N]'\nset y2label 'engagement [deg]'\nset y2tics\nset ytics nomirror\n"
+           "set y2range [0:*]\n",
+           force_plot(T), force_plot(W));
+    g << "set autoscale y2\n";
+  }
+  if (path_view) g << corner_path_script(W, *trajectory, corners.front(), cutting);
+  g << "unset output\n";
+  std::vector<std::filesystem::path> written;
+  for (const auto& o : outputs) written.push_back(results.path(o));
+  run_gnuplot(results.staging_dir(), g.str(), outputs);
+  return written;
+}
+
+std::vector<std::filesystem::path> plot_calibration(io::ResultSet& results, const std::string& residuals_name,
+                                                    const std::vector<Axis>& axes,
+                                                    const std::optional<CalibrationEvidence>& evidence) {
+  const std::string d = gnuplot_file(residuals_name);
+  std::string script = "set datafile separator ','\nset key autotitle columnhead\nset grid\n";
+  std::vector<std::string> outputs;
+  const std::size_t na = axes.size();
+  for (const std::string which : {"before", "after"}) {
+    const std::string png = fmt::format("residual_{}.png", which);
+    outputs.push_back(png);
+    script += fmt::format("set terminal pngcairo size 1200,{} noenhanced\nset output {}\nset multiplot layout {},2\n",
+                          300 * na, gnuplot_output(png), na);
+    for (std::size_t j = 0; j < na; ++j) {
+      const std::size_t c0 = 2 + 5 * j;  // gnuplot columns are 1-based: t_s is 1
+      const std::string an(axis_name(axes[j]));
+      const std::size_t ce = c0 + (which == "before" ? 1 : 2);
+      const std::size_t cu = c0 + (which == "before" ? 3 : 4);
+      script += fmt::format("set title {}\nset xlabel 't s'\nset ylabel 'mm'\nplot {} using 1:{} with lines notitle\n",
+                            gnuplot_text(fmt::format("{} tracking error, measured minus model ({})", an, which)), d,
+                            ce);
+      script += fmt::format("set title {}\nset ylabel 'V (or A)'\nplot {} using 1:{} with lines notitle\n",
+                            gnuplot_text(fmt::format("{} low-passed u, measured minus model ({})", an, which)), d,
+                            cu);
+    }
+    script += "unset multiplot\n";
+  }
+  if (evidence && evidence->axis_slot < na) {
+    const std::size_t c0 = 2 + 5 * evidence->axis_slot;
+    const std::string png = "evidence.png";
+    outputs.push_back(png);
+    const std::string xlabel = evidence->over_position ? fmt::format("{} mm", axis_name(evidence->axis)) : "t s";
+    const std::size_t cx = evidence->over_position ? c0 : 1;
+    script += fmt::format("set terminal pngcairo size 1200,500 noenhanced\nset output {}\nset multiplot layout 1,2\n",
+                          gnuplot_output(png));
+    script += fmt::format("set title {}\nset xlabel {}\nset ylabel 'V (or A)'\nplot {} using {}:{} with dots notitle\n",
+                          gnuplot_text(fmt::format("{} on {}: low-passed u residual of the model without it",
+                                                   evidence->effect, axis_name(evidence->axis))),
+                          gnuplot_text(xlabel), d, cx, c0 + 3);
+    script += fmt::format("set title 'tracking-error residual, without (red) and with (blue) it'\nset xlabel {}\n"
+                          "set ylabel 'mm'\nplot {} using {}:{} with dots lc rgb 'red' notitle, '' using {}:{} with "
+                          "dots lc rgb 'blue' notitle\nunset multiplot\n",
+                          gnuplot_text(xlabel), d, cx, c0 + 1, cx, c0 + 2);
+  }
+  std::vector<std::filesystem::path> written;
+  for (const auto& o : outputs) written.push_back(results.path(o));
+  run_gnuplot(results.staging_dir(), script, outputs);
+  return written;
+}
+
+}  // namespace twin::analysis

@@ -1,0 +1,73 @@
+#pragma once
+/// Plots a person looks at, drawn by gnuplot (Debian's gnuplot-nox): PNG files
+/// in a command's result set.
+///
+/// The one way the project drives gnuplot. No string from input (folder, run,
+/// scenario or machine names) reaches gnuplot or a shell as code:
+///  - gnuplot is started by fork and exec with a fixed argument vector (no
+///    shell), in the folder that holds the data and receives the plots;
+///  - scripts name files only by plain names the program chose
+///    (gnuplot_file: letters, digits, '_', '-', '.'), never by a path;
+///  - any other text (titles) goes through gnuplot_text: a single-quoted
+///    literal, in which gnuplot expands nothing (no backquote or macro
+///    substitution), with a quote doubled and every byte outside printable
+///    ASCII (newline included) replaced by '?', so the literal cannot end early.
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "twin/report/run_report.hpp"
+#include "twin/io/atomic_file.hpp"
+
+namespace twin::analysis {
+
+/// A file of gnuplot's working folder as a gnuplot string literal.
+/// InternalError for anything but a plain name of [A-Za-z0-9_.-] not starting with '.'.
+std::string gnuplot_file(std::string_view name);
+/// Text (a title or label) as a safe single-quoted gnuplot literal (see above).
+std::string gnuplot_text(std::string_view text);
+/// The temporary name gnuplot writes the plot `final_name` to (a gnuplot_file
+/// literal of "<final_name>.tmp.png"); run_gnuplot renames it.
+std::string gnuplot_output(std::string_view final_name);
+
+/// Runs gnuplot on `script` in `work_dir`. Each of `outputs` (plain names in
+/// work_dir) must have been written by the script to gnuplot_output(name) and is
+/// renamed to its name when gnuplot succeeds. Temporaries (script, log, partial
+/// plots) are removed, also when the process is ended by a signal. Throws
+/// IoError with gnuplot's first error line otherwise.
+void run_gnuplot(const std::filesystem::path& work_dir, const std::string& script,
+                 const std::vector<std::string>& outputs);
+
+/// feedrate.png (programmed, reference and real feed over time, corners
+/// marked), errors.png (tracking per axis and contour error), and with a cut
+/// forces.png (fx fy fz and engagement), drawn from the result set's file
+/// `trace_name` (`rows` data rows). With the plan (`trajectory`), a corner and the x and y axes,
+/// also corner_path.png: the XY path at the first corner (programmed
+/// corner, planned blend arc, reference and the drives' real path coloured
+/// by the force) and the force and engagement along the path. Returns the
+/// plots written (staged paths of `results`).
+std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::string& trace_name,
+                                            std::size_t rows, const std::vector<Axis>& axes,
+                                            const std::vector<CornerWindow>& corners, bool cutting,
+                                            const controller::Trajectory* trajectory = nullptr);
+
+/// The effect `twin calibrate` added first, for evidence.png.
+struct CalibrationEvidence {
+  std::string effect;        ///< e.g. "cogging"
+  Axis axis{Axis::kX};
+  std::size_t axis_slot{0};  ///< position of the axis in the residual file's axes
+  bool over_position{false}; ///< plotted over the axis position (else over time)
+};
+
+/// residual_before.png, residual_after.png (tracking error and low-passed u,
+/// measured minus model, per axis) and with `evidence` evidence.png, from the
+/// result set's file `residuals_name`: columns t_s, then per axis <a>_mm,
+/// <a>_err_res_before_mm, <a>_err_res_after_mm, <a>_u_res_before, <a>_u_res_after.
+/// Returns the plots written (staged paths of `results`).
+std::vector<std::filesystem::path> plot_calibration(io::ResultSet& results, const std::string& residuals_name,
+                                                    const std::vector<Axis>& axes,
+                                                    const std::optional<CalibrationEvidence>& evidence);
+
+}  // namespace twin::analysis

@@ -1,0 +1,339 @@
+#include "twin/report/replay.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <memory>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "twin/core/error.hpp"
+#include "twin/io/atomic_file.hpp"
+#include "twin/io/machine_file.hpp"
+#include "twin/sim/cosimulation.hpp"
+#include "twin/sim/reference.hpp"
+
+namespace twin::analysis {
+namespace {
+
+std::optional<double> optional_number(const nlohmann::json& j, const char* key, const std::string& where) {
+  if (!j.contains(key) || j[key].is_null()) return std::nullopt;
+  if (!j[key].is_number()) throw ConfigError(fmt::format("{}: {} must be a number or null", where, key));
+  const double v = j[key].get<double>();
+  if (!std::isfinite(v) || !(v > 0.0)) throw ConfigError(fmt::format("{}: {} = {} must be > 0", where, key, v));
+  return v;
+}
+
+}  // namespace
+
+MeasuredRun load_run(const std::filesystem::path& dir) {
+  MeasuredRun run;
+  run.dir = dir;
+  if (!std::filesystem::is_directory(dir)) throw IoError(fmt::format("{}: not a run folder", dir.string()));
+  const auto meta_path = dir / "meta.json";
+  const std::string where = meta_path.string();
+  nlohmann::json meta;
+  try {
+    meta = nlohmann::json::parse(io::read_file(meta_path));
+  } catch (const nlohmann::json::exception& e) {
+    throw ConfigError(fmt::format("{}: not valid JSON ({})", where, e.what()));
+  }
+  if (!meta.is_object()) throw ConfigError(fmt::format("{}: must be a JSON object", where));
+  if (meta.contains("machine") && !meta["machine"].is_null()) {
+    if (!meta["machine"].is_string()) throw ConfigError(fmt::format("{}: machine must be a string or null", where));
+    run.meta.machine = meta["machine"].get<std::string>();
+  }
+  run.meta.controller_period_s = optional_number(meta, "controller_period_s", where);
+  run.meta.sample_period_s = optional_number(meta, "sample_period_s", where);
+  run.meta.encoder_resolution_mm = optional_number(meta, "encoder_resolution_mm", where);
+  if (meta.contains("description") && meta["description"].is_string())
+    run.meta.description = meta["description"].get<std::string>();
+  if (meta.contains("axes")) {
+    if (!meta["axes"].is_array()) throw ConfigError(fmt::format("{}: axes must be a list", where));
+    for (const auto& a : meta["axes"]) {
+      const auto ax = a.is_string() ? parse_axis(a.get<std::string>()) : std::nullopt;
+      if (!ax) throw ConfigError(fmt::format("{}: axes: unknown axis {}", where, a.dump()));
+      run.meta.axes.push_back(*ax);
+    }
+  }
+  std::filesystem::path trace_path = dir / "trace.csv";
+  if (!std::filesystem::exists(trace_path)) trace_path = dir / "trace.csv.gz";
+  if (!std::filesystem::exists(trace_path))
+    throw IoError(fmt::format("{}: no trace.csv or trace.csv.gz", dir.string()));
+  run.trace = io::read_trace_csv(trace_path);
+  for (Axis a : kAllAxes)
+    if (run.trace.find(std::string(axis_name(a)) + "_ref_mm")) run.axes.push_back(a);
+  if (run.axes.empty()) throw IoError(fmt::format("{}: no <a>_ref_mm column (x_ref_mm, y_ref_mm or z_ref_mm)", run.trace.source));
+  for (Axis a : run.meta.axes)
+    if (std::find(run.axes.begin(), run.axes.end(), a) == run.axes.end())
+      throw IoError(fmt::format("{}: meta.json lists axis {} but the trace has no {}_ref_mm column", run.trace.source,
+                                axis_name(a), axis_name(a)));
+  for (Axis a : run.axes) {
+    const std::string n(axis_name(a));
+    const auto& ref = run.trace.at(n + "_ref_mm");
+    const auto [rlo, rhi] = std::minmax_element(ref.begin(), ref.end());
+    if (*rlo == *rhi) continue;  // a still axis may well hold u and current constant
+    for (const std::string& col : {n + "_u_V", n + "_i_A"}) {
+      const auto it = std::find(run.trace.names.begin(), run.trace.names.end(), col);
+      if (it == run.trace.names.end()) continue;
+      const auto c = static_cast<std::size_t>(it - run.trace.names.begin());
+      const auto& v = run.trace.columns[c];
+      const auto [lo, hi] = std::minmax_element(v.begin(), v.end());
+      if (*lo != *hi) continue;
+      run.notes.push_back(fmt::format("{}: {} holds {} over the whole run while axis {} moves: a channel that was not "
+                                      "recorded; left out",
+                                      run.trace.source, col, *lo, n));
+      run.trace.names.erase(it);
+      run.trace.columns.erase(run.trace.columns.begin() + static_cast<std::ptrdiff_t>(c));
+    }
+  }
+  const auto& t = run.trace.at("t_s");
+  if (t.size() < 3) throw IoError(fmt::format("{}: {} rows are too few to replay", run.trace.source, t.size()));
+  const double dt = (t.back() - t.front()) / static_cast<double>(t.size() - 1);
+  // Uniform within 1 %; a time stamp that jitters by up to a fifth of a period
+  // about the uniform grid (a logger's clock, not the loop's) is taken as
+  // on the grid and said; a missing or doubled row is an error.
+  double max_dev = 0.0;
+  for (std::size_t r = 0; r < t.size(); ++r)
+    max_dev = std::max(max_dev, std::abs(t[r] - t.front() - static_cast<double>(r) * dt));
+  for (std::size_t r = 1; r < t.size(); ++r) {
+    const double d = t[r] - t[r - 1];
+    const double tol = max_dev <= 0.2 * dt ? 0.4 * dt : 0.01 * dt + 2e-6;
+    if (std::abs(d - dt) > tol)
+      throw IoError(fmt::format("{}: sampling is not uniform: rows {} to {} are {} s apart, the mean period is {} s",
+                                run.trace.source, r + 1, r + 2, d, dt));
+  }
+  if (max_dev > 0.01 * dt + 2e-6)
+    run.notes.push_back(fmt::format("{}: t_s jitters by up to {:.3g} s ({:.0f} % of the period) about a uniform grid: the "
+                                    "rows are taken as sampled every {} s",
+                                    run.trace.source, max_dev, 100.0 * max_dev / dt, dt));
+  run.sample_period_s = dt;
+  if (run.meta.sample_period_s && std::abs(*run.meta.sample_period_s - dt) > 0.01 * dt)
+    throw IoError(fmt::format("{}: sample_period_s = {} s but the trace's t_s steps by {} s", where,
+                              *run.meta.sample_period_s, dt));
+  return run;
+}
+
+sim::MachineDefinition machine_for_run(const MeasuredRun& run, const std::string& machine_override,
+                                       std::vector<std::string>* notes) {
+  std::string name = machine_override.empty() ? run.meta.machine.value_or("") : machine_override;
+  auto path = io::resolve_machine_path(name);
+  if (name.empty() || !std::filesystem::exists(path)) {
+    if (!machine_override.empty())
+      throw ConfigError(fmt::format("--machine {}: no such machine file ({} does not exist)", machine_override,
+                                    path.string()));
+    // A run from a machine the twin does not know (real data often names
+    // none): the shipped definition stands in, and the notes say so, since
+    // its gains, drive constants and encoder are then assumed, not known.
+    const std::string said =
+        run.meta.machine ? fmt::format("names machine '{}', which the twin does not ship", *run.meta.machine)
+                         : std::string("names no machine");
+    name = io::kDefaultMachineName;
+    path = io::resolve_machine_path(name);
+    if (notes)
+      notes->push_back(fmt::format("meta.json {}: the {} definition is assumed (its loop gains, Ka, Kt, rg, Ts, "
+                                   "encoder resolution and limits where the run does not give them); pass "
+                                   "--machine FILE for the machine the run was made on",
+                                   said, name));
+  }
+  sim::MachineDefinition m = io::load_machine(path);
+  if (run.meta.controller_period_s && std::abs(*run.meta.controller_period_s - m.Ts_s) > 1e-12) {
+    if (notes)
+      notes->push_back(fmt::format("controller period {} s from meta.json replaces the machine's Ts = {} s",
+                                   *run.meta.controller_period_s, m.Ts_s));
+    m.Ts_s = *run.meta.controller_period_s;
+    for (auto& ax : m.axes) ax.loop.Ts_s = m.Ts_s;
+  }
+  if (run.meta.encoder_resolution_mm) m.encoder_resolution_mm = *run.meta.encoder_resolution_mm;
+  for (Axis a : run.axes)
+    if (!m.axes[index(a)].present && sim::machine_loop_law(m) == controller::LoopLaw::kCascade) {
+      // A machine identified from data leaves out the axes it could not identify.
+      if (notes)
+        notes->push_back(fmt::format("axis {}: machine {} does not define it (it was not identified); not replayed",
+                                     axis_name(a), m.name));
+    } else if (!m.axes[index(a)].present)
+      throw ConfigError(fmt::format("{}: the run has axis {} but machine {} does not define it", run.dir.string(),
+                                    axis_name(a), m.name));
+  return m;
+}
+
+std::vector<double> monotone_slopes(const std::vector<double>& r) {
+  const std::size_t n = r.size();
+  // Secant slopes per sample interval, and at each sample the centred
+  // difference (exact through constant acceleration), set to zero where the
+  // reference turns or stops and limited to 3 times the smaller secant so
+  // that no interval overshoots its end values (Fritsch and Carlson, SIAM
+  // J. Numer. Anal. 17 (1980) 238-246).
+  std::vector<double> d(n > 1 ? n - 1 : 0), slope(n, 0.0);
+  for (std::size_t i = 0; i + 1 < n; ++i) d[i] = r[i + 1] - r[i];
+  if (n > 1) {
+    slope.front() = d.front();
+    slope.back() = d.back();
+  }
+  for (std::size_t i = 1; i + 1 < n; ++i) {
+    if (d[i - 1] * d[i] <= 0.0) continue;
+    const double c = 0.5 * (d[i - 1] + d[i]);
+    const double lim = 3.0 * std::min(std::abs(d[i - 1]), std::abs(d[i]));
+    slope[i] = std::copysign(std::min(std::abs(c), lim), c);
+  }
+  return slope;
+}
+
+std::vector<double> upsample_reference(const std::vector<double>& r, std::int64_t m) {
+  const std::size_t n = r.size();
+  if (n == 0 || m <= 1) return r;
+  const std::vector<double> slope = monotone_slopes(r);
+  std::vector<double> out(static_cast<std::size_t>((static_cast<std::int64_t>(n) - 1) * m + 1));
+  for (std::size_t k = 0; k < out.size(); ++k) {
+    const std::size_t i = k / static_cast<std::size_t>(m);
+    const double f = static_cast<double>(k % static_cast<std::size_t>(m)) / static_cast<double>(m);
+    if (f == 0.0) {
+      out[k] = r[i];
+      continue;
+    }
+    // Cubic Hermite on [i, i+1] in the unit parameter f.
+    const double f2 = f * f, f3 = f2 * f;
+    out[k] = (2 * f3 - 3 * f2 + 1) * r[i] + (f3 - 2 * f2 + f) * slope[i] + (-2 * f3 + 3 * f2) * r[i + 1] +
+             (f3 - f2) * slope[i + 1];
+  }
+  return out;
+}
+
+/// Controller periods rebuilt between two trace samples: a 1 ms log of a
+/// 0.1 ms loop needs 10; 1000 allows a 0.1 s log of that loop.
+constexpr std::int64_t kMaxUpsampling = 1000;
+
+ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& machine_in, std::size_t rows,
+                        feeddrive::IntegratorOptions options, ChannelSampling sampling) {
+  ReplayResult res;
+  res.axes = run.axes;
+  sim::MachineDefinition machine = machine_in;
+  // Only the run's axes are simulated.
+  for (Axis a : kAllAxes)
+    if (std::find(run.axes.begin(), run.axes.end(), a) == run.axes.end()) machine.axes[index(a)].present = false;
+  const double Ts = machine.Ts_s;
+  const double ratio = run.sample_period_s / Ts;
+  if (!(ratio < static_cast<double>(kMaxUpsampling) + 0.5))
+    throw ConfigError(fmt::format("{}: the trace is sampled every {} s, {:.4g} controller periods of {} s: more than "
+                                  "the {} a replay rebuilds between two samples (check controller_period_s in meta.json)",
+                                  run.trace.source, run.sample_period_s, ratio, Ts, kMaxUpsampling));
+  const auto m = static_cast<std::int64_t>(std::llround(ratio));
+  if (m < 1 || std::abs(ratio - static_cast<double>(m)) > 0.01)
+    throw ConfigError(fmt::format(
+        "{}: the trace is sampled every {} s, which is not a whole multiple of the controller period {} s: the "
+        "reference the loop saw cannot be rebuilt",
+        run.trace.source, run.sample_period_s, Ts));
+  const std::size_t n_rows = rows == 0 ? run.trace.num_rows() : std::min(rows, run.trace.num_rows());
+  if (m > 1)
+    res.notes.push_back(fmt::format("trace sampled every {} s = {} controller periods: the reference is interpolated "
+                                    "by a monotone cubic to Ts = {} s and the twin's outputs are taken at the trace's samples",
+                                    run.sample_period_s, m, Ts));
+  const auto& t = run.trace.at("t_s");
+  const std::int64_t n_ticks = static_cast<std::int64_t>(n_rows - 1) * m + 1;
+  AxisArray<std::vector<double>> ref;
+  AxisArray<double> x0{};
+  for (Axis a : run.axes) {
+    const std::string n(axis_name(a));
+    const auto& r = run.trace.at(n + "_ref_mm");
+    auto& dst = ref[index(a)];
+    dst = upsample_reference(std::vector<double>(r.begin(), r.begin() + static_cast<std::ptrdiff_t>(n_rows)), m);
+    const auto* xm = run.trace.find(n + "_mm");
+    x0[index(a)] = xm ? (*xm)[0] : r[0];
+    // The machine that made the run did not alarm: the following-error limit
+    // of the replay must allow at least twice the run's own largest error.
+    if (xm) {
+      double e_max = 0.0;
+      for (std::size_t k = 0; k < std::min(r.size(), xm->size()); ++k) e_max = std::max(e_max, std::abs(r[k] - (*xm)[k]));
+      auto& lim = machine.axes[index(a)].following_error_limit_mm;
+      if (2.0 * e_max > lim) {
+        res.notes.push_back(fmt::format("axis {}: the run's tracking error reaches {:.3f} mm; the replay's following-error "
+                                        "limit is raised from {} mm to {:.3f} mm",
+                                        n, e_max, lim, 2.0 * e_max));
+        lim = 2.0 * e_max;
+      }
+    }
+  }
+  auto reference = std::make_shared<sim::SampledReference>(std::move(ref), Ts);
+  sim::CoSimulation cosim(machine, reference, nullptr, x0, options);
+  res.t_s.reserve(n_rows);
+  for (Axis a : run.axes) {
+    res.x_ref_mm[index(a)].reserve(n_rows);
+    res.x_mm[index(a)].reserve(n_rows);
+    res.u_V[index(a)].reserve(n_rows);
+    res.i_A[index(a)].reserve(n_rows);
+    res.Tm[index(a)].reserve(n_rows);
+    res.vcmd_mm_per_s[index(a)].reserve(n_rows);
+  }
+  // Running sums of the torque-side channels per tick (kMeanOverNeighbours):
+  // the mean over ticks [a, b] is (S[b + 1] - S[a]) / (b - a + 1).
+  const bool window = sampling == ChannelSampling::kMeanOverNeighbours && m > 1;
+  AxisArray<std::array<std::vector<double>, 3>> sums{};
+  if (window)
+    for (Axis a : run.axes)
+      for (auto& v : sums[index(a)]) {
+        v.reserve(static_cast<std::size_t>(n_ticks) + 1);
+        v.push_back(0.0);
+      }
+  for (std::int64_t k = 0; k < n_ticks; ++k) {
+    const sim::Snapshot& s = cosim.step();
+    if (window)
+      for (Axis a : run.axes) {
+        const auto& x = s.axes[index(a)];
+        auto& S = sums[index(a)];
+        S[0].push_back(S[0].back() + x.u_V);
+        S[1].push_back(S[1].back() + x.i_A);
+        S[2].push_back(S[2].back() + x.Tm_Nm);
+      }
+    if (k % m != 0) continue;
+    res.t_s.push_back(t[static_cast<std::size_t>(k / m)]);
+    for (Axis a : run.axes) {
+      const auto& x = s.axes[index(a)];
+      res.x_ref_mm[index(a)].push_back(x.x_ref_mm);
+      res.x_mm[index(a)].push_back(x.x_mm);
+      res.u_V[index(a)].push_back(x.u_V);
+      res.i_A[index(a)].push_back(x.i_A);
+      res.Tm[index(a)].push_back(x.Tm_Nm);
+      res.vcmd_mm_per_s[index(a)].push_back(x.vcmd_mm_per_s);
+    }
+  }
+  if (window) {
+    res.notes.push_back(fmt::format("the twin's u, current and torque at a row are their mean over the two sample "
+                                    "periods around it ({} s): where the log samples every {} s, a stop or a change "
+                                    "of speed falls at a time inside them the log does not give",
+                                    2.0 * run.sample_period_s, run.sample_period_s));
+    for (Axis a : run.axes) {
+      const auto& S = sums[index(a)];
+      for (std::size_t r = 0; r < res.t_s.size(); ++r) {
+        const std::int64_t c = static_cast<std::int64_t>(r) * m;
+        const auto lo = static_cast<std::size_t>(std::max<std::int64_t>(c - m, 0));
+        const auto hi = static_cast<std::size_t>(std::min<std::int64_t>(c + m, n_ticks - 1));
+        const double n_in = static_cast<double>(hi - lo + 1);
+        res.u_V[index(a)][r] = (S[0][hi + 1] - S[0][lo]) / n_in;
+        res.i_A[index(a)][r] = (S[1][hi + 1] - S[1][lo]) / n_in;
+        res.Tm[index(a)][r] = (S[2][hi + 1] - S[2][lo]) / n_in;
+      }
+    }
+  }
+  return res;
+}
+
+void write_replay_trace(const std::filesystem::path& path, const ReplayResult& r) {
+  std::vector<std::string> names{"t_s"};
+  for (Axis a : r.axes) {
+    const std::string n(axis_name(a));
+    names.insert(names.end(), {n + "_ref_mm", n + "_mm", n + "_u_V", n + "_i_A"});
+  }
+  io::TraceWriter w(path, names);
+  std::vector<double> row;
+  for (std::size_t i = 0; i < r.t_s.size(); ++i) {
+    row.clear();
+    row.push_back(r.t_s[i]);
+    for (Axis a : r.axes)
+      row.insert(row.end(), {r.x_ref_mm[index(a)][i], r.x_mm[index(a)][i], r.u_V[index(a)][i], r.i_A[index(a)][i]});
+    w.write_row(row);
+  }
+  w.commit();
+}
+
+}  // namespace twin::analysis
