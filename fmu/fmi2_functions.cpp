@@ -57,29 +57,16 @@ template <class T, class Get>
 fmi2Status get_values(fmi2Component c, const char* function, const fmi2ValueReference vr[], size_t nvr, T value[],
                       Get get) {
   return guarded(c, function, [&](Instance& inst) {
-    inst.require_get();
-    if (nvr > 0 && (vr == nullptr || value == nullptr)) throw twin::ConfigError("null array");
-    for (size_t i = 0; i < nvr; ++i) value[i] = get(inst.slave(), vr[i]);
+    twin::fmu::get_values(inst, vr, nvr, value, get);
     return fmi2OK;
   });
 }
-
-std::string value_text(double v) { return fmt::format("{}", v); }
-std::string value_text(int v) { return std::to_string(v); }
 
 template <class T, class Set>
 fmi2Status set_values(fmi2Component c, const char* function, const fmi2ValueReference vr[], size_t nvr, const T value[],
                       Set set) {
   return guarded(c, function, [&](Instance& inst) {
-    inst.require_set();
-    if (nvr > 0 && (vr == nullptr || value == nullptr)) throw twin::ConfigError("null array");
-    for (size_t i = 0; i < nvr; ++i) set(inst.slave(), vr[i], value[i]);
-    if (inst.logs_calls() && nvr > 0) {
-      std::string what;
-      for (size_t i = 0; i < nvr; ++i)
-        what += fmt::format("{}{} = {}", i > 0 ? ", " : "", inst.slave().variables()[vr[i]].name, value_text(value[i]));
-      inst.log_call(function, what);
-    }
+    twin::fmu::set_values(inst, function, vr, nvr, value, set);
     return fmi2OK;
   });
 }
@@ -213,19 +200,19 @@ fmi2Status fmi2Reset(fmi2Component c) {
 }
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
-  return get_values(c, "fmi2GetReal", vr, nvr, value, [](Slave& f, fmi2ValueReference r) { return f.get_real(r); });
+  return get_values(c, "fmi2GetReal", vr, nvr, value, [](const Slave& f, fmi2ValueReference r) { return f.get_real(r); });
 }
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
   return get_values(c, "fmi2GetInteger", vr, nvr, value,
-                    [](Slave& f, fmi2ValueReference r) { return f.get_integer(r); });
+                    [](const Slave& f, fmi2ValueReference r) { return f.get_integer(r); });
 }
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
-  return get_values(c, "fmi2GetBoolean", vr, nvr, value, [](Slave& f, fmi2ValueReference r) {
+  return get_values(c, "fmi2GetBoolean", vr, nvr, value, [](const Slave& f, fmi2ValueReference r) {
     return f.get_boolean(r) ? fmi2True : fmi2False;
   });
 }
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
-  return get_values(c, "fmi2GetString", vr, nvr, value, [](Slave& f, fmi2ValueReference r) -> fmi2String {
+  return get_values(c, "fmi2GetString", vr, nvr, value, [](const Slave& f, fmi2ValueReference r) -> fmi2String {
     throw twin::ConfigError("unknown valueReference " + std::to_string(r) + " (the FMU has no String variables; " +
                             std::to_string(f.variables().size()) + " variables)");
   });

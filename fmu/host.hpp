@@ -18,6 +18,8 @@
 #include <optional>
 #include <string>
 
+#include <fmt/format.h>
+
 #include "fmu/slave.hpp"
 #include "twin/core/error.hpp"
 
@@ -141,6 +143,34 @@ Status guarded(Instance* inst, const char* function, F&& f) noexcept {
     inst->fail();
     inst->log_error(Status::kFatal, function, "unknown exception");
     return Status::kFatal;
+  }
+}
+
+/// A value as the logCalls lines write it.
+inline std::string value_text(double v) { return fmt::format("{}", v); }
+inline std::string value_text(int v) { return std::to_string(v); }
+inline std::string value_text(bool v) { return v ? "true" : "false"; }
+
+/// Get*: value[i] = get(slave, vr[i]) for each of the nvr references.
+template <class VR, class T, class Get>
+void get_values(const Instance& inst, const VR vr[], std::size_t nvr, T value[], Get get) {
+  inst.require_get();
+  if (nvr > 0 && (vr == nullptr || value == nullptr)) throw ConfigError("null array");
+  for (std::size_t i = 0; i < nvr; ++i) value[i] = get(inst.slave(), vr[i]);
+}
+
+/// Set*: set(slave, vr[i], value[i]) for each of the nvr references, then
+/// one logCalls line naming them.
+template <class VR, class T, class Set>
+void set_values(Instance& inst, const char* function, const VR vr[], std::size_t nvr, const T value[], Set set) {
+  inst.require_set();
+  if (nvr > 0 && (vr == nullptr || value == nullptr)) throw ConfigError("null array");
+  for (std::size_t i = 0; i < nvr; ++i) set(inst.slave(), vr[i], value[i]);
+  if (inst.logs_calls() && nvr > 0) {
+    std::string what;
+    for (std::size_t i = 0; i < nvr; ++i)
+      what += fmt::format("{}{} = {}", i > 0 ? ", " : "", inst.slave().variables()[vr[i]].name, value_text(value[i]));
+    inst.log_call(function, what);
   }
 }
 
