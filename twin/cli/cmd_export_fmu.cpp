@@ -9,7 +9,6 @@
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
-#include <yaml-cpp/yaml.h>
 
 #include "fmu/archive.hpp"
 #include "fmu/model.hpp"
@@ -20,9 +19,7 @@
 #include "twin/core/error.hpp"
 #include "twin/io/atomic_file.hpp"
 #include "twin/io/machine_file.hpp"
-#include "twin/io/process_yaml.hpp"
 #include "twin/io/scenario_file.hpp"
-#include "twin/io/yaml_util.hpp"
 
 namespace twin::cli {
 void register_export_fmu(CLI::App& app) {
@@ -49,12 +46,10 @@ void register_export_fmu(CLI::App& app) {
     const auto path = opt->scenario.empty() ? io::default_scenario_path() : io::resolve_scenario_path(opt->scenario);
     io::Scenario scenario = io::load_scenario(path, opt->machine);
     apply_sets(scenario.machine, opt->sets);
-    const YAML::Node root = io::load_yaml_file(path);
-    // The process section resolved (tool and material files read) into a
-    // complete setup: the FMU carries numbers, not file references.
+    // The scenario's process setup, resolved when it was read (tool and
+    // material files included): the FMU carries numbers, not file references.
     nlohmann::json process = nullptr;
-    if (root.IsMap() && root["process"])
-      process = fmu::process_setup_to_json(io::parse_process_setup(root["process"], path.string(), path.parent_path()));
+    if (scenario.process_setup) process = fmu::process_setup_to_json(*scenario.process_setup);
 
     const std::string model_text =
         fmu::model_to_json(scenario.name, scenario.machine, scenario.program_path.filename().string(),
