@@ -134,15 +134,20 @@ std::string default_experiment_xml(const FmuModel& model) {
                      on_tick_grid(stop_ticks, Ts), on_tick_grid(10, Ts));
 }
 
-std::string model_attributes(const FmuModel& model, const char* token_name, const char* steps) {
+/// The XML declaration and the opening fmiModelDescription element (the
+/// identity attribute `token_name` holds the placeholder).
+std::string xml_head(const FmuModel& model, const char* version, const char* token_name, const char* steps,
+                     const char* extra) {
   return fmt::format(
-      "modelName=\"{}\" {}=\"{}\"\n"
+      "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+      "<fmiModelDescription fmiVersion=\"{}\" modelName=\"{}\" {}=\"{}\"\n"
       "  description=\"{}\"\n"
-      "  generationTool=\"twin export-fmu\" variableNamingConvention=\"flat\"",
-      xml_escape("MachineTwin " + model.scenario_name), token_name, kGuidPlaceholder,
+      "  generationTool=\"twin export-fmu\" variableNamingConvention=\"flat\"{}>\n",
+      version, xml_escape("MachineTwin " + model.scenario_name), token_name, kGuidPlaceholder,
       xml_escape(fmt::format("Digital twin of the {} milling machine (feed drives, position loops, interpolator, "
                              "cutting process), scenario {}. The controller samples its inputs every Ts = {} s; {}.",
-                             model.machine.name, model.scenario_name, model.machine.Ts_s, steps)));
+                             model.machine.name, model.scenario_name, model.machine.Ts_s, steps)),
+      extra);
 }
 
 /// The attributes every variable has in both versions (value reference = row).
@@ -171,10 +176,8 @@ std::size_t encoder_row(const std::vector<Variable>& vars) {
 /// FMI 2.0: ScalarVariable elements, ModelStructure by index (row + 1).
 std::string xml_template_fmi2(const FmuModel& model) {
   const std::vector<Variable> vars = make_variables(model.machine);
-  std::string x = "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n";
-  x += "<fmiModelDescription fmiVersion=\"2.0\" " +
-       model_attributes(model, "guid", "communication steps may end between its ticks") +
-       " numberOfEventIndicators=\"0\">\n";
+  std::string x = xml_head(model, "2.0", "guid", "communication steps may end between its ticks",
+                           " numberOfEventIndicators=\"0\"");
   x += fmt::format(
       "  <CoSimulation modelIdentifier=\"{}\" needsExecutionTool=\"false\" "
       "canHandleVariableCommunicationStepSize=\"true\" canInterpolateInputs=\"false\" "
@@ -219,10 +222,8 @@ std::string xml_template_fmi2(const FmuModel& model) {
 std::string xml_template_fmi3(const FmuModel& model) {
   const std::vector<Variable> vars = make_variables(model.machine);
   const double Ts = model.machine.Ts_s;
-  std::string x = "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n";
-  x += "<fmiModelDescription fmiVersion=\"3.0\" " +
-       model_attributes(model, "instantiationToken", "every communication step is a whole number of its ticks") +
-       ">\n";
+  std::string x =
+      xml_head(model, "3.0", "instantiationToken", "every communication step is a whole number of its ticks", "");
   x += fmt::format(
       "  <CoSimulation modelIdentifier=\"{}\" needsExecutionTool=\"false\" "
       "canBeInstantiatedOnlyOncePerProcess=\"false\" canGetAndSetFMUState=\"true\" canSerializeFMUState=\"{}\" "

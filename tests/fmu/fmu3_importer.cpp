@@ -3,20 +3,11 @@
 #include <dlfcn.h>
 
 #include <filesystem>
-#include <fstream>
 #include <regex>
-#include <sstream>
 #include <stdexcept>
 
 namespace twin::fmu_test {
 namespace {
-
-std::string attr(const std::string& element, const std::string& name) {
-  const std::regex re("\\s" + name + "=\"([^\"]*)\"");
-  std::smatch m;
-  if (std::regex_search(element, m, re)) return m[1];
-  return {};
-}
 
 void logger(fmi3InstanceEnvironment env, fmi3Status status, fmi3String category, fmi3String message) {
   auto* log = static_cast<std::vector<std::string>*>(env);
@@ -52,29 +43,26 @@ const std::vector<std::string>& fmi3_function_names() {
 
 LoadedFmu3::LoadedFmu3(const std::string& fmu_path) {
   dir_ = extract_fmu(fmu_path);
-  std::ifstream in(dir_ + "/modelDescription.xml");
-  std::stringstream s;
-  s << in.rdbuf();
-  xml_ = s.str();
+  xml_ = read_text_file(dir_ + "/modelDescription.xml");
   std::smatch m;
   if (!std::regex_search(xml_, m, std::regex("<fmiModelDescription[^>]*>")))
     throw std::runtime_error("no fmiModelDescription element");
-  if (attr(m[0], "fmiVersion") != "3.0") throw std::runtime_error("fmiVersion is not 3.0");
-  token_ = attr(m[0], "instantiationToken");
+  if (xml_attribute(m[0], "fmiVersion") != "3.0") throw std::runtime_error("fmiVersion is not 3.0");
+  token_ = xml_attribute(m[0], "instantiationToken");
   if (!std::regex_search(xml_, m, std::regex("<CoSimulation[^>]*>"))) throw std::runtime_error("no CoSimulation element");
-  model_identifier_ = attr(m[0], "modelIdentifier");
+  model_identifier_ = xml_attribute(m[0], "modelIdentifier");
   const std::regex var("<(Float64|Int32|Boolean|Float32|String)\\s([^>]*)/>");
   for (auto it = std::sregex_iterator(xml_.begin(), xml_.end(), var); it != std::sregex_iterator(); ++it) {
     const std::string a = " " + (*it)[2].str();
     VarInfo v;
     v.type = (*it)[1];
-    v.name = attr(a, "name");
-    v.vr = static_cast<unsigned>(std::stoul(attr(a, "valueReference")));
-    v.causality = attr(a, "causality");
-    v.variability = attr(a, "variability");
-    v.initial = attr(a, "initial");
-    v.unit = attr(a, "unit");
-    v.start = attr(a, "start");
+    v.name = xml_attribute(a, "name");
+    v.vr = static_cast<unsigned>(std::stoul(xml_attribute(a, "valueReference")));
+    v.causality = xml_attribute(a, "causality");
+    v.variability = xml_attribute(a, "variability");
+    v.initial = xml_attribute(a, "initial");
+    v.unit = xml_attribute(a, "unit");
+    v.start = xml_attribute(a, "start");
     by_name_[v.name] = vars_.size();
     vars_.push_back(v);
   }
@@ -110,9 +98,7 @@ const VarInfo& LoadedFmu3::var(const std::string& name) const {
 }
 
 std::string LoadedFmu3::default_experiment(const std::string& attribute) const {
-  std::smatch m;
-  if (!std::regex_search(xml_, m, std::regex("<DefaultExperiment[^>]*>"))) return {};
-  return attr(m[0], attribute);
+  return default_experiment_attribute(xml_, attribute);
 }
 
 fmi3Instance LoadedFmu3::instantiate(const std::string& name, const char* token, bool logging_on) {

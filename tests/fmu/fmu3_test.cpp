@@ -30,31 +30,6 @@
 namespace twin::fmu_test {
 namespace {
 
-std::string export_error(const std::string& fmu) {
-  std::ifstream e(fmu + ".error");
-  if (!e) return {};
-  std::stringstream s;
-  s << e.rdbuf();
-  return s.str();
-}
-
-#define REQUIRE_EXPORTED(path)                                                 \
-  do {                                                                         \
-    const std::string err = export_error(path);                                \
-    ASSERT_TRUE(err.empty()) << err;                                           \
-    ASSERT_TRUE(std::filesystem::exists(path)) << path << " was not exported"; \
-  } while (false)
-
-int run(const std::string& cmd, std::string& out) {
-  out.clear();
-  std::FILE* p = ::popen((cmd + " 2>&1").c_str(), "r");
-  if (p == nullptr) return -1;
-  std::array<char, 4096> buf{};
-  while (std::fgets(buf.data(), buf.size(), p) != nullptr) out += buf.data();
-  const int rc = ::pclose(p);
-  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-}
-
 // ---- the archive and its modelDescription.xml -----------------------------------
 
 struct Pair {
