@@ -59,6 +59,12 @@ void write_zip(const std::filesystem::path& path, const std::vector<std::pair<st
 }  // namespace
 
 void write_fmu_archive(const std::filesystem::path& path, const FmuArchive& a) {
+  // The binary must be one of this version: it holds the name of the
+  // version's instantiate function (which it exports); the other's does not.
+  const char* entry = a.version == FmiVersion::k3 ? "fmi3InstantiateCoSimulation" : "fmi2Instantiate";
+  if (a.binary.find(entry) == std::string::npos)
+    throw ConfigError(fmt::format("the FMU binary has no {}: not an FMI {} binary", entry,
+                                  a.version == FmiVersion::k3 ? "3.0" : "2.0"));
   std::vector<std::pair<std::string, const std::string*>> entries;
   entries.emplace_back("modelDescription.xml", &a.model_description);
   entries.emplace_back(fmt::format("binaries/{}/{}.so", binary_platform(a.version), kModelIdentifier), &a.binary);

@@ -25,7 +25,9 @@ struct FmuArchive {
 
 /// Writes the archive at `path` through a temporary name in the same folder
 /// (renamed at the end: never a half-written file at `path`).
-/// @throws IoError naming the file and libzip's reason.
+/// @throws ConfigError, before writing anything, when the binary is not one
+/// of `archive.version` (no fmi2Instantiate, or no fmi3InstantiateCoSimulation);
+/// IoError naming the file and libzip's reason.
 void write_fmu_archive(const std::filesystem::path& path, const FmuArchive& archive);
 
 /// The bytes of a file (the FMU binary); throws IoError naming it.

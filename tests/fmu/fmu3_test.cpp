@@ -10,6 +10,7 @@
 // native co-simulation in fmu_import_test and fmu_cosim_test.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <bit>
 #include <cmath>
@@ -476,6 +477,21 @@ TEST_F(Fmi3Calls, CallsOutOfTurnAreErrorsAndWhatTheFmuLacksIsRefusedWithItsReaso
   fmi3Instance e = initialised();
   EXPECT_EQ(do_step(e, 0.0, 1e5), fmi3Discard) << "more ticks than one step runs";
   EXPECT_EQ(do_step(e, 0.0, 10 * Ts_), fmi3OK) << "a Discard changes nothing";
+}
+
+TEST(Fmi3Export, TheFmi2BinaryIsNotPackedAsAnFmi3Fmu) {
+  // `--fmi 3 --binary` with the FMI 2.0 binary: one line, exit 1, no file.
+  REQUIRE_EXPORTED(TWIN_FMU_AIRCUT);
+  const LoadedFmu fmi2(TWIN_FMU_AIRCUT);
+  const std::string out_path = fmi2.dir() + "/wrong.fmu";
+  std::string out;
+  const int rc = run(std::string(TWIN_BINARY_DIR) + "/bin/twin export-fmu --fmi 3 --binary " + fmi2.so_path() +
+                         " -o " + out_path,
+                     out);
+  EXPECT_EQ(rc, 1) << out;
+  EXPECT_NE(out.find("not an FMI 3.0 binary"), std::string::npos) << out;
+  EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << out;
+  EXPECT_FALSE(std::filesystem::exists(out_path));
 }
 
 }  // namespace

@@ -64,9 +64,10 @@ void register_export_fmu(CLI::App& app) {
     fmu::FmuArchive archive;
     archive.version = version;
     archive.model_description = fmu::model_description_xml(model, version);
-    archive.binary = fmu::read_binary_file(!opt->binary.empty() ? opt->binary
-                                           : version == fmu::FmiVersion::k3 ? TWIN_FMU3_BINARY
-                                                                            : TWIN_FMU_BINARY);
+    const std::string binary_path = !opt->binary.empty()                 ? opt->binary
+                                    : version == fmu::FmiVersion::k3 ? TWIN_FMU3_BINARY
+                                                                     : TWIN_FMU_BINARY;
+    archive.binary = fmu::read_binary_file(binary_path);
     archive.resources.emplace_back("model.json", model_text);
     archive.resources.emplace_back(
         "machine.yaml",
@@ -76,7 +77,11 @@ void register_export_fmu(CLI::App& app) {
       archive.resources.emplace_back(scenario.program_path.filename().string(), scenario.program_text);
     const std::filesystem::path out(opt->out);
     if (out.has_parent_path()) io::ensure_directory(out.parent_path());
-    fmu::write_fmu_archive(out, archive);
+    try {
+      fmu::write_fmu_archive(out, archive);
+    } catch (const ConfigError& e) {
+      throw ConfigError(fmt::format("{}: {} (--fmi {})", binary_path, e.what(), opt->fmi));
+    }
     const std::string id = version == fmu::FmiVersion::k3 ? fmu::instantiation_token(model) : fmu::model_guid(model);
     std::printf("%s\n", fmt::format("wrote {} (FMI {}.0, scenario {}, {} axes, {} {}{})", out.string(), opt->fmi,
                                     scenario.name, scenario.machine.present_axes().size(),
