@@ -58,9 +58,8 @@ TEST_P(Fmi3Archive, LayoutHasDescriptionBinaryForX86_64LinuxAndResources) {
 
 TEST_P(Fmi3Archive, ModelDescriptionValidatesAgainstTheFmi3Schema) {
   std::string out;
-  const int rc = run("xmllint --noout --nonet --schema " TWIN_SHARED_DIR "/fmi/schema/fmi3/fmi3ModelDescription.xsd " +
-                         fmu_->dir() + "/modelDescription.xml",
-                     out);
+  const int rc = validate_with_xsd(TWIN_SHARED_DIR "/fmi/schema/fmi3/fmi3ModelDescription.xsd",
+                                   fmu_->dir() + "/modelDescription.xml", out);
   EXPECT_EQ(rc, 0) << out;
 }
 

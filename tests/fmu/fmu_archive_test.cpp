@@ -44,9 +44,8 @@ TEST_P(FmuArchive, LayoutHasDescriptionBinaryAndResources) {
 
 TEST_P(FmuArchive, ModelDescriptionValidatesAgainstTheFmi2Schema) {
   std::string out;
-  const int rc = run("xmllint --noout --nonet --schema " TWIN_SHARED_DIR "/fmi/schema/fmi2/fmi2ModelDescription.xsd " +
-                         fmu_->dir() + "/modelDescription.xml",
-                     out);
+  const int rc = validate_with_xsd(TWIN_SHARED_DIR "/fmi/schema/fmi2/fmi2ModelDescription.xsd",
+                                   fmu_->dir() + "/modelDescription.xml", out);
   EXPECT_EQ(rc, 0) << out;
 }
 

@@ -65,6 +65,10 @@ int run(const std::string& cmd, std::string& out) {
   return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
 }
 
+int validate_with_xsd(const std::string& xsd, const std::string& xml_file, std::string& out) {
+  return run("xmllint --noout --nonet --schema " + xsd + " " + xml_file, out);
+}
+
 std::string python3() {
 #ifdef TWIN_SANITIZER_RUNTIME
   return "LD_PRELOAD=" TWIN_SANITIZER_RUNTIME " ASAN_OPTIONS=detect_leaks=0 python3 ";

@@ -42,6 +42,10 @@ std::string export_error(const std::string& fmu);
 /// Runs a shell command; returns its exit status and fills `out` (stdout+stderr).
 int run(const std::string& cmd, std::string& out);
 
+/// Validates `xml_file` with xmllint against `xsd` (a path); returns the exit
+/// status (0: valid) and fills `out` with what xmllint said.
+int validate_with_xsd(const std::string& xsd, const std::string& xml_file, std::string& out);
+
 /// The command that runs python3 on an FMU. In the sanitizer build the FMU
 /// takes its sanitizer runtime from the host, so python3 gets the shared one
 /// preloaded (python's own allocations are not the project's: no leak check).
