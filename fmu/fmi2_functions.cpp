@@ -1,120 +1,35 @@
-// The exported FMI 2.0 Co-Simulation entry points. Each goes through
-// guarded(): no exception crosses the C boundary; a failed call logs one line
-// (category logStatusError, always) and moves the instance to the error
-// state; a refused call (fmi2Discard, category logStatusDiscard) changes
-// nothing; warnings go to logStatusWarning and calls that change the state to
-// logCalls, each when enabled (loggingOn, fmi2SetDebugLogging).
-#include <cstdio>
+// The exported FMI 2.0 Co-Simulation entry points: a thin adapter over the
+// slave (fmu/slave.hpp) through the shared instance (fmu/host.hpp). Each call
+// goes through guarded(): no exception crosses the C boundary; a failed call
+// logs one line (category logStatusError, always) and moves the instance to
+// the error state; a refused call (fmi2Discard, category logStatusDiscard)
+// changes nothing; warnings go to logStatusWarning and calls that change the
+// state to logCalls, each when enabled (loggingOn, fmi2SetDebugLogging).
 #include <cstring>
-#include <fstream>
 #include <memory>
-#include <new>
-#include <sstream>
 #include <string>
 
 #include <fmt/format.h>
 
 #include "fmu/fmi2_api.h"
-#include "fmu/instance.hpp"
+#include "fmu/host.hpp"
 #include "fmu/model_description.hpp"
 #include "twin/core/error.hpp"
 
 namespace {
 
-using twin::fmu::FmuInstance;
-using twin::fmu::FmuMode;
-using twin::fmu::SavedState;
+using twin::fmu::Instance;
+using twin::fmu::Slave;
+using twin::fmu::with_function;
 
-/// The log categories of modelDescription.xml, as bits.
-enum LogCategory : unsigned {
-  kLogCalls = 1u,
-  kLogStatusWarning = 2u,
-  kLogStatusDiscard = 4u,
-  kLogStatusError = 8u,
-  kLogStatusFatal = 16u,
-};
-struct CategoryName {
-  const char* name;
-  unsigned bit;
-};
-constexpr CategoryName kCategories[] = {{"logCalls", kLogCalls},
-                                        {"logStatusWarning", kLogStatusWarning},
-                                        {"logStatusDiscard", kLogStatusDiscard},
-                                        {"logStatusError", kLogStatusError},
-                                        {"logStatusFatal", kLogStatusFatal}};
-constexpr unsigned kAllCategories = kLogCalls | kLogStatusWarning | kLogStatusDiscard | kLogStatusError | kLogStatusFatal;
-
-const char* category_name(unsigned bit) {
-  for (const auto& c : kCategories)
-    if (c.bit == bit) return c.name;
-  return "logStatusError";
-}
-
-struct Component {
-  std::string name;
-  fmi2CallbackFunctions callbacks{};
-  unsigned categories{0};  ///< enabled log categories (loggingOn and fmi2SetDebugLogging)
-  std::unique_ptr<FmuInstance> fmu;
-};
-
-void log_message(const fmi2CallbackFunctions* cb, const char* instance, fmi2Status status, const char* category,
-                 const std::string& message) {
-  if (cb == nullptr || cb->logger == nullptr) return;
-  cb->logger(cb->componentEnvironment, instance, status, category, "%s", message.c_str());
-}
-
-/// Errors and fatal errors are always logged (a failed call without its
-/// reason helps nobody); the other categories only when enabled.
-void emit(const Component& c, fmi2Status status, unsigned category, const std::string& message) {
-  const bool always = category == kLogStatusError || category == kLogStatusFatal;
-  if (!always && (c.categories & category) == 0) return;
-  log_message(&c.callbacks, c.name.c_str(), status, category_name(category), message);
-}
-
-/// "function: what", without repeating a "function: " that `what` already starts with.
-std::string with_function(const char* function, const std::string& what) {
-  const std::string prefix = std::string(function) + ": ";
-  return what.rfind(prefix, 0) == 0 ? what : prefix + what;
-}
-
-void log_error(const Component& c, fmi2Status status, const char* function, const std::string& what) {
-  emit(c, status, status == fmi2Fatal ? kLogStatusFatal : kLogStatusError, with_function(function, what));
-}
-
-/// A call that changed the state, for category logCalls.
-void log_call(const Component& c, const char* function, const std::string& what) {
-  if ((c.categories & kLogCalls) == 0) return;
-  emit(c, fmi2OK, kLogCalls, with_function(function, what));
-}
+/// fmi2Status has the numbers of twin::fmu::Status (fmi2Pending is never returned).
+fmi2Status status(twin::fmu::Status s) { return static_cast<fmi2Status>(s); }
 
 template <class F>
-fmi2Status guarded(fmi2Component handle, const char* function, F&& f) noexcept {
-  auto* c = static_cast<Component*>(handle);
-  if (c == nullptr) return fmi2Error;
-  try {
-    fmi2Status status = f(*c);
-    for (const std::string& w : c->fmu->take_warnings()) {
-      emit(*c, fmi2Warning, kLogStatusWarning, with_function(function, w));
-      if (status == fmi2OK) status = fmi2Warning;
-    }
-    return status;
-  } catch (const twin::fmu::Discard& e) {
-    c->fmu->take_warnings();
-    emit(*c, fmi2Discard, kLogStatusDiscard, with_function(function, e.what()));
-    return fmi2Discard;
-  } catch (const twin::InternalError& e) {
-    c->fmu->fail();
-    log_error(*c, fmi2Fatal, function, e.what());
-    return fmi2Fatal;
-  } catch (const std::exception& e) {
-    c->fmu->fail();
-    log_error(*c, fmi2Error, function, e.what());
-    return fmi2Error;
-  } catch (...) {
-    c->fmu->fail();
-    log_error(*c, fmi2Fatal, function, "unknown exception");
-    return fmi2Fatal;
-  }
+fmi2Status guarded(fmi2Component c, const char* function, F&& f) noexcept {
+  return status(twin::fmu::guarded(static_cast<Instance*>(c), function, [&](Instance& inst) {
+    return static_cast<twin::fmu::Status>(f(inst));
+  }));
 }
 
 /// "file:///a/b/resources", "file:/a/b/resources/", "file://localhost/a/b" -> "/a/b/...".
@@ -138,41 +53,20 @@ std::string path_from_uri(const std::string& uri) {
   return out;
 }
 
-std::string read_text(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw twin::IoError("cannot read " + path);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 template <class T, class Get>
 fmi2Status get_values(fmi2Component c, const char* function, const fmi2ValueReference vr[], size_t nvr, T value[],
                       Get get) {
-  return guarded(c, function, [&](Component& comp) {
-    comp.fmu->require({FmuMode::kInitialization, FmuMode::kStepMode, FmuMode::kTerminated, FmuMode::kError});
-    if (nvr > 0 && (vr == nullptr || value == nullptr)) throw twin::ConfigError("null array");
-    for (size_t i = 0; i < nvr; ++i) value[i] = get(*comp.fmu, vr[i]);
+  return guarded(c, function, [&](Instance& inst) {
+    twin::fmu::get_values(inst, vr, nvr, value, get);
     return fmi2OK;
   });
 }
 
-std::string value_text(double v) { return fmt::format("{}", v); }
-std::string value_text(int v) { return std::to_string(v); }
-
 template <class T, class Set>
 fmi2Status set_values(fmi2Component c, const char* function, const fmi2ValueReference vr[], size_t nvr, const T value[],
                       Set set) {
-  return guarded(c, function, [&](Component& comp) {
-    comp.fmu->require({FmuMode::kInstantiated, FmuMode::kInitialization, FmuMode::kStepMode});
-    if (nvr > 0 && (vr == nullptr || value == nullptr)) throw twin::ConfigError("null array");
-    for (size_t i = 0; i < nvr; ++i) set(*comp.fmu, vr[i], value[i]);
-    if ((comp.categories & kLogCalls) != 0 && nvr > 0) {
-      std::string what;
-      for (size_t i = 0; i < nvr; ++i)
-        what += fmt::format("{}{} = {}", i > 0 ? ", " : "", comp.fmu->variables()[vr[i]].name, value_text(value[i]));
-      log_call(comp, function, what);
-    }
+  return guarded(c, function, [&](Instance& inst) {
+    twin::fmu::set_values(inst, function, vr, nvr, value, set);
     return fmi2OK;
   });
 }
@@ -180,8 +74,8 @@ fmi2Status set_values(fmi2Component c, const char* function, const fmi2ValueRefe
 /// An optional function the FMU does not provide: fmi2Error and a log line,
 /// the instance stays usable.
 fmi2Status unsupported(fmi2Component c, const char* function, const char* why) noexcept {
-  auto* comp = static_cast<Component*>(c);
-  if (comp != nullptr) log_error(*comp, fmi2Error, function, std::string("not supported: ") + why);
+  auto* inst = static_cast<Instance*>(c);
+  if (inst != nullptr) inst->log_error(twin::fmu::Status::kError, function, std::string("not supported: ") + why);
   return fmi2Error;
 }
 
@@ -198,19 +92,18 @@ const char* status_kind_name(fmi2StatusKind s) {
 /// fmi2Get*Status for a kind the FMU does not provide: fmi2Discard (FMI
 /// 2.0.2, section 4.2.3), logged in logStatusDiscard; nothing changes.
 fmi2Status status_not_provided(fmi2Component c, const char* function, fmi2StatusKind s, const char* provided) {
-  return guarded(c, function, [&](Component&) -> fmi2Status {
+  return guarded(c, function, [&](Instance&) -> fmi2Status {
     throw twin::fmu::Discard(fmt::format("{} is not provided ({})", status_kind_name(s), provided));
   });
 }
 
-const SavedState& saved_state(fmi2FMUstate state) {
-  if (state == nullptr) throw twin::ConfigError("FMUstate is null");
-  const auto* s = static_cast<const SavedState*>(state);
-  if (s->magic != twin::fmu::kStateMagic) throw twin::ConfigError("FMUstate was not made by this FMU");
-  return *s;
-}
-
 std::string time_text(double t) { return fmt::format("{:.17g}", t); }
+
+/// Logs an instantiation failure through the master's logger (no instance yet).
+void log_instantiate_error(const fmi2CallbackFunctions* cb, const char* name, const std::string& message) {
+  if (cb == nullptr || cb->logger == nullptr) return;
+  cb->logger(cb->componentEnvironment, name, fmi2Error, "logStatusError", "%s", message.c_str());
+}
 
 }  // namespace
 
@@ -221,28 +114,10 @@ const char* fmi2GetVersion(void) { return "2.0"; }
 
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
                                const fmi2String categories[]) {
-  return guarded(c, "fmi2SetDebugLogging", [&](Component& comp) {
+  return guarded(c, "fmi2SetDebugLogging", [&](Instance& inst) {
     const bool on = loggingOn != fmi2False;
-    unsigned bits = 0;
-    if (nCategories == 0) {
-      bits = kAllCategories;
-    } else {
-      if (categories == nullptr) throw twin::ConfigError(fmt::format("nCategories = {} with a null array", nCategories));
-      for (size_t i = 0; i < nCategories; ++i) {
-        const char* name = categories[i];
-        unsigned bit = 0;
-        for (const auto& cat : kCategories)
-          if (name != nullptr && std::strcmp(name, cat.name) == 0) bit = cat.bit;
-        if (bit == 0)
-          throw twin::ConfigError(fmt::format(
-              "category '{}' is not one of the FMU's (logCalls, logStatusWarning, logStatusDiscard, logStatusError, "
-              "logStatusFatal)",
-              name != nullptr ? name : "(null)"));
-        bits |= bit;
-      }
-    }
-    comp.categories = on ? (comp.categories | bits) : (comp.categories & ~bits);
-    log_call(comp, "fmi2SetDebugLogging", fmt::format("loggingOn = {}, {} categories", on, nCategories));
+    inst.set_logging(on, twin::fmu::category_bits(nCategories, categories));
+    inst.log_call("fmi2SetDebugLogging", fmt::format("loggingOn = {}, {} categories", on, nCategories));
     return fmi2OK;
   });
 }
@@ -258,88 +133,86 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                               " is not fmi2CoSimulation (the FMU is Co-Simulation only)");
     if (fmuGUID == nullptr) throw twin::ConfigError("fmuGUID is null");
     if (fmuResourceLocation == nullptr) throw twin::ConfigError("fmuResourceLocation is null");
-    const std::string model_path = path_from_uri(fmuResourceLocation) + "/model.json";
-    twin::fmu::FmuModel model = twin::fmu::model_from_json(read_text(model_path), model_path);
-    std::string guid = twin::fmu::model_guid(model);
-    if (guid != fmuGUID)
-      throw twin::ConfigError("GUID " + std::string(fmuGUID) + " does not match this FMU's " + guid +
-                              " (modelDescription.xml and binary or resources/model.json differ)");
-    auto comp = std::make_unique<Component>();
-    comp->name = name;
-    if (functions != nullptr) comp->callbacks = *functions;
-    comp->categories = loggingOn != fmi2False ? kAllCategories : 0u;
-    comp->fmu = std::make_unique<FmuInstance>(name, std::move(model), std::move(guid));
-    log_call(*comp, "fmi2Instantiate",
-             fmt::format("scenario {}, GUID {}, resources {}", comp->fmu->model().scenario_name, comp->fmu->guid(),
-                         fmuResourceLocation));
-    return comp.release();
+    auto slave = twin::fmu::make_slave(path_from_uri(fmuResourceLocation), fmuGUID, "GUID", &twin::fmu::model_guid);
+    twin::fmu::LogSink sink;
+    if (functions != nullptr && functions->logger != nullptr)
+      sink = [cb = *functions, instance = std::string(name)](twin::fmu::Status s, const char* category,
+                                                             const std::string& message) {
+        cb.logger(cb.componentEnvironment, instance.c_str(), status(s), category, "%s", message.c_str());
+      };
+    auto inst = std::make_unique<Instance>(name, std::move(sink), loggingOn != fmi2False, std::move(slave));
+    inst->log_call("fmi2Instantiate", fmt::format("scenario {}, GUID {}, resources {}",
+                                                  inst->slave().model().scenario_name, inst->slave().identity(),
+                                                  fmuResourceLocation));
+    return inst.release();
   } catch (const std::exception& e) {
-    log_message(functions, name, fmi2Error, "logStatusError", with_function("fmi2Instantiate", e.what()));
+    log_instantiate_error(functions, name, with_function("fmi2Instantiate", e.what()));
   } catch (...) {
-    log_message(functions, name, fmi2Error, "logStatusError", "fmi2Instantiate: unknown exception");
+    log_instantiate_error(functions, name, "fmi2Instantiate: unknown exception");
   }
   return nullptr;
 }
 
-void fmi2FreeInstance(fmi2Component c) { delete static_cast<Component*>(c); }
+void fmi2FreeInstance(fmi2Component c) { delete static_cast<Instance*>(c); }
 
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean, fmi2Real, fmi2Real startTime, fmi2Boolean stopTimeDefined,
                                fmi2Real stopTime) {
-  return guarded(c, "fmi2SetupExperiment", [&](Component& comp) {
-    comp.fmu->setup_experiment(startTime, stopTimeDefined != fmi2False, stopTime);
-    log_call(comp, "fmi2SetupExperiment",
-             fmt::format("startTime = {} s, {}", time_text(startTime),
-                         stopTimeDefined != fmi2False ? "stopTime = " + time_text(stopTime) + " s" : "no stop time"));
+  return guarded(c, "fmi2SetupExperiment", [&](Instance& inst) {
+    const bool stop_defined = stopTimeDefined != fmi2False;
+    inst.set_experiment(startTime, stop_defined ? std::optional<double>(stopTime) : std::nullopt);
+    inst.log_call("fmi2SetupExperiment",
+                  fmt::format("startTime = {} s, {}", time_text(startTime),
+                              stop_defined ? "stopTime = " + time_text(stopTime) + " s" : "no stop time"));
     return fmi2OK;
   });
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
-  return guarded(c, "fmi2EnterInitializationMode", [&](Component& comp) {
-    comp.fmu->enter_initialization();
-    log_call(comp, "fmi2EnterInitializationMode", "initialization mode");
+  return guarded(c, "fmi2EnterInitializationMode", [&](Instance& inst) {
+    inst.enter_initialization();
+    inst.log_call("fmi2EnterInitializationMode", "initialization mode");
     return fmi2OK;
   });
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
-  return guarded(c, "fmi2ExitInitializationMode", [&](Component& comp) {
-    comp.fmu->exit_initialization();
-    log_call(comp, "fmi2ExitInitializationMode", "step mode");
+  return guarded(c, "fmi2ExitInitializationMode", [&](Instance& inst) {
+    inst.exit_initialization();
+    inst.log_call("fmi2ExitInitializationMode", "step mode");
     return fmi2OK;
   });
 }
 
 fmi2Status fmi2Terminate(fmi2Component c) {
-  return guarded(c, "fmi2Terminate", [&](Component& comp) {
-    comp.fmu->terminate();
-    log_call(comp, "fmi2Terminate", fmt::format("terminated at t = {} s", time_text(comp.fmu->time_s())));
+  return guarded(c, "fmi2Terminate", [&](Instance& inst) {
+    inst.terminate();
+    inst.log_call("fmi2Terminate", fmt::format("terminated at t = {} s", time_text(inst.slave().time_s())));
     return fmi2OK;
   });
 }
 
 fmi2Status fmi2Reset(fmi2Component c) {
-  return guarded(c, "fmi2Reset", [&](Component& comp) {
-    comp.fmu->reset();
-    log_call(comp, "fmi2Reset", "instantiated");
+  return guarded(c, "fmi2Reset", [&](Instance& inst) {
+    inst.reset();
+    inst.log_call("fmi2Reset", "instantiated");
     return fmi2OK;
   });
 }
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
-  return get_values(c, "fmi2GetReal", vr, nvr, value, [](FmuInstance& f, fmi2ValueReference r) { return f.get_real(r); });
+  return get_values(c, "fmi2GetReal", vr, nvr, value, [](const Slave& f, fmi2ValueReference r) { return f.get_real(r); });
 }
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
   return get_values(c, "fmi2GetInteger", vr, nvr, value,
-                    [](FmuInstance& f, fmi2ValueReference r) { return f.get_integer(r); });
+                    [](const Slave& f, fmi2ValueReference r) { return f.get_integer(r); });
 }
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
-  return get_values(c, "fmi2GetBoolean", vr, nvr, value, [](FmuInstance& f, fmi2ValueReference r) {
+  return get_values(c, "fmi2GetBoolean", vr, nvr, value, [](const Slave& f, fmi2ValueReference r) {
     return f.get_boolean(r) ? fmi2True : fmi2False;
   });
 }
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
-  return get_values(c, "fmi2GetString", vr, nvr, value, [](FmuInstance& f, fmi2ValueReference r) -> fmi2String {
+  return get_values(c, "fmi2GetString", vr, nvr, value, [](const Slave& f, fmi2ValueReference r) -> fmi2String {
     throw twin::ConfigError("unknown valueReference " + std::to_string(r) + " (the FMU has no String variables; " +
                             std::to_string(f.variables().size()) + " variables)");
   });
@@ -347,88 +220,67 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
   return set_values(c, "fmi2SetReal", vr, nvr, value,
-                    [](FmuInstance& f, fmi2ValueReference r, fmi2Real v) { f.set_real(r, v); });
+                    [](Slave& f, fmi2ValueReference r, fmi2Real v) { f.set_real(r, v); });
 }
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
   return set_values(c, "fmi2SetInteger", vr, nvr, value,
-                    [](FmuInstance& f, fmi2ValueReference r, fmi2Integer v) { f.set_integer(r, v); });
+                    [](Slave& f, fmi2ValueReference r, fmi2Integer v) { f.set_integer(r, v); });
 }
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
   return set_values(c, "fmi2SetBoolean", vr, nvr, value,
-                    [](FmuInstance& f, fmi2ValueReference r, fmi2Boolean v) { f.set_boolean(r, v != fmi2False); });
+                    [](Slave& f, fmi2ValueReference r, fmi2Boolean v) { f.set_boolean(r, v != fmi2False); });
 }
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
-  return guarded(c, "fmi2SetString", [&](Component& comp) -> fmi2Status {
-    comp.fmu->require({FmuMode::kInstantiated, FmuMode::kInitialization, FmuMode::kStepMode});
+  return guarded(c, "fmi2SetString", [&](Instance& inst) -> fmi2Status {
+    inst.require_set();
     if (nvr > 0 && (vr == nullptr || value == nullptr)) throw twin::ConfigError("null array");
     if (nvr == 0) return fmi2OK;
     throw twin::ConfigError("unknown valueReference " + std::to_string(vr[0]) +
-                            " (the FMU has no String variables; " + std::to_string(comp.fmu->variables().size()) +
+                            " (the FMU has no String variables; " + std::to_string(inst.slave().variables().size()) +
                             " variables)");
   });
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state) {
-  return guarded(c, "fmi2GetFMUstate", [&](Component& comp) {
-    if (state == nullptr) throw twin::ConfigError("FMUstate pointer is null");
-    auto saved = std::make_unique<SavedState>(comp.fmu->save());
-    if (*state != nullptr) {
-      saved_state(*state);  // refuse to overwrite what is not ours
-      delete static_cast<SavedState*>(*state);
-    }
-    *state = saved.release();
+  return guarded(c, "fmi2GetFMUstate", [&](Instance& inst) {
+    twin::fmu::get_state(inst, state);
     return fmi2OK;
   });
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
-  return guarded(c, "fmi2SetFMUstate", [&](Component& comp) {
-    comp.fmu->restore(saved_state(state));
-    log_call(comp, "fmi2SetFMUstate", fmt::format("restored t = {} s", time_text(comp.fmu->time_s())));
+  return guarded(c, "fmi2SetFMUstate", [&](Instance& inst) {
+    twin::fmu::set_state(inst, state);
+    inst.log_call("fmi2SetFMUstate", fmt::format("restored t = {} s", time_text(inst.slave().time_s())));
     return fmi2OK;
   });
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state) {
-  return guarded(c, "fmi2FreeFMUstate", [&](Component&) {
-    if (state != nullptr && *state != nullptr) {
-      saved_state(*state);
-      delete static_cast<SavedState*>(*state);
-      *state = nullptr;
-    }
+  return guarded(c, "fmi2FreeFMUstate", [&](Instance&) {
+    twin::fmu::free_state(state);
     return fmi2OK;
   });
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t* size) {
-  return guarded(c, "fmi2SerializedFMUstateSize", [&](Component&) {
+  return guarded(c, "fmi2SerializedFMUstateSize", [&](Instance&) {
     if (size == nullptr) throw twin::ConfigError("size pointer is null");
-    *size = twin::fmu::serialize_state(saved_state(state)).size();
+    *size = twin::fmu::serialized_state_size(state);
     return fmi2OK;
   });
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
-  return guarded(c, "fmi2SerializeFMUstate", [&](Component&) {
-    if (bytes == nullptr) throw twin::ConfigError("byte array is null");
-    const std::vector<char> b = twin::fmu::serialize_state(saved_state(state));
-    if (b.size() != size)
-      throw twin::ConfigError("buffer of " + std::to_string(size) + " bytes, the state has " + std::to_string(b.size()));
-    std::memcpy(bytes, b.data(), b.size());
+  return guarded(c, "fmi2SerializeFMUstate", [&](Instance&) {
+    twin::fmu::serialize_state(state, bytes, size);
     return fmi2OK;
   });
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate* state) {
-  return guarded(c, "fmi2DeSerializeFMUstate", [&](Component& comp) {
-    if (bytes == nullptr || state == nullptr) throw twin::ConfigError("null argument");
-    auto s = std::make_unique<SavedState>(twin::fmu::deserialize_state(bytes, size));
-    comp.fmu->check_state(*s);
-    if (*state != nullptr) {
-      saved_state(*state);
-      delete static_cast<SavedState*>(*state);
-    }
-    *state = s.release();
+  return guarded(c, "fmi2DeSerializeFMUstate", [&](Instance& inst) {
+    twin::fmu::deserialize_state(inst, bytes, size, state);
     return fmi2OK;
   });
 }
@@ -450,11 +302,11 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean) {
-  return guarded(c, "fmi2DoStep", [&](Component& comp) {
-    const std::int64_t n = comp.fmu->do_step(currentCommunicationPoint, communicationStepSize);
-    log_call(comp, "fmi2DoStep",
-             fmt::format("t = {} s, h = {} s: {} ticks run, {} in all", time_text(currentCommunicationPoint),
-                         time_text(communicationStepSize), n, comp.fmu->ticks()));
+  return guarded(c, "fmi2DoStep", [&](Instance& inst) {
+    const std::int64_t n = inst.do_step(currentCommunicationPoint, communicationStepSize);
+    inst.log_call("fmi2DoStep",
+                  fmt::format("t = {} s, h = {} s: {} ticks run, {} in all", time_text(currentCommunicationPoint),
+                              time_text(communicationStepSize), n, inst.slave().ticks()));
     return fmi2OK;
   });
 }
@@ -469,9 +321,9 @@ fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status*) {
 
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real* value) {
   if (s != fmi2LastSuccessfulTime) return status_not_provided(c, "fmi2GetRealStatus", s, "only fmi2LastSuccessfulTime is");
-  return guarded(c, "fmi2GetRealStatus", [&](Component& comp) {
+  return guarded(c, "fmi2GetRealStatus", [&](Instance& inst) {
     if (value == nullptr) throw twin::ConfigError("value pointer is null");
-    *value = comp.fmu->time_s();
+    *value = inst.slave().time_s();
     return fmi2OK;
   });
 }
@@ -482,7 +334,7 @@ fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Int
 
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean* value) {
   if (s != fmi2Terminated) return status_not_provided(c, "fmi2GetBooleanStatus", s, "only fmi2Terminated is");
-  return guarded(c, "fmi2GetBooleanStatus", [&](Component&) {
+  return guarded(c, "fmi2GetBooleanStatus", [&](Instance&) {
     if (value == nullptr) throw twin::ConfigError("value pointer is null");
     *value = fmi2False;
     return fmi2OK;

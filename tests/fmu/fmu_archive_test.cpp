@@ -25,43 +25,6 @@
 namespace twin::fmu_test {
 namespace {
 
-std::string export_error(const std::string& fmu) {
-  std::ifstream e(fmu + ".error");
-  if (!e) return {};
-  std::stringstream s;
-  s << e.rdbuf();
-  return s.str();
-}
-
-#define REQUIRE_EXPORTED(path)                                                 \
-  do {                                                                         \
-    const std::string err = export_error(path);                                \
-    ASSERT_TRUE(err.empty()) << err;                                           \
-    ASSERT_TRUE(std::filesystem::exists(path)) << path << " was not exported"; \
-  } while (false)
-
-/// Runs a shell command; returns its exit status and fills `out` (stdout+stderr).
-int run(const std::string& cmd, std::string& out) {
-  out.clear();
-  std::FILE* p = ::popen((cmd + " 2>&1").c_str(), "r");
-  if (p == nullptr) return -1;
-  std::array<char, 4096> buf{};
-  while (std::fgets(buf.data(), buf.size(), p) != nullptr) out += buf.data();
-  const int rc = ::pclose(p);
-  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-}
-
-/// The command that runs python3 on an FMU. In the sanitizer build the FMU
-/// takes its sanitizer runtime from the host, so python3 gets the shared one
-/// preloaded (python's own allocations are not the project's: no leak check).
-std::string python3() {
-#ifdef TWIN_SANITIZER_RUNTIME
-  return "LD_PRELOAD=" TWIN_SANITIZER_RUNTIME " ASAN_OPTIONS=detect_leaks=0 python3 ";
-#else
-  return "python3 ";
-#endif
-}
-
 class FmuArchive : public ::testing::TestWithParam<const char*> {
  protected:
   void SetUp() override {
@@ -81,9 +44,8 @@ TEST_P(FmuArchive, LayoutHasDescriptionBinaryAndResources) {
 
 TEST_P(FmuArchive, ModelDescriptionValidatesAgainstTheFmi2Schema) {
   std::string out;
-  const int rc = run("xmllint --noout --nonet --schema " TWIN_SHARED_DIR "/fmi/schema/fmi2/fmi2ModelDescription.xsd " +
-                         fmu_->dir() + "/modelDescription.xml",
-                     out);
+  const int rc = validate_with_xsd(TWIN_SHARED_DIR "/fmi/schema/fmi2/fmi2ModelDescription.xsd",
+                                   fmu_->dir() + "/modelDescription.xml", out);
   EXPECT_EQ(rc, 0) << out;
 }
 

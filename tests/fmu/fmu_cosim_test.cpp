@@ -33,21 +33,6 @@
 namespace twin::fmu_test {
 namespace {
 
-std::string export_error(const std::string& fmu) {
-  std::ifstream e(fmu + ".error");
-  if (!e) return {};
-  std::stringstream s;
-  s << e.rdbuf();
-  return s.str();
-}
-
-#define REQUIRE_EXPORTED(path)                                                 \
-  do {                                                                         \
-    const std::string err = export_error(path);                                \
-    ASSERT_TRUE(err.empty()) << err;                                           \
-    ASSERT_TRUE(std::filesystem::exists(path)) << path << " was not exported"; \
-  } while (false)
-
 /// Ticks a step ending at t_end (from 0) has run: those starting before
 /// t_end, a start within 1e-9 of t_end counting as t_end.
 std::int64_t ticks_before(double t_end, double Ts) {

@@ -36,21 +36,6 @@
 namespace twin::fmu_test {
 namespace {
 
-std::string export_error(const std::string& fmu) {
-  std::ifstream e(fmu + ".error");
-  if (!e) return {};
-  std::stringstream s;
-  s << e.rdbuf();
-  return s.str();
-}
-
-#define REQUIRE_EXPORTED(path)                                                     \
-  do {                                                                             \
-    const std::string err = export_error(path);                                    \
-    ASSERT_TRUE(err.empty()) << err;                                               \
-    ASSERT_TRUE(std::filesystem::exists(path)) << path << " was not exported";     \
-  } while (false)
-
 /// Output name -> the Snapshot field it must equal, written out here
 /// independently of fmu/variables.cpp.
 std::map<std::string, std::function<double(const sim::Snapshot&)>> expected_outputs(const std::vector<Axis>& axes) {

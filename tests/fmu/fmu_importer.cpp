@@ -3,6 +3,9 @@
 #include <dlfcn.h>
 #include <zip.h>
 
+#include <sys/wait.h>
+
+#include <array>
 #include <cstdarg>
 #include <cstdio>
 #include <cstdlib>
@@ -14,13 +17,6 @@
 
 namespace twin::fmu_test {
 namespace {
-
-std::string attr(const std::string& element, const std::string& name) {
-  const std::regex re("\\s" + name + "=\"([^\"]*)\"");
-  std::smatch m;
-  if (std::regex_search(element, m, re)) return m[1];
-  return {};
-}
 
 void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status, fmi2String category,
             fmi2String message, ...) {
@@ -35,6 +31,51 @@ void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status
 }
 
 }  // namespace
+
+std::string xml_attribute(const std::string& element, const std::string& name) {
+  const std::regex re("\\s" + name + "=\"([^\"]*)\"");
+  std::smatch m;
+  if (std::regex_search(element, m, re)) return m[1];
+  return {};
+}
+
+std::string default_experiment_attribute(const std::string& xml, const std::string& name) {
+  const std::regex de("<DefaultExperiment[^>]*>");
+  std::smatch m;
+  if (!std::regex_search(xml, m, de)) return {};
+  return xml_attribute(m[0], name);
+}
+
+std::string read_text_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+std::string export_error(const std::string& fmu) { return read_text_file(fmu + ".error"); }
+
+int run(const std::string& cmd, std::string& out) {
+  out.clear();
+  std::FILE* p = ::popen((cmd + " 2>&1").c_str(), "r");
+  if (p == nullptr) return -1;
+  std::array<char, 4096> buf{};
+  while (std::fgets(buf.data(), buf.size(), p) != nullptr) out += buf.data();
+  const int rc = ::pclose(p);
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+int validate_with_xsd(const std::string& xsd, const std::string& xml_file, std::string& out) {
+  return run("xmllint --noout --nonet --schema " + xsd + " " + xml_file, out);
+}
+
+std::string python3() {
+#ifdef TWIN_SANITIZER_RUNTIME
+  return "LD_PRELOAD=" TWIN_SANITIZER_RUNTIME " ASAN_OPTIONS=detect_leaks=0 python3 ";
+#else
+  return "python3 ";
+#endif
+}
 
 std::string extract_fmu(const std::string& fmu) {
   int err = 0;
@@ -61,30 +102,27 @@ std::string extract_fmu(const std::string& fmu) {
 
 LoadedFmu::LoadedFmu(const std::string& fmu_path) {
   dir_ = extract_fmu(fmu_path);
-  std::ifstream in(dir_ + "/modelDescription.xml");
-  std::stringstream s;
-  s << in.rdbuf();
-  xml_ = s.str();
+  xml_ = read_text_file(dir_ + "/modelDescription.xml");
   const std::regex root("<fmiModelDescription[^>]*>");
   std::smatch m;
   if (!std::regex_search(xml_, m, root)) throw std::runtime_error("no fmiModelDescription element");
-  guid_ = attr(m[0], "guid");
+  guid_ = xml_attribute(m[0], "guid");
   const std::regex cs("<CoSimulation[^>]*>");
   if (!std::regex_search(xml_, m, cs)) throw std::runtime_error("no CoSimulation element");
-  model_identifier_ = attr(m[0], "modelIdentifier");
+  model_identifier_ = xml_attribute(m[0], "modelIdentifier");
   const std::regex var("<ScalarVariable([^>]*)>\\s*<(Real|Integer|Boolean|String)([^>]*)/>");
   for (auto it = std::sregex_iterator(xml_.begin(), xml_.end(), var); it != std::sregex_iterator(); ++it) {
     VarInfo v;
     const std::string a = (*it)[1];
     const std::string t = (*it)[3];
-    v.name = attr(a, "name");
-    v.vr = static_cast<unsigned>(std::stoul(attr(a, "valueReference")));
-    v.causality = attr(a, "causality");
-    v.variability = attr(a, "variability");
-    v.initial = attr(a, "initial");
+    v.name = xml_attribute(a, "name");
+    v.vr = static_cast<unsigned>(std::stoul(xml_attribute(a, "valueReference")));
+    v.causality = xml_attribute(a, "causality");
+    v.variability = xml_attribute(a, "variability");
+    v.initial = xml_attribute(a, "initial");
     v.type = (*it)[2];
-    v.unit = attr(t, "unit");
-    v.start = attr(t, "start");
+    v.unit = xml_attribute(t, "unit");
+    v.start = xml_attribute(t, "start");
     by_name_[v.name] = vars_.size();
     vars_.push_back(v);
   }
@@ -124,10 +162,7 @@ const VarInfo& LoadedFmu::var(const std::string& name) const {
 }
 
 std::string LoadedFmu::default_experiment(const std::string& attribute) const {
-  const std::regex de("<DefaultExperiment[^>]*>");
-  std::smatch m;
-  if (!std::regex_search(xml_, m, de)) return {};
-  return attr(m[0], attribute);
+  return default_experiment_attribute(xml_, attribute);
 }
 
 fmi2Component LoadedFmu::instantiate(const std::string& name, const char* guid, bool logging_on,

@@ -3,6 +3,7 @@
 // reads modelDescription.xml with regular expressions (independent of the
 // generator in fmu/), dlopens the binary with RTLD_NOW and resolves every
 // fmi2 function, as a system-level master would.
+#include <filesystem>
 #include <map>
 #include <memory>
 #include <string>
@@ -25,6 +26,37 @@ struct VarInfo {
 
 /// Unzips `fmu` into a fresh folder and returns it.
 std::string extract_fmu(const std::string& fmu);
+
+/// What `twin export-fmu` said when it failed to write `fmu` at build time
+/// (tests/fmu/export_fmu.cmake leaves it in FMU.error); empty when it worked.
+std::string export_error(const std::string& fmu);
+
+/// Fails the test (with the export's message) unless `path` was exported.
+#define REQUIRE_EXPORTED(path)                                                 \
+  do {                                                                         \
+    const std::string err = ::twin::fmu_test::export_error(path);              \
+    ASSERT_TRUE(err.empty()) << err;                                           \
+    ASSERT_TRUE(std::filesystem::exists(path)) << path << " was not exported"; \
+  } while (false)
+
+/// Runs a shell command; returns its exit status and fills `out` (stdout+stderr).
+int run(const std::string& cmd, std::string& out);
+
+/// Validates `xml_file` with xmllint against `xsd` (a path); returns the exit
+/// status (0: valid) and fills `out` with what xmllint said.
+int validate_with_xsd(const std::string& xsd, const std::string& xml_file, std::string& out);
+
+/// The command that runs python3 on an FMU. In the sanitizer build the FMU
+/// takes its sanitizer runtime from the host, so python3 gets the shared one
+/// preloaded (python's own allocations are not the project's: no leak check).
+std::string python3();
+
+/// The value of attribute `name` in the text of one XML element ("" if absent).
+std::string xml_attribute(const std::string& element, const std::string& name);
+/// Attribute `name` of the DefaultExperiment element of `xml` ("" if absent).
+std::string default_experiment_attribute(const std::string& xml, const std::string& name);
+/// The text of a file ("" when it cannot be read).
+std::string read_text_file(const std::string& path);
 
 struct Fmi2Functions {
 #define TWIN_FMI2_FN(name) decltype(&::name) name{nullptr};

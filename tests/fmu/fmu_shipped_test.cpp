@@ -24,27 +24,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-/// Runs a shell command; returns its exit status and fills `out` (stdout+stderr).
-int run(const std::string& cmd, std::string& out) {
-  out.clear();
-  std::FILE* p = ::popen((cmd + " 2>&1").c_str(), "r");
-  if (p == nullptr) return -1;
-  std::array<char, 4096> buf{};
-  while (std::fgets(buf.data(), buf.size(), p) != nullptr) out += buf.data();
-  const int rc = ::pclose(p);
-  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-}
-
-/// python3 as the FMU needs it (the sanitizer build preloads the sanitizers'
-/// runtime: see tests/fmu/CMakeLists.txt).
-std::string python3() {
-#ifdef TWIN_SANITIZER_RUNTIME
-  return "LD_PRELOAD=" TWIN_SANITIZER_RUNTIME " ASAN_OPTIONS=detect_leaks=0 python3 ";
-#else
-  return "python3 ";
-#endif
-}
-
 std::vector<std::string> shipped_scenarios() {
   std::vector<std::string> names;
   for (const auto& e : fs::directory_iterator(fs::path(TWIN_SOURCE_DIR) / "scenarios"))
