@@ -298,10 +298,15 @@ AirNoise air_noise(const ForceRun& run, int na, std::size_t n_first) {
   return out;
 }
 
-/// The cut's first sample (the first beyond 8 sigma of the air's noise followed
-/// within a revolution (`look` samples) by at least a quarter more) and the sample
-/// after its last one.
-std::pair<std::size_t, std::size_t> find_cut(const ForceRun& run, int na, const AirNoise& air, std::size_t look) {
+/// Where the cut is in a run's samples.
+struct CutSpan {
+  std::size_t entry{0};  ///< its first sample
+  std::size_t exit{0};   ///< the sample after its last one
+};
+
+/// The cut: from the first sample beyond 8 sigma of the air's noise followed within a
+/// revolution (`look` samples) by at least a quarter more, to the last beyond it.
+CutSpan find_cut(const ForceRun& run, int na, const AirNoise& air, std::size_t look) {
   const std::size_t n = run.t_s.size();
   auto dev = [&](std::size_t k) {
     double s = 0.0;
@@ -328,7 +333,7 @@ std::pair<std::size_t, std::size_t> find_cut(const ForceRun& run, int na, const 
       exit = k + 1;
       break;
     }
-  return {entry, exit};
+  return CutSpan{entry, exit};
 }
 
 /// Mean force and time of the air before the cut (up to 5 samples before its entry)
@@ -420,7 +425,8 @@ Prep prepare(const ForceRun& run, std::vector<std::string>& notes) {
   // Air: baseline and noise from the first samples.
   const std::size_t n_first = std::clamp<std::size_t>(static_cast<std::size_t>(0.5 * spr), 20, std::max<std::size_t>(20, n / 10));
   const AirNoise air = air_noise(run, force_axes(p), n_first);
-  const auto [entry, exit] = find_cut(run, force_axes(p), air, static_cast<std::size_t>(std::ceil(spr)));
+  const CutSpan cut_span = find_cut(run, force_axes(p), air, static_cast<std::size_t>(std::ceil(spr)));
+  const std::size_t entry = cut_span.entry, exit = cut_span.exit;
   const double guard_s = std::max(0.25 * (1.0 / p.f_rev_hz), 0.005);
   p.zero.t_entry_s = run.t_s[entry];
   p.zero.t_exit_s = exit < n ? run.t_s[exit] : run.t_s.back();
