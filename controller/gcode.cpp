@@ -183,69 +183,75 @@ class Parser {
 
   double spindle_rpm() const { return spindle_dir_ * spindle_speed_rpm_; }
 
-  void parse_line(std::string_view raw, Program& program) {
-    std::string s = clean(raw);
-    if (s.empty()) return;
-    if (s.front() == '%') return;
-    const LineWords w = split_words(s);
+  /// What a line's G codes ask of it beyond the modal state they set.
+  struct LineModes {
+    std::optional<MotionKind> motion;
+    bool dwell{false};
+    bool set_g64{false};
+  };
+
+  /// Refuses words of a letter the twin does not know.
+  void check_letters(const LineWords& w) const {
     static constexpr std::string_view kSupportedLetters = "FIJKNPRSTXYZ";
     for (std::size_t idx = 0; idx < 26; ++idx) {
       if (!w.by_letter[idx].has_value()) continue;
       if (kSupportedLetters.find(static_cast<char>('A' + idx)) == std::string_view::npos)
         fail("unsupported word", w.text_by_letter[idx]);
     }
+  }
 
-    std::optional<MotionKind> motion_this_line;
-    bool dwell = false;
-    bool set_g64 = false;
-    for (double g : w.g) {
-      const std::string word = fmt::format("G{}", g);
-      if (!(std::abs(g) < kMaxCode)) fail("unknown G code", word);
-      const double gr = std::round(g * 10.0) / 10.0;
-      if (std::abs(g - gr) > 1e-9) fail("unknown G code", word);
-      const int code10 = static_cast<int>(std::lround(gr * 10.0));
-      auto set_motion = [&](MotionKind k) {
-        if (motion_this_line || dwell) fail("two motion codes on one line", word);
-        motion_this_line = k;
-      };
-      switch (code10) {
-        case 0: set_motion(MotionKind::kRapid); break;
-        case 10: set_motion(MotionKind::kLinear); break;
-        case 20: set_motion(MotionKind::kArcCw); break;
-        case 30: set_motion(MotionKind::kArcCcw); break;
-        case 40:
-          if (motion_this_line || dwell) fail("two motion codes on one line", word);
-          dwell = true;
-          break;
-        case 170: break;
-        case 180:
-        case 190: fail("only the XY plane (G17) is supported", word);
-        case 200: mm_per_unit_ = kMmPerInch; break;
-        case 210: mm_per_unit_ = 1.0; break;
-        case 900: incremental_ = false; break;
-        case 910: incremental_ = true; break;
-        case 610:  // exact path (LinuxCNC): no blending, tangent junctions pass
-          exact_path_ = true;
-          exact_stop_ = false;
-          break;
-        case 611:  // exact stop (LinuxCNC G61.1, Fanuc G61): stop after every block
-          exact_stop_ = true;
-          exact_path_ = false;
-          break;
-        case 640:
-          exact_stop_ = false;
-          exact_path_ = false;
-          set_g64 = true;
-          break;
-        case 400:  // cutter compensation off: it is never on
-        case 490:  // tool length offset cancel: none is applied
-        case 540:  // first work offset: identity in the twin
-        case 800:  // canned cycle cancel: none is supported
-        case 940:  // feed per minute: the only feed mode
-          break;
-        default: fail("unknown G code", word);
-      }
+  /// G code g (G0 ... G99.9): a motion or dwell of this line, or a modal setting.
+  void apply_g_code(double g, LineModes& line) {
+    const std::string word = fmt::format("G{}", g);
+    if (!(std::abs(g) < kMaxCode)) fail("unknown G code", word);
+    const double gr = std::round(g * 10.0) / 10.0;
+    if (std::abs(g - gr) > 1e-9) fail("unknown G code", word);
+    const int code10 = static_cast<int>(std::lround(gr * 10.0));
+    auto set_motion = [&](MotionKind k) {
+      if (line.motion || line.dwell) fail("two motion codes on one line", word);
+      line.motion = k;
+    };
+    switch (code10) {
+      case 0: set_motion(MotionKind::kRapid); break;
+      case 10: set_motion(MotionKind::kLinear); break;
+      case 20: set_motion(MotionKind::kArcCw); break;
+      case 30: set_motion(MotionKind::kArcCcw); break;
+      case 40:
+        if (line.motion || line.dwell) fail("two motion codes on one line", word);
+        line.dwell = true;
+        break;
+      case 170: break;
+      case 180:
+      case 190: fail("only the XY plane (G17) is supported", word);
+      case 200: mm_per_unit_ = kMmPerInch; break;
+      case 210: mm_per_unit_ = 1.0; break;
+      case 900: incremental_ = false; break;
+      case 910: incremental_ = true; break;
+      case 610:  // exact path (LinuxCNC): no blending, tangent junctions pass
+        exact_path_ = true;
+        exact_stop_ = false;
+        break;
+      case 611:  // exact stop (LinuxCNC G61.1, Fanuc G61): stop after every block
+        exact_stop_ = true;
+        exact_path_ = false;
+        break;
+      case 640:
+        exact_stop_ = false;
+        exact_path_ = false;
+        line.set_g64 = true;
+        break;
+      case 400:  // cutter compensation off: it is never on
+      case 490:  // tool length offset cancel: none is applied
+      case 540:  // first work offset: identity in the twin
+      case 800:  // canned cycle cancel: none is supported
+      case 940:  // feed per minute: the only feed mode
+        break;
+      default: fail("unknown G code", word);
     }
+  }
+
+  /// The line's M codes; true when one of them ends the program.
+  bool apply_m_codes(const LineWords& w) {
     bool program_end = false;
     for (double m : w.m) {
       const std::string word = fmt::format("M{}", m);
@@ -261,7 +267,11 @@ class Parser {
         default: fail("unknown M code", word);
       }
     }
+    return program_end;
+  }
 
+  /// F, N, T and S words.
+  void apply_values(const LineWords& w) {
     if (w.has('F')) {
       const double f = w.get('F');
       if (!(f > 0.0)) fail("feed must be > 0", w.text_by_letter['F' - 'A']);
@@ -281,26 +291,29 @@ class Parser {
         fail(fmt::format("spindle speed beyond {:.0f} rpm", kMaxSpindle_rpm), w.text_by_letter['S' - 'A']);
       spindle_speed_rpm_ = sp;
     }
+  }
+
+  /// P: a dwell's seconds (G4) or a blend tolerance (G64).
+  void apply_p(const LineWords& w, const LineModes& line) {
     if (w.has('P')) {
       const double p = w.get('P');
       const std::string& word = w.text_by_letter['P' - 'A'];
-      if (dwell) {
+      if (line.dwell) {
         if (p < 0.0) fail("dwell must be >= 0", word);
-      } else if (set_g64) {
+      } else if (line.set_g64) {
         if (p < 0.0) fail("blend tolerance must be >= 0", word);
         blend_tolerance_mm_ = p * mm_per_unit_;
       } else {
         fail("P without G4 or G64", word);
       }
-    } else if (set_g64) {
+    } else if (line.set_g64) {
       blend_tolerance_mm_ = 0.0;
     }
-    if (dwell && !w.has('P')) fail("G4 needs P (seconds)", "G4");
+    if (line.dwell && !w.has('P')) fail("G4 needs P (seconds)", "G4");
+  }
 
-    if (motion_this_line) motion_ = motion_this_line;
-    const bool has_axis = w.has('X') || w.has('Y') || w.has('Z');
-    const bool has_arc_word = w.has('I') || w.has('J') || w.has('K') || w.has('R');
-
+  /// A block at the current position with the current modal settings.
+  Block block_here() const {
     Block base;
     base.line = line_;
     base.start_mm = pos_mm_;
@@ -310,8 +323,26 @@ class Parser {
     base.exact_stop = exact_stop_;
     base.exact_path = exact_path_;
     base.blend_tolerance_mm = blend_tolerance_mm_;
+    return base;
+  }
 
-    if (dwell) {
+  void parse_line(std::string_view raw, Program& program) {
+    std::string s = clean(raw);
+    if (s.empty()) return;
+    if (s.front() == '%') return;
+    const LineWords w = split_words(s);
+    check_letters(w);
+    LineModes line;
+    for (double g : w.g) apply_g_code(g, line);
+    const bool program_end = apply_m_codes(w);
+    apply_values(w);
+    apply_p(w, line);
+
+    if (line.motion) motion_ = line.motion;
+    const bool has_axis = w.has('X') || w.has('Y') || w.has('Z');
+    const bool has_arc_word = w.has('I') || w.has('J') || w.has('K') || w.has('R');
+    Block base = block_here();
+    if (line.dwell) {
       if (has_axis || has_arc_word) fail("G4 takes no axis or arc words", s);
       base.kind = MotionKind::kDwell;
       base.dwell_s = w.get('P');

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <optional>
 
 #include <fmt/format.h>
 
@@ -519,6 +520,504 @@ void check_travel(const Program& program, const AxisArray<double>& travel_min_mm
   }
 }
 
+namespace {
+
+ConfigError block_error(const Program& program, const Block& b, const std::string& what, const std::string& value) {
+  return ConfigError(fmt::format("{}:{}: {} ({})", program.source_name, b.line, what, value));
+}
+
+/// The programmed moves (zero-length moves and zero dwells dropped) with
+/// their path limits, in program order.
+struct ProgrammedMoves {
+  std::vector<Segment> moves;
+  std::vector<PathLimits> lims;
+};
+
+/// A line or rapid: direction and path limits; false for a zero-length move.
+bool plan_line(const Program& program, const Block& b, const MotionLimits& limits, Segment& s, PathLimits& pl) {
+  AxisArray<double> d{};
+  for (std::size_t a = 0; a < kNumAxes; ++a) d[a] = b.end_mm[a] - b.start_mm[a];
+  s.length_mm = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  if (!std::isfinite(s.length_mm))
+    throw block_error(program, b, "move length is not finite", fmt::format("{:g} mm", s.length_mm));
+  if (s.length_mm < kMinLength_mm) return false;
+  s.kind = SegmentKind::kLine;
+  s.u = normalized(d);
+  pl.v_cap = std::min(s.feed_mm_per_s, min_over_axes(limits.v_max_mm_per_s, s.u));
+  pl.a = min_over_axes(limits.a_max_mm_per_s2, s.u);
+  pl.j = min_over_axes(limits.j_max_mm_per_s3, s.u);
+  return true;
+}
+
+/// Signed sweep of an arc from phi0 to phi1 in its direction, in (0, 2 pi]
+/// counter-clockwise and [-2 pi, 0) clockwise.
+double arc_sweep_rad(double phi0, double phi1, bool ccw) {
+  double d = phi1 - phi0;
+  if (ccw) {
+    while (d <= 1e-9) d += 2.0 * kPi;
+    while (d > 2.0 * kPi + 1e-9) d -= 2.0 * kPi;
+  } else {
+    while (d >= -1e-9) d -= 2.0 * kPi;
+    while (d < -2.0 * kPi - 1e-9) d += 2.0 * kPi;
+  }
+  return d;
+}
+
+/// An arc or helix: centre, radii, sweep and path limits.
+PathLimits plan_arc(const Program& program, const Block& b, const MotionLimits& limits, Segment& s) {
+  s.kind = SegmentKind::kArc;
+  s.cx_mm = b.center_mm[0];
+  s.cy_mm = b.center_mm[1];
+  s.r0_mm = std::hypot(b.start_mm[0] - s.cx_mm, b.start_mm[1] - s.cy_mm);
+  s.r1_mm = std::hypot(b.end_mm[0] - s.cx_mm, b.end_mm[1] - s.cy_mm);
+  const std::string radii = fmt::format("r_start {:.6g} mm, r_end {:.6g} mm", s.r0_mm, s.r1_mm);
+  if (!(s.r0_mm > 1e-9)) throw block_error(program, b, "arc radius must be > 0", radii);
+  if (std::abs(s.r1_mm - s.r0_mm) > std::max(kArcRadiusTolerance_mm, kArcRadiusTolerance_rel * s.r0_mm))
+    throw block_error(program, b, "arc end not on its circle", radii);
+  s.phi0_rad = std::atan2(b.start_mm[1] - s.cy_mm, b.start_mm[0] - s.cx_mm);
+  const double phi1 = std::atan2(b.end_mm[1] - s.cy_mm, b.end_mm[0] - s.cx_mm);
+  const double d = arc_sweep_rad(s.phi0_rad, phi1, b.kind == MotionKind::kArcCcw);
+  s.dphi_rad = d;
+  const double R = 0.5 * (s.r0_mm + s.r1_mm);
+  const double dz = b.end_mm[2] - b.start_mm[2];
+  s.length_mm = std::hypot(R * std::abs(d), dz);
+  if (!std::isfinite(s.length_mm)) throw block_error(program, b, "arc length is not finite", radii);
+  // Helix: pitch per radian h, curvature k = R/(R^2+h^2), torsion tau = h/(R^2+h^2).
+  const double h = dz / std::abs(d);
+  const double ell2 = R * R + h * h;
+  const double c_xy = R / std::sqrt(ell2);
+  const double c_z = std::abs(h) / std::sqrt(ell2);
+  double v_axes = std::min({s.feed_mm_per_s, limits.v_max_mm_per_s[0] / c_xy, limits.v_max_mm_per_s[1] / c_xy});
+  if (c_z > 1e-15) v_axes = std::min(v_axes, limits.v_max_mm_per_s[2] / c_z);
+  return arc_limits(R / ell2, std::abs(h) / ell2, v_axes, min_of(limits.a_max_mm_per_s2),
+                    min_of(limits.j_max_mm_per_s3));
+}
+
+/// One block as a move; false when it moves nowhere (a zero-length move or a
+/// zero dwell).
+bool plan_move(const Program& program, std::size_t bi, const MotionLimits& limits, Segment& s, PathLimits& pl) {
+  const Block& b = program.blocks[bi];
+  for (std::size_t a = 0; a < kNumAxes; ++a)
+    if (!std::isfinite(b.start_mm[a]) || !std::isfinite(b.end_mm[a]) || !std::isfinite(b.center_mm[a]))
+      throw block_error(program, b, "non-finite coordinate", std::string(axis_name(a)));
+  s.block = static_cast<int>(bi);
+  s.start_mm = b.start_mm;
+  s.end_mm = b.end_mm;
+  s.spindle_rpm = b.spindle_rpm;
+  s.feed_mm_per_s = b.feed_mm_per_min / kSPerMin;
+  if (b.kind == MotionKind::kDwell) {
+    if (!(b.dwell_s >= 0.0) || !std::isfinite(b.dwell_s))
+      throw block_error(program, b, "dwell must be >= 0 s", fmt::format("{}", b.dwell_s));
+    s.kind = SegmentKind::kDwell;
+    s.feed_mm_per_s = 0.0;
+    s.end_mm = s.start_mm;
+    return b.dwell_s != 0.0;
+  }
+  if (!(b.feed_mm_per_min > 0.0) || !std::isfinite(b.feed_mm_per_min))
+    throw block_error(program, b, "feed must be > 0", fmt::format("F{}", b.feed_mm_per_min));
+  s.cutting = b.kind != MotionKind::kRapid;
+  if (b.kind == MotionKind::kRapid || b.kind == MotionKind::kLinear) return plan_line(program, b, limits, s, pl);
+  pl = plan_arc(program, b, limits, s);
+  return true;
+}
+
+/// 1. Geometry and path limits of every programmed move.
+ProgrammedMoves programmed_moves(const Program& program, const MotionLimits& limits) {
+  ProgrammedMoves out;
+  for (std::size_t bi = 0; bi < program.blocks.size(); ++bi) {
+    Segment s;
+    PathLimits pl;
+    if (!plan_move(program, bi, limits, s, pl)) continue;
+    out.moves.push_back(s);
+    out.lims.push_back(pl);
+  }
+  return out;
+}
+
+/// Acceleration, jerk and speed limits of an arc whose plane is spanned by p
+/// and q: the smallest of the axes it moves.
+struct PlaneLimits {
+  double a{0.0};
+  double j{0.0};
+  double v{0.0};
+};
+
+PlaneLimits plane_limits(const MotionLimits& limits, const AxisArray<double>& p, const AxisArray<double>& q) {
+  AxisArray<double> a_lim{}, j_lim{}, v_lim{};
+  for (std::size_t a = 0; a < kNumAxes; ++a) {
+    const bool used = std::abs(p[a]) > 1e-12 || std::abs(q[a]) > 1e-12;
+    const double inf = std::numeric_limits<double>::infinity();
+    a_lim[a] = used ? limits.a_max_mm_per_s2[a] : inf;
+    j_lim[a] = used ? limits.j_max_mm_per_s3[a] : inf;
+    v_lim[a] = used ? limits.v_max_mm_per_s[a] : inf;
+  }
+  return {min_of(a_lim), min_of(j_lim), min_of(v_lim)};
+}
+
+/// The junctions between programmed moves (stop, pass-through or blend) and
+/// the blend arcs of the blended ones.
+struct Junctions {
+  std::vector<Junction> at;
+  std::vector<Fillet> fillets;
+};
+
+/// The line or planar curve of a move at one of its ends, for plane_fillet.
+PlaneCurve plane_curve(const Segment& s, bool at_end) {
+  PlaneCurve c;
+  c.line = s.kind == SegmentKind::kLine;
+  c.tx = s.u[0];
+  c.ty = s.u[1];
+  c.ox = s.cx_mm;
+  c.oy = s.cy_mm;
+  c.rho = at_end ? s.r1_mm : s.r0_mm;
+  c.dir = s.dphi_rad >= 0.0 ? 1.0 : -1.0;
+  return c;
+}
+
+/// The blend arc at a corner of turn J.turn_rad deviating at most P from it,
+/// the smallest that lets v_both through; sets J to a blend when one fits.
+Fillet plan_blend(const Segment& s0, const Segment& s1, double P, double v_both, const MotionLimits& limits,
+                  Junction& J) {
+  const AxisArray<double> t0 = exit_tangent(s0), t1 = entry_tangent(s1);
+  const bool lines = s0.kind == SegmentKind::kLine && s1.kind == SegmentKind::kLine;
+  // Axes the blend arc moves: its acceleration, jerk and speed limits.
+  const PlaneLimits plane = plane_limits(limits, t0, t1);
+  const double d0_max = 0.5 * s0.length_mm, d1_max = 0.5 * s1.length_mm;
+  const AxisArray<double> C = s0.end_mm;
+  std::function<Fillet(double)> make;
+  double R_max = 0.0;
+  const double R_tol = P * std::cos(0.5 * J.turn_rad) / (1.0 - std::cos(0.5 * J.turn_rad));
+  if (lines) {
+    make = [&](double R) { return line_line_fillet(C, s0.u, s1.u, J.turn_rad, R); };
+    R_max = std::min(R_tol, std::min(d0_max, d1_max) / std::tan(0.5 * J.turn_rad));
+  } else {
+    const PlaneCurve c0 = plane_curve(s0, true), c1 = plane_curve(s1, false);
+    const double sigma = cross2(t0[0], t0[1], t1[0], t1[1]) >= 0.0 ? 1.0 : -1.0;
+    make = [&, c0, c1, sigma](double R) { return plane_fillet(c0, c1, C, sigma, R, d0_max, d1_max); };
+    R_max = bisect_max(0.0, 4.0 * R_tol, [&](double R) {
+      const Fillet f = make(R);
+      return f.valid && f.deviation_mm <= P;
+    });
+  }
+  // The smallest arc that lets the slower neighbour's speed through (a
+  // larger one would only deviate more).
+  const double R = std::min(R_max, radius_for_speed(v_both, plane.a, plane.j));
+  if (!(R >= kMinBlendRadius_mm)) return Fillet{};
+  Fillet f = make(R);
+  if (!f.valid) return f;
+  J.kind = JunctionKind::kBlend;
+  J.v_mm_per_s = arc_limits(1.0 / R, 0.0, std::min(v_both, plane.v), plane.a, plane.j).v_cap;
+  return f;
+}
+
+bool planar(const Segment& s) {
+  return s.kind == SegmentKind::kLine ? std::abs(s.u[2]) < 1e-12 : s.end_mm[2] == s.start_mm[2];
+}
+
+/// 2. The junction after programmed move i: stop, pass-through, or blend.
+void plan_junction(const Program& program, const ProgrammedMoves& pm, std::size_t i, const MotionLimits& limits,
+                   double Ts_s, Junctions& out) {
+  Junction& J = out.at[i];
+  const Segment& s0 = pm.moves[i];
+  const Segment& s1 = pm.moves[i + 1];
+  const Block& b0 = program.blocks[static_cast<std::size_t>(s0.block)];
+  const Block& b1 = program.blocks[static_cast<std::size_t>(s1.block)];
+  if (s0.kind == SegmentKind::kDwell || s1.kind == SegmentKind::kDwell) return;
+  J.turn_rad = angle_between(exit_tangent(s0), entry_tangent(s1));
+  if (b0.kind == MotionKind::kRapid || b1.kind == MotionKind::kRapid || b0.exact_stop) return;
+  const double v_both = std::min(pm.lims[i].v_cap, pm.lims[i + 1].v_cap);
+  const bool lines = s0.kind == SegmentKind::kLine && s1.kind == SegmentKind::kLine;
+  const bool blendable = lines || (planar(s0) && planar(s1));
+  const double kink_limit_rad = blendable ? kKinkAngle_rad : kTangentAngle_rad;
+  if (J.turn_rad <= kink_limit_rad) {
+    J.kind = JunctionKind::kTangent;
+    J.v_mm_per_s = J.turn_rad <= kCollinearAngle_rad
+                       ? v_both
+                       : std::min(v_both, 0.5 * min_of(limits.a_max_mm_per_s2) * Ts_s / J.turn_rad);
+    return;
+  }
+  if (!blendable || b0.exact_path || J.turn_rad > kMaxBlendTurn_rad) return;
+  const double P = b0.blend_tolerance_mm > 0.0 ? b0.blend_tolerance_mm : limits.default_blend_tolerance_mm;
+  if (!(P > 0.0)) return;
+  out.fillets[i] = plan_blend(s0, s1, P, v_both, limits, J);
+}
+
+Junctions plan_junctions(const Program& program, const ProgrammedMoves& pm, const MotionLimits& limits,
+                         double Ts_s) {
+  const std::size_t nm = pm.moves.size();
+  Junctions out;
+  out.at.resize(nm > 0 ? nm - 1 : 0);
+  out.fillets.resize(out.at.size());
+  for (std::size_t i = 0; i + 1 < nm; ++i) plan_junction(program, pm, i, limits, Ts_s, out);
+  return out;
+}
+
+/// One half of the blend arc of fillet f: the first reports the block before
+/// (owner: the move before), the second the block after.
+Segment blend_half(const Fillet& f, const Segment& owner, bool second) {
+  Segment h = owner;
+  h.kind = SegmentKind::kBlend;
+  h.c_mm = f.c_mm;
+  h.e1 = f.e1;
+  h.e2 = f.e2;
+  h.r0_mm = h.r1_mm = f.R_mm;
+  h.phi0_rad = second ? f.split_rad : 0.0;
+  h.dphi_rad = second ? f.sweep_rad - f.split_rad : f.split_rad;
+  h.length_mm = f.R_mm * h.dphi_rad;
+  for (std::size_t a = 0; a < kNumAxes; ++a) {
+    h.start_mm[a] = f.c_mm[a] + f.R_mm * (std::cos(h.phi0_rad) * f.e1[a] + std::sin(h.phi0_rad) * f.e2[a]);
+    const double p1 = h.phi0_rad + h.dphi_rad;
+    h.end_mm[a] = f.c_mm[a] + f.R_mm * (std::cos(p1) * f.e1[a] + std::sin(p1) * f.e2[a]);
+  }
+  return h;
+}
+
+/// A programmed move shortened by d_in at its start and d_out at its end (the
+/// blends there).
+void trim_move(Segment& m, double d_in, double d_out, bool blend_out) {
+  if (m.kind == SegmentKind::kLine) {
+    m.start_mm = axpy(m.start_mm, d_in, m.u);
+    if (blend_out) m.end_mm = axpy(m.end_mm, -d_out, m.u);
+    m.length_mm -= d_in + d_out;
+  } else if (m.kind == SegmentKind::kArc && (d_in > 0.0 || d_out > 0.0)) {
+    // Planar arc: trim by angle, keeping the radius law r(lambda).
+    const double L = m.length_mm;
+    const double l0 = d_in / L, l1 = 1.0 - d_out / L;
+    const double r0 = m.r0_mm + (m.r1_mm - m.r0_mm) * l0, r1 = m.r0_mm + (m.r1_mm - m.r0_mm) * l1;
+    m.phi0_rad += m.dphi_rad * l0;
+    m.dphi_rad *= (l1 - l0);
+    m.r0_mm = r0;
+    m.r1_mm = r1;
+    m.length_mm = 0.5 * (r0 + r1) * std::abs(m.dphi_rad);
+    m.start_mm = {m.cx_mm + r0 * std::cos(m.phi0_rad), m.cy_mm + r0 * std::sin(m.phi0_rad), m.start_mm[2]};
+    if (blend_out) {
+      const double p1 = m.phi0_rad + m.dphi_rad;
+      m.end_mm = {m.cx_mm + r1 * std::cos(p1), m.cy_mm + r1 * std::sin(p1), m.end_mm[2]};
+    }
+  }
+}
+
+/// The planned moves in time order with their limits and the junctions
+/// between them; corner_seg[i] is, for the junction after programmed move i,
+/// the second half of its blend or else the first segment after it.
+class PlannedPath {
+ public:
+  std::vector<Segment> segs;
+  std::vector<PathLimits> lims;
+  std::vector<Junction> junc;
+  std::vector<std::size_t> corner_seg;
+
+  /// The next segment, after a junction of the kind set by pass() (a
+  /// tangent one with no cap of its own between pieces of one move).
+  void push(const Segment& s, const PathLimits& pl) {
+    if (!segs.empty()) {
+      Junction J;
+      J.kind = pending_;
+      J.turn_rad = pending_turn_;
+      J.v_mm_per_s = pending_ == JunctionKind::kStop ? 0.0 : pending_v_;  // capped by both neighbours later
+      junc.push_back(J);
+    }
+    segs.push_back(s);
+    lims.push_back(pl);
+    pending_ = JunctionKind::kTangent;
+    pending_v_ = std::numeric_limits<double>::infinity();
+    pending_turn_ = 0.0;
+  }
+  /// The next segment starts after programmed junction J (a blend's second
+  /// half follows its first tangentially).
+  void pass(const Junction& J) {
+    pending_ = J.kind == JunctionKind::kBlend ? JunctionKind::kTangent : J.kind;
+    pending_v_ = J.kind == JunctionKind::kTangent ? J.v_mm_per_s : std::numeric_limits<double>::infinity();
+    pending_turn_ = J.kind == JunctionKind::kTangent ? J.turn_rad : 0.0;
+  }
+
+ private:
+  JunctionKind pending_{JunctionKind::kStop};
+  double pending_v_{0.0};
+  double pending_turn_{0.0};
+};
+
+/// 3. Each programmed move trimmed by the blends at its ends, each blend arc
+/// split in two halves, and the junctions between them.
+PlannedPath assemble_path(const ProgrammedMoves& pm, const Junctions& jn) {
+  const std::size_t nm = pm.moves.size();
+  const std::vector<Junction>& mj = jn.at;
+  PlannedPath path;
+  path.corner_seg.assign(mj.size(), 0);
+  for (std::size_t i = 0; i < nm; ++i) {
+    const bool blend_in = i > 0 && mj[i - 1].kind == JunctionKind::kBlend;
+    const bool blend_out = i + 1 < nm && mj[i].kind == JunctionKind::kBlend;
+    if (i > 0) {
+      path.pass(mj[i - 1]);
+      path.corner_seg[i - 1] = path.segs.size();
+    }
+    Segment m = pm.moves[i];
+    const double d_in = blend_in ? jn.fillets[i - 1].d1_mm : 0.0;
+    const double d_out = blend_out ? jn.fillets[i].d0_mm : 0.0;
+    if (blend_in) path.push(blend_half(jn.fillets[i - 1], pm.moves[i], true), PathLimits{});
+    trim_move(m, d_in, d_out, blend_out);
+    if (m.kind == SegmentKind::kDwell || m.length_mm >= kMinLength_mm) path.push(m, pm.lims[i]);
+    if (blend_out) path.push(blend_half(jn.fillets[i], pm.moves[i], false), PathLimits{});
+  }
+  return path;
+}
+
+/// Blend halves get the limits of their arc; every pass-through junction is
+/// capped by both neighbours' speed caps.
+void limit_path(PlannedPath& path, const MotionLimits& limits) {
+  const std::size_t n = path.segs.size();
+  for (std::size_t k = 0; k < n; ++k) {
+    const Segment& s = path.segs[k];
+    if (s.kind != SegmentKind::kBlend) continue;
+    // The axes of the arc's plane (spanned by e1 and e2).
+    const PlaneLimits plane = plane_limits(limits, s.e1, s.e2);
+    path.lims[k] = arc_limits(1.0 / s.r0_mm, 0.0, std::min(s.feed_mm_per_s, plane.v), plane.a, plane.j);
+  }
+  for (std::size_t k = 0; k + 1 < n; ++k) {
+    Junction& J = path.junc[k];
+    if (J.kind == JunctionKind::kStop) continue;
+    J.v_mm_per_s = std::min({J.v_mm_per_s, path.lims[k].v_cap, path.lims[k + 1].v_cap});
+  }
+}
+
+double v_in(const PlannedPath& path, std::size_t i) { return i == 0 ? 0.0 : path.junc[i - 1].v_mm_per_s; }
+double v_out(const PlannedPath& path, std::size_t i) {
+  return i + 1 == path.segs.size() ? 0.0 : path.junc[i].v_mm_per_s;
+}
+
+/// 4. Look-ahead over the whole program: a backward and a forward pass over
+/// the pass-through junction speeds.
+void look_ahead(PlannedPath& path) {
+  const std::size_t n = path.segs.size();
+  auto& junc = path.junc;
+  for (std::size_t i = n - 1; n > 1 && i-- > 0;) {
+    if (junc[i].kind == JunctionKind::kStop) continue;
+    const PathLimits& pl = path.lims[i + 1];
+    junc[i].v_mm_per_s = std::min(
+        junc[i].v_mm_per_s, reachable_speed(v_out(path, i + 1), path.segs[i + 1].length_mm, pl.a, pl.j, pl.v_cap));
+  }
+  for (std::size_t i = 0; i + 1 < n; ++i) {
+    if (junc[i].kind == JunctionKind::kStop) continue;
+    const PathLimits& pl = path.lims[i];
+    junc[i].v_mm_per_s =
+        std::min(junc[i].v_mm_per_s, reachable_speed(v_in(path, i), path.segs[i].length_mm, pl.a, pl.j, pl.v_cap));
+  }
+}
+
+/// The jerk-limited law of one move from v0 to v1 within its length, as fast
+/// as its limits allow; returns its duration.
+double move_law(std::vector<LawPiece>& pieces, double t_s, double L, double v0, double v1, const PathLimits& pl) {
+  const double v_top = std::max({v0, v1, pl.v_cap});
+  auto needed = [&](double v) { return transition_distance(v0, v, pl.a, pl.j) + transition_distance(v, v1, pl.a, pl.j); };
+  TWIN_DEMAND(needed(std::max(v0, v1)) <= L + 1e-9 * std::max(1.0, L));
+  const double peak = bisect_max(std::max(v0, v1), v_top, [&](double v) { return needed(v) <= L; });
+  LawBuilder law(pieces, t_s, v0);
+  law.transition_to(peak, pl.a, pl.j);
+  law.cruise(L - needed(peak));
+  law.transition_to(v1, pl.a, pl.j);
+  return law.t_s() - t_s;
+}
+
+/// 5. Time laws, one after the other; returns the program's duration.
+double time_laws(const Program& program, PlannedPath& path, double Ts_s, std::vector<LawPiece>& pieces) {
+  double t_s = 0.0;
+  for (std::size_t i = 0; i < path.segs.size(); ++i) {
+    Segment& s = path.segs[i];
+    const Block& b = program.blocks[static_cast<std::size_t>(s.block)];
+    s.first_piece = pieces.size();
+    s.t_start_s = t_s;
+    const double duration_s = s.kind == SegmentKind::kDwell
+                                  ? b.dwell_s
+                                  : move_law(pieces, t_s, s.length_mm, v_in(path, i), v_out(path, i), path.lims[i]);
+    s.t_end_s = t_s + duration_s;
+    if (!std::isfinite(duration_s))
+      throw ConfigError(fmt::format("{}:{}: the planned duration of this move is not finite ({} s)",
+                                    program.source_name, b.line, duration_s));
+    if (!(s.t_end_s / Ts_s < kMaxTicks))
+      throw ConfigError(fmt::format("{}:{}: the program's planned duration reaches {:.6g} s here, {:.3g} ticks of "
+                                    "{} s: more than a run can count",
+                                    program.source_name, b.line, s.t_end_s, s.t_end_s / Ts_s, Ts_s));
+    s.num_pieces = pieces.size() - s.first_piece;
+    t_s = s.t_end_s;
+  }
+  return t_s;
+}
+
+/// 6. Each block's start, end, length and programmed feed.
+std::vector<BlockTiming> block_timings(const Program& program, const std::vector<Segment>& S) {
+  const auto& blocks = program.blocks;
+  std::vector<BlockTiming> out(blocks.size());
+  double cursor_s = 0.0;
+  std::size_t next_seg = 0;
+  for (std::size_t bi = 0; bi < blocks.size(); ++bi) {
+    BlockTiming& bt = out[bi];
+    bt.feed_programmed_mm_per_s = blocks[bi].kind == MotionKind::kDwell ? 0.0 : blocks[bi].feed_mm_per_min / kSPerMin;
+    bt.t_start_s = bt.t_end_s = cursor_s;
+    bool first = true;
+    while (next_seg < S.size() && S[next_seg].block == static_cast<int>(bi)) {
+      const Segment& s = S[next_seg++];
+      if (first) bt.t_start_s = s.t_start_s;
+      first = false;
+      bt.t_end_s = s.t_end_s;
+      bt.length_mm += s.length_mm;
+      cursor_s = s.t_end_s;
+    }
+  }
+  return out;
+}
+
+/// The corner between programmed move i and the next move k that is not a
+/// dwell, when it turns by more than kCornerReportAngle_deg.
+std::optional<Corner> corner_after(const Trajectory& traj, const ProgrammedMoves& pm, const Junctions& jn,
+                                   const std::vector<std::size_t>& corner_seg, std::size_t i, std::size_t k) {
+  const auto& S = traj.segments();
+  const Segment& s0 = pm.moves[i];
+  const Segment& s1 = pm.moves[k];
+  const bool dwell_between = k > i + 1;
+  const double turn = angle_between(exit_tangent(s0), entry_tangent(s1));
+  if (turn * kDegPerRad <= kCornerReportAngle_deg) return std::nullopt;
+  Corner c;
+  c.block_before = s0.block;
+  c.block_after = s1.block;
+  c.turn_angle_deg = turn * kDegPerRad;
+  c.p_mm = s0.end_mm;
+  const Junction& J = jn.at[i];
+  c.exact_stop = dwell_between || J.kind == JunctionKind::kStop;
+  const std::size_t at = corner_seg[i];
+  c.t_s = at < S.size() ? S[at].t_start_s : traj.duration_s();
+  c.t_blend_begin_s = c.t_blend_end_s = c.t_s;
+  if (!dwell_between && J.kind == JunctionKind::kBlend) {
+    c.blend_radius_mm = jn.fillets[i].R_mm;
+    c.t_blend_begin_s = S[at - 1].t_start_s;
+    c.t_blend_end_s = S[at].t_end_s;
+  } else if (dwell_between) {
+    c.t_s = S[at - 1].t_end_s;  // before the dwell
+    c.t_blend_begin_s = c.t_blend_end_s = c.t_s;
+  }
+  const ReferenceSample r = traj.at_time(c.t_s);
+  c.v_ref_mm_per_s = dwell_between ? 0.0 : r.path_speed_mm_per_s;
+  c.deviation_mm =
+      J.kind == JunctionKind::kBlend && !dwell_between ? jn.fillets[i].deviation_mm : norm3(r.x_mm - c.p_mm);
+  return c;
+}
+
+/// 6. The corners of the program, in order.
+std::vector<Corner> find_corners(const Trajectory& traj, const ProgrammedMoves& pm, const Junctions& jn,
+                                 const std::vector<std::size_t>& corner_seg) {
+  std::vector<Corner> out;
+  const std::size_t nm = pm.moves.size();
+  for (std::size_t i = 0; i + 1 < nm; ++i) {
+    if (pm.moves[i].kind == SegmentKind::kDwell) continue;
+    std::size_t k = i + 1;
+    while (k < nm && pm.moves[k].kind == SegmentKind::kDwell) ++k;
+    if (k >= nm) break;
+    if (auto c = corner_after(traj, pm, jn, corner_seg, i, k)) out.push_back(*c);
+  }
+  return out;
+}
+
+}  // namespace
+
 Trajectory plan_trajectory(const Program& program, const MotionLimits& limits, double Ts_s) {
   limits.validate();
   if (!(Ts_s > 0.0) || !std::isfinite(Ts_s))
@@ -532,382 +1031,16 @@ Trajectory plan_trajectory(const Program& program, const MotionLimits& limits, d
     traj.spindle_rpm_at_start_ = blocks.front().spindle_rpm;
   }
   traj.spindle_rpm_at_end_ = program.spindle_rpm_at_end;
-  const double a_min = min_of(limits.a_max_mm_per_s2);
-  const double j_min = min_of(limits.j_max_mm_per_s3);
 
-  // 1. Geometry and path limits of every programmed move (zero-length moves
-  // are dropped).
-  std::vector<Segment> moves;
-  std::vector<PathLimits> move_lims;
-  for (std::size_t bi = 0; bi < blocks.size(); ++bi) {
-    const Block& b = blocks[bi];
-    auto where = [&](const std::string& what, const std::string& value) {
-      return ConfigError(fmt::format("{}:{}: {} ({})", program.source_name, b.line, what, value));
-    };
-    for (std::size_t a = 0; a < kNumAxes; ++a)
-      if (!std::isfinite(b.start_mm[a]) || !std::isfinite(b.end_mm[a]) || !std::isfinite(b.center_mm[a]))
-        throw where("non-finite coordinate", std::string(axis_name(a)));
-    Segment s;
-    s.block = static_cast<int>(bi);
-    s.start_mm = b.start_mm;
-    s.end_mm = b.end_mm;
-    s.spindle_rpm = b.spindle_rpm;
-    s.feed_mm_per_s = b.feed_mm_per_min / kSPerMin;
-    PathLimits pl;
-    if (b.kind == MotionKind::kDwell) {
-      if (!(b.dwell_s >= 0.0) || !std::isfinite(b.dwell_s)) throw where("dwell must be >= 0 s", fmt::format("{}", b.dwell_s));
-      if (b.dwell_s == 0.0) continue;
-      s.kind = SegmentKind::kDwell;
-      s.feed_mm_per_s = 0.0;
-      s.end_mm = s.start_mm;
-      moves.push_back(s);
-      move_lims.push_back(pl);
-      continue;
-    }
-    if (!(b.feed_mm_per_min > 0.0) || !std::isfinite(b.feed_mm_per_min))
-      throw where("feed must be > 0", fmt::format("F{}", b.feed_mm_per_min));
-    s.cutting = b.kind != MotionKind::kRapid;
-    if (b.kind == MotionKind::kRapid || b.kind == MotionKind::kLinear) {
-      AxisArray<double> d{};
-      for (std::size_t a = 0; a < kNumAxes; ++a) d[a] = b.end_mm[a] - b.start_mm[a];
-      s.length_mm = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-      if (!std::isfinite(s.length_mm)) throw where("move length is not finite", fmt::format("{:g} mm", s.length_mm));
-      if (s.length_mm < kMinLength_mm) continue;
-      s.kind = SegmentKind::kLine;
-      s.u = normalized(d);
-      pl.v_cap = std::min(s.feed_mm_per_s, min_over_axes(limits.v_max_mm_per_s, s.u));
-      pl.a = min_over_axes(limits.a_max_mm_per_s2, s.u);
-      pl.j = min_over_axes(limits.j_max_mm_per_s3, s.u);
-    } else {
-      s.kind = SegmentKind::kArc;
-      s.cx_mm = b.center_mm[0];
-      s.cy_mm = b.center_mm[1];
-      s.r0_mm = std::hypot(b.start_mm[0] - s.cx_mm, b.start_mm[1] - s.cy_mm);
-      s.r1_mm = std::hypot(b.end_mm[0] - s.cx_mm, b.end_mm[1] - s.cy_mm);
-      const std::string radii = fmt::format("r_start {:.6g} mm, r_end {:.6g} mm", s.r0_mm, s.r1_mm);
-      if (!(s.r0_mm > 1e-9)) throw where("arc radius must be > 0", radii);
-      if (std::abs(s.r1_mm - s.r0_mm) > std::max(kArcRadiusTolerance_mm, kArcRadiusTolerance_rel * s.r0_mm))
-        throw where("arc end not on its circle", radii);
-      s.phi0_rad = std::atan2(b.start_mm[1] - s.cy_mm, b.start_mm[0] - s.cx_mm);
-      const double phi1 = std::atan2(b.end_mm[1] - s.cy_mm, b.end_mm[0] - s.cx_mm);
-      double d = phi1 - s.phi0_rad;
-      if (b.kind == MotionKind::kArcCcw) {
-        while (d <= 1e-9) d += 2.0 * kPi;
-        while (d > 2.0 * kPi + 1e-9) d -= 2.0 * kPi;
-      } else {
-        while (d >= -1e-9) d -= 2.0 * kPi;
-        while (d < -2.0 * kPi - 1e-9) d += 2.0 * kPi;
-      }
-      s.dphi_rad = d;
-      const double R = 0.5 * (s.r0_mm + s.r1_mm);
-      const double dz = b.end_mm[2] - b.start_mm[2];
-      s.length_mm = std::hypot(R * std::abs(d), dz);
-      if (!std::isfinite(s.length_mm)) throw where("arc length is not finite", radii);
-      // Helix: pitch per radian h, curvature k = R/(R^2+h^2), torsion tau = h/(R^2+h^2).
-      const double h = dz / std::abs(d);
-      const double ell2 = R * R + h * h;
-      const double c_xy = R / std::sqrt(ell2);
-      const double c_z = std::abs(h) / std::sqrt(ell2);
-      double v_axes = std::min({s.feed_mm_per_s, limits.v_max_mm_per_s[0] / c_xy, limits.v_max_mm_per_s[1] / c_xy});
-      if (c_z > 1e-15) v_axes = std::min(v_axes, limits.v_max_mm_per_s[2] / c_z);
-      pl = arc_limits(R / ell2, std::abs(h) / ell2, v_axes, a_min, j_min);
-    }
-    moves.push_back(s);
-    move_lims.push_back(pl);
-  }
-  const std::size_t nm = moves.size();
-
-  // 2. Junctions between programmed moves: stop, pass-through, or blend.
-  std::vector<Junction> mj(nm > 0 ? nm - 1 : 0);
-  std::vector<Fillet> fillets(mj.size());
-  for (std::size_t i = 0; i + 1 < nm; ++i) {
-    Junction& J = mj[i];
-    const Segment& s0 = moves[i];
-    const Segment& s1 = moves[i + 1];
-    const Block& b0 = blocks[static_cast<std::size_t>(s0.block)];
-    const Block& b1 = blocks[static_cast<std::size_t>(s1.block)];
-    if (s0.kind == SegmentKind::kDwell || s1.kind == SegmentKind::kDwell) continue;
-    const AxisArray<double> t0 = exit_tangent(s0), t1 = entry_tangent(s1);
-    J.turn_rad = angle_between(t0, t1);
-    if (b0.kind == MotionKind::kRapid || b1.kind == MotionKind::kRapid || b0.exact_stop) continue;
-    const double v_both = std::min(move_lims[i].v_cap, move_lims[i + 1].v_cap);
-    const bool lines = s0.kind == SegmentKind::kLine && s1.kind == SegmentKind::kLine;
-    auto planar = [](const Segment& s) {
-      return s.kind == SegmentKind::kLine ? std::abs(s.u[2]) < 1e-12 : s.end_mm[2] == s.start_mm[2];
-    };
-    const bool blendable = lines || (planar(s0) && planar(s1));
-    const double kink_limit_rad = blendable ? kKinkAngle_rad : kTangentAngle_rad;
-    if (J.turn_rad <= kink_limit_rad) {
-      J.kind = JunctionKind::kTangent;
-      J.v_mm_per_s = J.turn_rad <= kCollinearAngle_rad ? v_both : std::min(v_both, 0.5 * a_min * Ts_s / J.turn_rad);
-      continue;
-    }
-    if (!blendable || b0.exact_path || J.turn_rad > kMaxBlendTurn_rad) continue;
-    const double P = b0.blend_tolerance_mm > 0.0 ? b0.blend_tolerance_mm : limits.default_blend_tolerance_mm;
-    if (!(P > 0.0)) continue;
-    // Axes the blend arc moves: its acceleration, jerk and speed limits.
-    AxisArray<double> a_lim{}, j_lim{}, v_lim{};
-    for (std::size_t a = 0; a < kNumAxes; ++a) {
-      const bool used = std::abs(t0[a]) > 1e-12 || std::abs(t1[a]) > 1e-12;
-      const double inf = std::numeric_limits<double>::infinity();
-      a_lim[a] = used ? limits.a_max_mm_per_s2[a] : inf;
-      j_lim[a] = used ? limits.j_max_mm_per_s3[a] : inf;
-      v_lim[a] = used ? limits.v_max_mm_per_s[a] : inf;
-    }
-    const double a_plane = min_of(a_lim), j_plane = min_of(j_lim);
-    const double d0_max = 0.5 * s0.length_mm, d1_max = 0.5 * s1.length_mm;
-    const AxisArray<double> C = s0.end_mm;
-    std::function<Fillet(double)> make;
-    double R_max = 0.0;
-    const double R_tol = P * std::cos(0.5 * J.turn_rad) / (1.0 - std::cos(0.5 * J.turn_rad));
-    if (lines) {
-      make = [&](double R) { return line_line_fillet(C, s0.u, s1.u, J.turn_rad, R); };
-      R_max = std::min(R_tol, std::min(d0_max, d1_max) / std::tan(0.5 * J.turn_rad));
-    } else {
-      auto curve = [](const Segment& s, bool at_end) {
-        PlaneCurve c;
-        c.line = s.kind == SegmentKind::kLine;
-        c.tx = s.u[0];
-        c.ty = s.u[1];
-        c.ox = s.cx_mm;
-        c.oy = s.cy_mm;
-        c.rho = at_end ? s.r1_mm : s.r0_mm;
-        c.dir = s.dphi_rad >= 0.0 ? 1.0 : -1.0;
-        return c;
-      };
-      const PlaneCurve c0 = curve(s0, true), c1 = curve(s1, false);
-      const double sigma = cross2(t0[0], t0[1], t1[0], t1[1]) >= 0.0 ? 1.0 : -1.0;
-      make = [&, c0, c1, sigma](double R) { return plane_fillet(c0, c1, C, sigma, R, d0_max, d1_max); };
-      R_max = bisect_max(0.0, 4.0 * R_tol, [&](double R) {
-        const Fillet f = make(R);
-        return f.valid && f.deviation_mm <= P;
-      });
-    }
-    // The smallest arc that lets the slower neighbour's speed through (a
-    // larger one would only deviate more).
-    const double R = std::min(R_max, radius_for_speed(v_both, a_plane, j_plane));
-    if (!(R >= kMinBlendRadius_mm)) continue;
-    fillets[i] = make(R);
-    if (!fillets[i].valid) continue;
-    J.kind = JunctionKind::kBlend;
-    const PathLimits bl = arc_limits(1.0 / R, 0.0, std::min(v_both, min_of(v_lim)), a_plane, j_plane);
-    J.v_mm_per_s = bl.v_cap;
-  }
-
-  // 3. The planned moves: each programmed move trimmed by the blends at its
-  // ends, each blend arc split in two halves (the first reports the block
-  // before, the second the block after), and the junctions between them.
-  std::vector<Segment> segs;
-  std::vector<PathLimits> lims;
-  std::vector<Junction> junc;
-  std::vector<std::size_t> corner_seg(mj.size(), 0);  // blends: the second half; others: first segment after
-  JunctionKind pending = JunctionKind::kStop;
-  double pending_v = 0.0, pending_turn = 0.0;
-  auto push = [&](const Segment& s, const PathLimits& pl) {
-    if (!segs.empty()) {
-      Junction J;
-      J.kind = pending;
-      J.turn_rad = pending_turn;
-      J.v_mm_per_s = pending == JunctionKind::kStop ? 0.0 : pending_v;  // capped by both neighbours below
-      junc.push_back(J);
-    }
-    segs.push_back(s);
-    lims.push_back(pl);
-    pending = JunctionKind::kTangent;
-    pending_v = std::numeric_limits<double>::infinity();
-    pending_turn = 0.0;
-  };
-  auto blend_half = [&](std::size_t i, bool second) {
-    const Fillet& f = fillets[i];
-    const Segment& owner = moves[second ? i + 1 : i];
-    Segment h = owner;
-    h.kind = SegmentKind::kBlend;
-    h.c_mm = f.c_mm;
-    h.e1 = f.e1;
-    h.e2 = f.e2;
-    h.r0_mm = h.r1_mm = f.R_mm;
-    h.phi0_rad = second ? f.split_rad : 0.0;
-    h.dphi_rad = second ? f.sweep_rad - f.split_rad : f.split_rad;
-    h.length_mm = f.R_mm * h.dphi_rad;
-    for (std::size_t a = 0; a < kNumAxes; ++a) {
-      h.start_mm[a] = f.c_mm[a] + f.R_mm * (std::cos(h.phi0_rad) * f.e1[a] + std::sin(h.phi0_rad) * f.e2[a]);
-      const double p1 = h.phi0_rad + h.dphi_rad;
-      h.end_mm[a] = f.c_mm[a] + f.R_mm * (std::cos(p1) * f.e1[a] + std::sin(p1) * f.e2[a]);
-    }
-    return h;
-  };
-  for (std::size_t i = 0; i < nm; ++i) {
-    const bool blend_in = i > 0 && mj[i - 1].kind == JunctionKind::kBlend;
-    const bool blend_out = i + 1 < nm && mj[i].kind == JunctionKind::kBlend;
-    if (i > 0) {
-      pending = mj[i - 1].kind == JunctionKind::kBlend ? JunctionKind::kTangent : mj[i - 1].kind;
-      pending_v = mj[i - 1].kind == JunctionKind::kTangent ? mj[i - 1].v_mm_per_s
-                                                             : std::numeric_limits<double>::infinity();
-      pending_turn = mj[i - 1].kind == JunctionKind::kTangent ? mj[i - 1].turn_rad : 0.0;
-      corner_seg[i - 1] = segs.size();
-    }
-    Segment m = moves[i];
-    const double d_in = blend_in ? fillets[i - 1].d1_mm : 0.0;
-    const double d_out = blend_out ? fillets[i].d0_mm : 0.0;
-    const PathLimits pl = move_lims[i];
-    if (blend_in) {
-      Segment h = blend_half(i - 1, true);
-      push(h, PathLimits{});
-    }
-    if (m.kind == SegmentKind::kLine) {
-      m.start_mm = axpy(m.start_mm, d_in, m.u);
-      if (blend_out) m.end_mm = axpy(m.end_mm, -d_out, m.u);
-      m.length_mm -= d_in + d_out;
-    } else if (m.kind == SegmentKind::kArc && (d_in > 0.0 || d_out > 0.0)) {
-      // Planar arc: trim by angle, keeping the radius law r(lambda).
-      const double L = m.length_mm;
-      const double l0 = d_in / L, l1 = 1.0 - d_out / L;
-      const double r0 = m.r0_mm + (m.r1_mm - m.r0_mm) * l0, r1 = m.r0_mm + (m.r1_mm - m.r0_mm) * l1;
-      m.phi0_rad += m.dphi_rad * l0;
-      m.dphi_rad *= (l1 - l0);
-      m.r0_mm = r0;
-      m.r1_mm = r1;
-      m.length_mm = 0.5 * (r0 + r1) * std::abs(m.dphi_rad);
-      m.start_mm = {m.cx_mm + r0 * std::cos(m.phi0_rad), m.cy_mm + r0 * std::sin(m.phi0_rad), m.start_mm[2]};
-      if (blend_out) {
-        const double p1 = m.phi0_rad + m.dphi_rad;
-        m.end_mm = {m.cx_mm + r1 * std::cos(p1), m.cy_mm + r1 * std::sin(p1), m.end_mm[2]};
-      }
-    }
-    if (m.kind == SegmentKind::kDwell || m.length_mm >= kMinLength_mm) push(m, pl);
-    if (blend_out) push(blend_half(i, false), PathLimits{});
-  }
-  const std::size_t n = segs.size();
-  // Blend halves: the limits of their arc.
-  for (std::size_t k = 0; k < n; ++k) {
-    if (segs[k].kind != SegmentKind::kBlend) continue;
-    AxisArray<double> a_lim{}, j_lim{}, v_lim{};
-    for (std::size_t a = 0; a < kNumAxes; ++a) {
-      // The axes of the arc's plane (spanned by e1 and e2).
-      const bool used = std::abs(segs[k].e1[a]) > 1e-12 || std::abs(segs[k].e2[a]) > 1e-12;
-      const double inf = std::numeric_limits<double>::infinity();
-      a_lim[a] = used ? limits.a_max_mm_per_s2[a] : inf;
-      j_lim[a] = used ? limits.j_max_mm_per_s3[a] : inf;
-      v_lim[a] = used ? limits.v_max_mm_per_s[a] : inf;
-    }
-    lims[k] = arc_limits(1.0 / segs[k].r0_mm, 0.0, std::min(segs[k].feed_mm_per_s, min_of(v_lim)), min_of(a_lim),
-                         min_of(j_lim));
-  }
-  // Junction caps: both neighbours' speed caps.
-  for (std::size_t k = 0; k + 1 < n; ++k) {
-    if (junc[k].kind == JunctionKind::kStop) continue;
-    junc[k].v_mm_per_s = std::min({junc[k].v_mm_per_s, lims[k].v_cap, lims[k + 1].v_cap});
-  }
-
-  // 4. Look-ahead over the whole program: a backward and a forward pass over
-  // the pass-through junction speeds.
-  auto v_in = [&](std::size_t i) { return i == 0 ? 0.0 : junc[i - 1].v_mm_per_s; };
-  auto v_out = [&](std::size_t i) { return i + 1 == n ? 0.0 : junc[i].v_mm_per_s; };
-  for (std::size_t i = n - 1; n > 1 && i-- > 0;) {
-    if (junc[i].kind == JunctionKind::kStop) continue;
-    const PathLimits& pl = lims[i + 1];
-    junc[i].v_mm_per_s =
-        std::min(junc[i].v_mm_per_s, reachable_speed(v_out(i + 1), segs[i + 1].length_mm, pl.a, pl.j, pl.v_cap));
-  }
-  for (std::size_t i = 0; i + 1 < n; ++i) {
-    if (junc[i].kind == JunctionKind::kStop) continue;
-    const PathLimits& pl = lims[i];
-    junc[i].v_mm_per_s = std::min(junc[i].v_mm_per_s, reachable_speed(v_in(i), segs[i].length_mm, pl.a, pl.j, pl.v_cap));
-  }
-
-  // 5. Time laws, one after the other.
-  double t_s = 0.0;
-  for (std::size_t i = 0; i < n; ++i) {
-    Segment& s = segs[i];
-    s.first_piece = traj.pieces_.size();
-    s.t_start_s = t_s;
-    double duration_s = 0.0;
-    if (s.kind == SegmentKind::kDwell) {
-      duration_s = blocks[static_cast<std::size_t>(s.block)].dwell_s;
-    } else {
-      const PathLimits& pl = lims[i];
-      const double L = s.length_mm;
-      const double v0 = v_in(i), v1 = v_out(i);
-      const double v_top = std::max({v0, v1, pl.v_cap});
-      auto needed = [&](double v) { return transition_distance(v0, v, pl.a, pl.j) + transition_distance(v, v1, pl.a, pl.j); };
-      TWIN_DEMAND(needed(std::max(v0, v1)) <= L + 1e-9 * std::max(1.0, L));
-      const double peak = bisect_max(std::max(v0, v1), v_top, [&](double v) { return needed(v) <= L; });
-      LawBuilder law(traj.pieces_, t_s, v0);
-      law.transition_to(peak, pl.a, pl.j);
-      law.cruise(L - needed(peak));
-      law.transition_to(v1, pl.a, pl.j);
-      duration_s = law.t_s() - t_s;
-    }
-    s.t_end_s = t_s + duration_s;
-    const int line = blocks[static_cast<std::size_t>(s.block)].line;
-    if (!std::isfinite(duration_s))
-      throw ConfigError(fmt::format("{}:{}: the planned duration of this move is not finite ({} s)",
-                                    program.source_name, line, duration_s));
-    if (!(s.t_end_s / Ts_s < kMaxTicks))
-      throw ConfigError(fmt::format("{}:{}: the program's planned duration reaches {:.6g} s here, {:.3g} ticks of "
-                                    "{} s: more than a run can count",
-                                    program.source_name, line, s.t_end_s, s.t_end_s / Ts_s, Ts_s));
-    s.num_pieces = traj.pieces_.size() - s.first_piece;
-    t_s = s.t_end_s;
-  }
-  traj.duration_s_ = t_s;
-  traj.segments_ = std::move(segs);
-  const auto& S = traj.segments_;
-
-  // 6. Block timings and corners.
-  traj.block_timings_.resize(blocks.size());
-  double cursor_s = 0.0;
-  std::size_t next_seg = 0;
-  for (std::size_t bi = 0; bi < blocks.size(); ++bi) {
-    BlockTiming& bt = traj.block_timings_[bi];
-    bt.feed_programmed_mm_per_s = blocks[bi].kind == MotionKind::kDwell ? 0.0 : blocks[bi].feed_mm_per_min / kSPerMin;
-    bt.t_start_s = bt.t_end_s = cursor_s;
-    bool first = true;
-    while (next_seg < n && S[next_seg].block == static_cast<int>(bi)) {
-      const Segment& s = S[next_seg++];
-      if (first) bt.t_start_s = s.t_start_s;
-      first = false;
-      bt.t_end_s = s.t_end_s;
-      bt.length_mm += s.length_mm;
-      cursor_s = s.t_end_s;
-    }
-  }
-  for (std::size_t i = 0; i + 1 < nm; ++i) {
-    const Segment& s0 = moves[i];
-    if (s0.kind == SegmentKind::kDwell) continue;
-    std::size_t k = i + 1;
-    bool dwell_between = false;
-    while (k < nm && moves[k].kind == SegmentKind::kDwell) {
-      dwell_between = true;
-      ++k;
-    }
-    if (k >= nm) break;
-    const Segment& s1 = moves[k];
-    const double turn = angle_between(exit_tangent(s0), entry_tangent(s1));
-    if (turn * kDegPerRad <= kCornerReportAngle_deg) continue;
-    Corner c;
-    c.block_before = s0.block;
-    c.block_after = s1.block;
-    c.turn_angle_deg = turn * kDegPerRad;
-    c.p_mm = s0.end_mm;
-    const Junction& J = mj[i];
-    c.exact_stop = dwell_between || J.kind == JunctionKind::kStop;
-    const std::size_t at = corner_seg[i];
-    c.t_s = at < n ? S[at].t_start_s : traj.duration_s_;
-    c.t_blend_begin_s = c.t_blend_end_s = c.t_s;
-    if (!dwell_between && J.kind == JunctionKind::kBlend) {
-      c.blend_radius_mm = fillets[i].R_mm;
-      c.t_blend_begin_s = S[at - 1].t_start_s;
-      c.t_blend_end_s = S[at].t_end_s;
-    } else if (dwell_between) {
-      c.t_s = S[at - 1].t_end_s;  // before the dwell
-      c.t_blend_begin_s = c.t_blend_end_s = c.t_s;
-    }
-    const ReferenceSample r = traj.at_time(c.t_s);
-    c.v_ref_mm_per_s = dwell_between ? 0.0 : r.path_speed_mm_per_s;
-    c.deviation_mm = J.kind == JunctionKind::kBlend && !dwell_between ? fillets[i].deviation_mm : norm3(r.x_mm - c.p_mm);
-    traj.corners_.push_back(c);
-  }
+  const ProgrammedMoves pm = programmed_moves(program, limits);
+  const Junctions jn = plan_junctions(program, pm, limits, Ts_s);
+  PlannedPath path = assemble_path(pm, jn);
+  limit_path(path, limits);
+  look_ahead(path);
+  traj.duration_s_ = time_laws(program, path, Ts_s, traj.pieces_);
+  traj.segments_ = std::move(path.segs);
+  traj.block_timings_ = block_timings(program, traj.segments_);
+  traj.corners_ = find_corners(traj, pm, jn, path.corner_seg);
   return traj;
 }
 

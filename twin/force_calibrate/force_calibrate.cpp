@@ -276,40 +276,45 @@ double cut_length_at(const Prep& p, double t_s) { return p.L0_mm + p.v_mm_per_s 
 bool is_fit_rev(int r) { return r >= 0 && r % 2 == 0; }
 bool is_held_rev(int r) { return r >= 0 && r % 2 == 1; }
 
-Prep prepare(const ForceRun& run, std::vector<std::string>& notes) {
-  Prep p;
-  p.run = &run;
-  const ForceCut& cut = run.cut;
-  p.f_rev_hz = cut.spindle_rpm / 60.0;
-  p.fs_hz = 1.0 / run.sample_period_s;
-  p.has_angle = !run.spindle_deg.empty();
-  p.has_fz = !run.F_N[2].empty();
-  p.v_mm_per_s = cut.feed_mm_per_min / 60.0;
+/// The force channels a run has: x and y, and z where logged.
+int force_axes(const Prep& p) { return p.has_fz ? 3 : 2; }
+
+/// Baseline (median) and noise (1.4826 MAD, at least 1e-3 N) of each force channel
+/// over the run's first n_first samples.
+struct AirNoise {
+  std::array<double, 3> baseline_N{};
+  std::array<double, 3> sigma_N{};
+};
+
+AirNoise air_noise(const ForceRun& run, int na, std::size_t n_first) {
+  AirNoise out;
   const std::size_t n = run.t_s.size();
-  const double spr = p.fs_hz / p.f_rev_hz;   // samples per revolution
-  if (spr < 8.0)
-    throw ConfigError(fmt::format("{}: {} samples per spindle revolution ({} Hz log, {} rpm): too few to see the tooth "
-                                  "pattern (need >= 8)",
-                                  run.dir.string(), spr, p.fs_hz, cut.spindle_rpm));
-  p.K = std::max(1, std::min(static_cast<int>(std::floor(0.5 * p.fs_hz / p.f_rev_hz - 1e-9)), 60));
-  const int na = p.has_fz ? 3 : 2;
-  auto F = [&](int a, std::size_t k) { return run.F_N[static_cast<std::size_t>(a)][k]; };
-  // Air: baseline and noise from the first samples.
-  const std::size_t n_first = std::clamp<std::size_t>(static_cast<std::size_t>(0.5 * spr), 20, std::max<std::size_t>(20, n / 10));
-  std::array<double, 3> b{}, sig{};
   for (int a = 0; a < na; ++a) {
     std::vector<double> v(run.F_N[a].begin(), run.F_N[a].begin() + static_cast<std::ptrdiff_t>(std::min(n_first, n)));
-    b[a] = median(v);
-    for (double& x : v) x = std::abs(x - b[a]);
-    sig[a] = std::max(1.4826 * median(v), 1e-3);
+    out.baseline_N[a] = median(v);
+    for (double& x : v) x = std::abs(x - out.baseline_N[a]);
+    out.sigma_N[a] = std::max(1.4826 * median(v), 1e-3);
   }
+  return out;
+}
+
+/// Where the cut is in a run's samples.
+struct CutSpan {
+  std::size_t entry{0};  ///< its first sample
+  std::size_t exit{0};   ///< the sample after its last one
+};
+
+/// The cut: from the first sample beyond 8 sigma of the air's noise followed within a
+/// revolution (`look` samples) by at least a quarter more, to the last beyond it.
+CutSpan find_cut(const ForceRun& run, int na, const AirNoise& air, std::size_t look) {
+  const std::size_t n = run.t_s.size();
   auto dev = [&](std::size_t k) {
     double s = 0.0;
-    for (int a = 0; a < na; ++a) s += std::pow((F(a, k) - b[a]) / sig[a], 2);
+    for (int a = 0; a < na; ++a)
+      s += std::pow((run.F_N[static_cast<std::size_t>(a)][k] - air.baseline_N[a]) / air.sigma_N[a], 2);
     return std::sqrt(s);
   };
   const double thr = 8.0;
-  const std::size_t look = static_cast<std::size_t>(std::ceil(spr));
   std::size_t entry = n;
   for (std::size_t k = 0; k < n; ++k) {
     if (dev(k) <= thr) continue;
@@ -328,49 +333,62 @@ Prep prepare(const ForceRun& run, std::vector<std::string>& notes) {
       exit = k + 1;
       break;
     }
-  const double T = 1.0 / p.f_rev_hz;
-  const double guard_s = std::max(0.25 * T, 0.005);
-  p.zero.t_entry_s = run.t_s[entry];
-  p.zero.t_exit_s = exit < n ? run.t_s[exit] : run.t_s.back();
-  p.air_before = entry >= n_first / 2 && entry >= 10;
-  // Air before: up to a few samples before the entry.
-  std::size_t air_end = entry > 5 ? entry - 5 : 0;
-  if (p.air_before) {
-    double tm = 0.0;
-    for (std::size_t k = 0; k < air_end; ++k) {
-      tm += run.t_s[k];
-      for (int a = 0; a < na; ++a) p.air_mean_N[a] += F(a, k);
-    }
-    tm /= static_cast<double>(air_end);
-    for (int a = 0; a < na; ++a) p.air_mean_N[a] /= static_cast<double>(air_end);
-    p.t_air_mean_s = tm;
-    std::array<double, 3> var{};
-    for (std::size_t k = 0; k < air_end; ++k)
-      for (int a = 0; a < na; ++a) var[a] += std::pow(F(a, k) - p.air_mean_N[a], 2);
-    double nz = 0.0;
-    for (int a = 0; a < na; ++a) nz += var[a] / static_cast<double>(air_end);
-    p.zero.noise_N = std::sqrt(nz / na);
-  } else {
+  return CutSpan{entry, exit};
+}
+
+/// Mean force and time of the air before the cut (up to 5 samples before its entry)
+/// and the noise there; without that air, the noise of the first samples.
+void measure_air_before(Prep& p, std::size_t entry, const AirNoise& air, std::vector<std::string>& notes) {
+  const ForceRun& run = *p.run;
+  const int na = force_axes(p);
+  const std::size_t air_end = entry > 5 ? entry - 5 : 0;
+  double nz = 0.0;
+  if (!p.air_before) {
     notes.push_back(fmt::format("{}: no air before the cut: the zero offset cannot be measured and is taken as 0 N",
                                 run.name));
-    double nz = 0.0;
-    for (int a = 0; a < na; ++a) nz += sig[a] * sig[a];
+    for (int a = 0; a < na; ++a) nz += air.sigma_N[a] * air.sigma_N[a];
     p.zero.noise_N = std::sqrt(nz / na);
+    return;
   }
-  // Air after the cut.
-  const std::size_t after0 = exit + static_cast<std::size_t>(std::ceil(guard_s * p.fs_hz));
-  if (exit < n && after0 + 20 <= n) {
-    p.air_after = true;
-    double tm = 0.0;
-    for (std::size_t k = after0; k < n; ++k) {
-      tm += run.t_s[k];
-      for (int a = 0; a < na; ++a) p.air_after_mean_N[a] += F(a, k);
-    }
-    const double cnt = static_cast<double>(n - after0);
-    p.t_air_after_mean_s = tm / cnt;
-    for (int a = 0; a < na; ++a) p.air_after_mean_N[a] /= cnt;
+  double tm = 0.0;
+  for (std::size_t k = 0; k < air_end; ++k) {
+    tm += run.t_s[k];
+    for (int a = 0; a < na; ++a) p.air_mean_N[a] += run.F_N[static_cast<std::size_t>(a)][k];
   }
-  // Steady window: past the entry (the arc grows over one revolution) and its ringing, short of the exit.
+  tm /= static_cast<double>(air_end);
+  for (int a = 0; a < na; ++a) p.air_mean_N[a] /= static_cast<double>(air_end);
+  p.t_air_mean_s = tm;
+  std::array<double, 3> var{};
+  for (std::size_t k = 0; k < air_end; ++k)
+    for (int a = 0; a < na; ++a) var[a] += std::pow(run.F_N[static_cast<std::size_t>(a)][k] - p.air_mean_N[a], 2);
+  for (int a = 0; a < na; ++a) nz += var[a] / static_cast<double>(air_end);
+  p.zero.noise_N = std::sqrt(nz / na);
+}
+
+/// Mean force and time of the air after the cut (from `after0`), where there are at
+/// least 20 samples of it.
+void measure_air_after(Prep& p, std::size_t exit, std::size_t after0) {
+  const ForceRun& run = *p.run;
+  const std::size_t n = run.t_s.size();
+  if (!(exit < n && after0 + 20 <= n)) return;
+  p.air_after = true;
+  double tm = 0.0;
+  for (std::size_t k = after0; k < n; ++k) {
+    tm += run.t_s[k];
+    for (int a = 0; a < force_axes(p); ++a) p.air_after_mean_N[a] += run.F_N[static_cast<std::size_t>(a)][k];
+  }
+  const double cnt = static_cast<double>(n - after0);
+  p.t_air_after_mean_s = tm / cnt;
+  for (int a = 0; a < force_axes(p); ++a) p.air_after_mean_N[a] /= cnt;
+}
+
+/// The steady window (past the entry, whose arc grows over one revolution, and its
+/// ringing; short of the exit) in whole revolutions, and each sample's angle and
+/// steady revolution.
+void steady_revolutions(Prep& p, double guard_s) {
+  const ForceRun& run = *p.run;
+  const std::size_t n = run.t_s.size();
+  const double T = 1.0 / p.f_rev_hz;
   p.zero.t_steady_begin_s = p.zero.t_entry_s + 2.0 * T + guard_s;
   p.zero.t_steady_end_s = p.air_after ? p.zero.t_exit_s - T : run.t_s.back() + 0.5 * run.sample_period_s;
   p.zero.revolutions = static_cast<int>(std::floor((p.zero.t_steady_end_s - p.zero.t_steady_begin_s) / T));
@@ -386,6 +404,36 @@ Prep prepare(const ForceRun& run, std::vector<std::string>& notes) {
     const double u = (run.t_s[k] - p.zero.t_steady_begin_s) / T;
     if (u >= 0.0 && u < p.zero.revolutions) p.rev[k] = static_cast<int>(std::floor(u));
   }
+}
+
+Prep prepare(const ForceRun& run, std::vector<std::string>& notes) {
+  Prep p;
+  p.run = &run;
+  const ForceCut& cut = run.cut;
+  p.f_rev_hz = cut.spindle_rpm / 60.0;
+  p.fs_hz = 1.0 / run.sample_period_s;
+  p.has_angle = !run.spindle_deg.empty();
+  p.has_fz = !run.F_N[2].empty();
+  p.v_mm_per_s = cut.feed_mm_per_min / 60.0;
+  const std::size_t n = run.t_s.size();
+  const double spr = p.fs_hz / p.f_rev_hz;   // samples per revolution
+  if (spr < 8.0)
+    throw ConfigError(fmt::format("{}: {} samples per spindle revolution ({} Hz log, {} rpm): too few to see the tooth "
+                                  "pattern (need >= 8)",
+                                  run.dir.string(), spr, p.fs_hz, cut.spindle_rpm));
+  p.K = std::max(1, std::min(static_cast<int>(std::floor(0.5 * p.fs_hz / p.f_rev_hz - 1e-9)), 60));
+  // Air: baseline and noise from the first samples.
+  const std::size_t n_first = std::clamp<std::size_t>(static_cast<std::size_t>(0.5 * spr), 20, std::max<std::size_t>(20, n / 10));
+  const AirNoise air = air_noise(run, force_axes(p), n_first);
+  const CutSpan cut_span = find_cut(run, force_axes(p), air, static_cast<std::size_t>(std::ceil(spr)));
+  const std::size_t entry = cut_span.entry, exit = cut_span.exit;
+  const double guard_s = std::max(0.25 * (1.0 / p.f_rev_hz), 0.005);
+  p.zero.t_entry_s = run.t_s[entry];
+  p.zero.t_exit_s = exit < n ? run.t_s[exit] : run.t_s.back();
+  p.air_before = entry >= n_first / 2 && entry >= 10;
+  measure_air_before(p, entry, air, notes);
+  measure_air_after(p, exit, exit + static_cast<std::size_t>(std::ceil(guard_s * p.fs_hz)));
+  steady_revolutions(p, guard_s);
   return p;
 }
 
@@ -1228,15 +1276,18 @@ std::string percent(double v) { return fmt::format("{:.2f} %", 100.0 * v); }
 
 }  // namespace
 
-ForceCalibration calibrate_forces(const std::vector<ForceRun>& runs, const ForceCalibrationOptions& opt) {
-  if (runs.empty()) throw ConfigError("calibrate: no force run");
-  ForceCalibration R;
+namespace {
+
+using Prediction = std::array<std::vector<double>, 3>;
+
+/// Each run prepared, its cut length at entry the sum of the runs before, with a
+/// zero offset and drift without wear and its synchronous average.
+std::vector<Prep> prepare_runs(const std::vector<ForceRun>& runs, ForceCalibration& R) {
   std::vector<Prep> preps;
   for (const auto& r : runs) {
     preps.push_back(prepare(r, R.notes));
     R.runs.push_back(r.name);
   }
-  R.material = runs.front().cut.material;
   double L = 0.0;
   for (Prep& p : preps) {
     p.L0_mm = L;
@@ -1244,333 +1295,392 @@ ForceCalibration calibrate_forces(const std::vector<ForceRun>& runs, const Force
     set_zero(p, 0.0, {});
     make_bins(p);
   }
-  Identifier id(preps, opt, R.notes);
-  const std::size_t n = preps.size();
+  return preps;
+}
 
-  // Altintas' average-force regression: revolution means against the model's means (runout 0).
-  {
-    id.sm().build({}, 0.0, kLinearRegressors);
-    std::vector<std::array<double, 7>> rows;
-    for (std::size_t i = 0; i < n; ++i)
-      for (int a = 0; a < (preps[i].has_fz ? 3 : 2); ++a) {
-        std::array<double, 7> r{};
-        for (int q = 0; q < 6; ++q) r[q] = id.sm().mean_regressor(i, q, a);
-        r[6] = preps[i].mean_fit_N[a];
-        rows.push_back(r);
-      }
-    Eigen::MatrixXd A(rows.size(), 6);
-    Eigen::VectorXd y(rows.size());
-    for (std::size_t r = 0; r < rows.size(); ++r) {
-      for (int q = 0; q < 6; ++q) A(r, q) = rows[r][q];
-      y(r) = rows[r][6];
+/// Altintas' average-force regression: revolution means against the model's means (runout 0).
+void average_force_regression(Identifier& id, const std::vector<Prep>& preps, ForceCalibration& R) {
+  id.sm().build({}, 0.0, kLinearRegressors);
+  std::vector<std::array<double, 7>> rows;
+  for (std::size_t i = 0; i < preps.size(); ++i)
+    for (int a = 0; a < force_axes(preps[i]); ++a) {
+      std::array<double, 7> r{};
+      for (int q = 0; q < 6; ++q) r[q] = id.sm().mean_regressor(i, q, a);
+      r[6] = preps[i].mean_fit_N[a];
+      rows.push_back(r);
     }
-    // Columns without information (e.g. one feed only) are left at 0 with an infinite error.
-    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A);
-    const Eigen::VectorXd x = qr.solve(y);
-    for (int q = 0; q < 3; ++q) {
-      R.average_force.a[q] = x(q);
-      R.average_force.e[q] = x(3 + q);
-    }
-    const double dof = static_cast<double>(rows.size()) - 6.0;
-    if (dof > 0.0 && qr.rank() == 6) {
-      const double s2 = (y - A * x).squaredNorm() / dof;
-      const Eigen::MatrixXd cov = (A.transpose() * A).inverse() * s2;
-      for (int q = 0; q < 6; ++q) R.average_force_stderr[q] = std::sqrt(std::max(0.0, cov(q, q)));
-    } else {
-      R.average_force_stderr.fill(std::numeric_limits<double>::infinity());
-      R.notes.push_back(fmt::format("average-force regression: {} equations for 6 coefficients (rank {}): standard "
-                                    "errors not available; use more feeds",
-                                    rows.size(), qr.rank()));
-    }
+  Eigen::MatrixXd A(rows.size(), 6);
+  Eigen::VectorXd y(rows.size());
+  for (std::size_t r = 0; r < rows.size(); ++r) {
+    for (int q = 0; q < 6; ++q) A(r, q) = rows[r][q];
+    y(r) = rows[r][6];
   }
+  // Columns without information (e.g. one feed only) are left at 0 with an infinite error.
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A);
+  const Eigen::VectorXd x = qr.solve(y);
+  for (int q = 0; q < 3; ++q) {
+    R.average_force.a[q] = x(q);
+    R.average_force.e[q] = x(3 + q);
+  }
+  const double dof = static_cast<double>(rows.size()) - 6.0;
+  if (dof > 0.0 && qr.rank() == 6) {
+    const double s2 = (y - A * x).squaredNorm() / dof;
+    const Eigen::MatrixXd cov = (A.transpose() * A).inverse() * s2;
+    for (int q = 0; q < 6; ++q) R.average_force_stderr[q] = std::sqrt(std::max(0.0, cov(q, q)));
+  } else {
+    R.average_force_stderr.fill(std::numeric_limits<double>::infinity());
+    R.notes.push_back(fmt::format("average-force regression: {} equations for 6 coefficients (rank {}): standard "
+                                  "errors not available; use more feeds",
+                                  rows.size(), qr.rank()));
+  }
+}
 
-  // Base model: linear coefficients, sensor delay (or the phase of runs without spindle_deg).
-  ForceModel m;
-  m.phi0_deg.assign(n, 0.0);
-  id.fit_phase(m);
-  Evaluated cur = id.evaluate(m);
-  R.before = cur.fit.model;
-  R.error_before = cur.err;
-  R.noise_floor = id.noise_floor();
+/// The mean of the axes' noise floors (those logged).
+double mean_noise_floor(const std::array<double, 3>& floor) {
   double floor_E = 0.0;
-  {
-    int na = 0;
-    for (int a = 0; a < 3; ++a)
-      if (R.noise_floor[a] > 0.0) {
-        floor_E += R.noise_floor[a];
-        ++na;
-      }
-    floor_E /= std::max(1, na);
-  }
+  int na = 0;
+  for (int a = 0; a < 3; ++a)
+    if (floor[a] > 0.0) {
+      floor_E += floor[a];
+      ++na;
+    }
+  return floor_E / std::max(1, na);
+}
 
-  auto accept = [&](const Evaluated& cand, const Evaluated& old, std::string& why) {
+/// The catalogue's effects tried one after the other on the current model `cur`:
+/// each is recorded with its held-out errors and kept only where it lowers them.
+class EffectSearch {
+ public:
+  EffectSearch(ForceCalibration& R, Evaluated cur, double floor_E) : R_(R), cur_(std::move(cur)), floor_E_(floor_E) {}
+  const Evaluated& current() const { return cur_; }
+
+  /// No axis's held-out error rises, and the mean falls by 2 % of it or a tenth of its
+  /// excess over the noise floor, whichever is more.
+  bool accept(const Evaluated& cand, std::string& why) const {
+    const Evaluated& old = cur_;
     for (int a = 0; a < 3; ++a)
       if (cand.err[a] > old.err[a] * (1.0 + 1e-3) + 1e-6) {
         why = fmt::format("{} held-out error would rise {} -> {}", kAxisNames[a], percent(old.err[a]), percent(cand.err[a]));
         return false;
       }
-    const double need = std::max(0.02 * old.E, 0.1 * (old.E - floor_E));
+    const double need = std::max(0.02 * old.E, 0.1 * (old.E - floor_E_));
     if (old.E - cand.E < need) {
       why = fmt::format("mean held-out error {} -> {}: less than the {} needed (2 % of it, or a tenth of its excess over "
                         "the noise floor {})",
-                        percent(old.E), percent(cand.E), percent(need), percent(floor_E));
+                        percent(old.E), percent(cand.E), percent(need), percent(floor_E_));
       return false;
     }
-    why = fmt::format("mean held-out error {} -> {} (noise floor {})", percent(old.E), percent(cand.E), percent(floor_E));
+    why = fmt::format("mean held-out error {} -> {} (noise floor {})", percent(old.E), percent(cand.E), percent(floor_E_));
     return true;
-  };
+  }
 
-  auto record = [&](const std::string& effect, const Evaluated& cand, bool ok, const std::string& why,
-                    const nlohmann::json& params) {
-    R.candidates.push_back({{"effect", effect}, {"accepted", ok}, {"params", params}, {"error_held_out", axes_json(cand.err)},
-                            {"reason", why}});
-  };
+  /// Records candidate `effect`; when `ok`, adds it (evidence: `evidence` then why) and
+  /// makes it the current model.
+  void decide(const std::string& effect, const Evaluated& cand, bool ok, const std::string& why,
+              const nlohmann::json& params, const std::string& evidence) {
+    R_.candidates.push_back({{"effect", effect}, {"accepted", ok}, {"params", params},
+                             {"error_held_out", axes_json(cand.err)}, {"reason", why}});
+    if (!ok) return;
+    R_.added.push_back({effect, params, evidence + "; " + why});
+    cur_ = cand;
+  }
 
-  // runout
-  {
-    const ForceModel cm = id.fit_runout(cur.fit.model);
+  /// Tries `effect` fitted as `cm` on the current model.
+  template <typename Params, typename Evidence>
+  bool consider(Identifier& id, const std::string& effect, const ForceModel& cm, Params&& params,
+                Evidence&& evidence) {
     const Evaluated cand = id.evaluate(cm);
     std::string why;
-    const bool ok = accept(cand, cur, why);
-    const nlohmann::json params = {{"rho_mm", cand.fit.model.runout.rho_mm},
-                                   {"lambda_deg", cand.fit.model.runout.lambda_deg}};
-    record("runout", cand, ok, why, params);
-    if (ok) {
-      R.added.push_back({"runout", params,
-                         fmt::format("rho {:.4f} mm at lambda {:.1f} deg from the per-revolution pattern ({}); {}",
-                                     cand.fit.model.runout.rho_mm, cand.fit.model.runout.lambda_deg,
-                                     preps.front().has_angle ? "spindle_deg" : "tooth pattern", why)});
-      cur = cand;
-    }
+    const bool ok = accept(cand, why);
+    decide(effect, cand, ok, why, params(cand.fit.model), evidence(cand.fit.model));
+    return ok;
   }
-  // sensor_resonance
-  {
-    const ForceModel cm = id.fit_mode(cur.fit.model);
-    const Evaluated cand = id.evaluate(cm);
+
+  /// tool_wear (last: it changes the drift); kept only when the coefficients grow with
+  /// cut length, else the zero goes back to no wear.
+  void consider_wear(Identifier& id) {
+    const Evaluated cand = id.evaluate(id.fit_wear(cur_.fit.model));
     std::string why;
-    const bool ok = accept(cand, cur, why);
-    const nlohmann::json params = {{"f_hz", cand.fit.model.mode->f_hz}, {"zeta", cand.fit.model.mode->zeta},
-                                   {"model", "H(s) = wn^2/(s^2 + 2 zeta wn s + wn^2) on fx, fy, fz"}};
-    record("sensor_resonance", cand, ok, why, params);
-    if (ok) {
-      R.added.push_back({"sensor_resonance", params,
-                         fmt::format("a sensor mode at {:.0f} Hz, zeta {:.3f}, in the force output; {}",
-                                     cand.fit.model.mode->f_hz, cand.fit.model.mode->zeta, why)});
-      cur = cand;
-    }
-  }
-  // size_effect
-  {
-    const ForceModel cm = id.fit_exponential(cur.fit.model, id.all());
-    const Evaluated cand = id.evaluate(cm);
-    std::string why;
-    const bool ok = accept(cand, cur, why);
-    const nlohmann::json params = coefficients_json(cand.fit.model.k);
-    record("size_effect", cand, ok, why, params);
-    if (ok) {
-      R.added.push_back({"size_effect", params,
-                         fmt::format("K(h) = a + b exp(-c h), c = {:.1f} 1/mm (Duan 2025 eq. 1); {}",
-                                     cand.fit.model.k.c_per_mm, why)});
-      cur = cand;
-    }
-  }
-  // tool_wear (last: it changes the drift)
-  {
-    const ForceModel cm = id.fit_wear(cur.fit.model);
-    const Evaluated cand = id.evaluate(cm);
-    std::string why;
-    bool ok = accept(cand, cur, why);
+    bool ok = accept(cand, why);
     if (ok && cand.fit.model.wear_per_mm <= 0.0) {
       ok = false;
       why += "; but the coefficients fall with cut length (not wear)";
     }
-    const nlohmann::json params = {{"wear_per_mm", cand.fit.model.wear_per_mm},
-                                   {"L_ref_mm", cand.fit.model.wear_L_ref_mm},
+    const ForceModel& m = cand.fit.model;
+    const nlohmann::json params = {{"wear_per_mm", m.wear_per_mm},
+                                   {"L_ref_mm", m.wear_L_ref_mm},
                                    {"law", "K(L) = K(L_ref) (1 + w (L - L_ref)), L the cut length along the feed"}};
-    record("tool_wear", cand, ok, why, params);
-    if (ok) {
-      R.added.push_back({"tool_wear", params,
-                         fmt::format("coefficients grow {:.3f} % per mm of cut; {}", 100.0 * cand.fit.model.wear_per_mm, why)});
-      cur = cand;
-    } else {
-      id.reset_zero(0.0);
+    decide("tool_wear", cand, ok, why, params,
+           fmt::format("coefficients grow {:.3f} % per mm of cut", 100.0 * m.wear_per_mm));
+    if (!ok) id.reset_zero(0.0);
+  }
+
+ private:
+  ForceCalibration& R_;
+  Evaluated cur_;
+  double floor_E_;
+};
+
+/// runout, sensor_resonance, size_effect and tool_wear, in that order, from `base`.
+Evaluated search_effects(Identifier& id, const std::vector<Prep>& preps, ForceCalibration& R, const Evaluated& base) {
+  EffectSearch search(R, base, mean_noise_floor(R.noise_floor));
+  const char* pattern = preps.front().has_angle ? "spindle_deg" : "tooth pattern";
+  search.consider(
+      id, "runout", id.fit_runout(search.current().fit.model),
+      [](const ForceModel& m) {
+        return nlohmann::json{{"rho_mm", m.runout.rho_mm}, {"lambda_deg", m.runout.lambda_deg}};
+      },
+      [&](const ForceModel& m) {
+        return fmt::format("rho {:.4f} mm at lambda {:.1f} deg from the per-revolution pattern ({})", m.runout.rho_mm,
+                           m.runout.lambda_deg, pattern);
+      });
+  search.consider(
+      id, "sensor_resonance", id.fit_mode(search.current().fit.model),
+      [](const ForceModel& m) {
+        return nlohmann::json{{"f_hz", m.mode->f_hz}, {"zeta", m.mode->zeta},
+                              {"model", "H(s) = wn^2/(s^2 + 2 zeta wn s + wn^2) on fx, fy, fz"}};
+      },
+      [](const ForceModel& m) {
+        return fmt::format("a sensor mode at {:.0f} Hz, zeta {:.3f}, in the force output", m.mode->f_hz, m.mode->zeta);
+      });
+  search.consider(
+      id, "size_effect", id.fit_exponential(search.current().fit.model, id.all()),
+      [](const ForceModel& m) { return coefficients_json(m.k); },
+      [](const ForceModel& m) {
+        return fmt::format("K(h) = a + b exp(-c h), c = {:.1f} 1/mm (Duan 2025 eq. 1)", m.k.c_per_mm);
+      });
+  search.consider_wear(id);
+  return search.current();
+}
+
+/// Duan's exponential K(h) over all feeds and per feed (runout and sensor path as identified).
+void exponential_per_feed(Identifier& id, const std::vector<Prep>& preps, ForceCalibration& R) {
+  ForceModel e = id.fit_exponential(R.after, id.all());
+  R.exponential_joint = id.solve(e, id.all()).model.k;
+  for (std::size_t i = 0; i < preps.size(); ++i) {
+    FeedResult fr;
+    fr.run = preps[i].run->name;
+    fr.fz_mm = preps[i].run->cut.feed_per_tooth_mm();
+    const std::vector<int> one{static_cast<int>(i)};
+    ForceModel ei = id.fit_exponential(R.after, one);
+    id.sm().build(ei.runout, ei.k.c_per_mm, kExpRegressors, &one);
+    fr.exponential = id.sm().solve(ei, one).model.k;
+    R.feeds.push_back(fr);
+  }
+}
+
+/// Measured and model forces of a run's steady revolutions in 360 bins of the
+/// spindle angle (sums and counts), and their means.
+struct RevolutionBins {
+  static constexpr int B = 360;
+  std::vector<double> w = std::vector<double>(B, 0.0), th = std::vector<double>(B, 0.0);
+  std::array<std::vector<double>, 3> bm, bp;
+
+  RevolutionBins(const Prep& p, const Prediction& pred, FeedResult& fr) {
+    for (int a = 0; a < 3; ++a) {
+      bm[a].assign(B, 0.0);
+      bp[a].assign(B, 0.0);
+    }
+    std::array<double, 3> sm{}, smod{};
+    double cnt = 0.0;
+    for (std::size_t k = 0; k < p.theta.size(); ++k) {
+      if (p.rev[k] < 0) continue;
+      double t = std::fmod(p.theta[k], kTwoPi);
+      if (t < 0.0) t += kTwoPi;
+      const int bi = std::min(B - 1, static_cast<int>(t / kTwoPi * B));
+      w[bi] += 1.0;
+      th[bi] += t;
+      cnt += 1.0;
+      for (int a = 0; a < force_axes(p); ++a) {
+        const double g = zeroed(p, a, k);
+        bm[a][bi] += g;
+        bp[a][bi] += pred[a][k];
+        sm[a] += g;
+        smod[a] += pred[a][k];
+      }
+    }
+    for (int a = 0; a < 3; ++a) {
+      fr.mean_measured_N[a] = sm[a] / cnt;
+      fr.mean_model_N[a] = smod[a] / cnt;
     }
   }
+};
+
+/// One revolution of measured and model (bin means), its peak-to-peak and its
+/// spindle-frequency line.
+void revolution_shape(const RevolutionBins& bins, FeedResult& fr) {
+  std::array<cd, 3> h1m{}, h1p{};
+  std::array<double, 3> lo, hi, lop, hip;
+  lo.fill(1e300);
+  hi.fill(-1e300);
+  lop.fill(1e300);
+  hip.fill(-1e300);
+  double wsum = 0.0;
+  for (int bi = 0; bi < RevolutionBins::B; ++bi) {
+    if (bins.w[bi] <= 0.0) continue;
+    const double t = bins.th[bi] / bins.w[bi];
+    fr.rev_theta_deg.push_back(t * 180.0 / kPi);
+    wsum += 1.0;
+    for (int a = 0; a < 3; ++a) {
+      const double vm = bins.bm[a][bi] / bins.w[bi], vp = bins.bp[a][bi] / bins.w[bi];
+      fr.rev_measured_N[a].push_back(vm);
+      fr.rev_model_N[a].push_back(vp);
+      h1m[a] += vm * std::polar(1.0, -t);
+      h1p[a] += vp * std::polar(1.0, -t);
+      lo[a] = std::min(lo[a], vm);
+      hi[a] = std::max(hi[a], vm);
+      lop[a] = std::min(lop[a], vp);
+      hip[a] = std::max(hip[a], vp);
+    }
+  }
+  for (int a = 0; a < 3; ++a) {
+    fr.p2p_measured_N[a] = hi[a] - lo[a];
+    fr.p2p_model_N[a] = hip[a] - lop[a];
+    fr.spindle_line_measured_N[a] = 2.0 * std::abs(h1m[a]) / wsum;
+    fr.spindle_line_model_N[a] = 2.0 * std::abs(h1p[a]) / wsum;
+  }
+}
+
+/// Shapes of measured and model per feed: means, one revolution, peak-to-peak, spindle-frequency line.
+void feed_shapes(Identifier& id, const std::vector<Prep>& preps, ForceCalibration& R) {
+  const Fit f = id.solve(R.after, id.all());
+  for (std::size_t i = 0; i < preps.size(); ++i) {
+    const Prediction pred = id.sm().predict(i, f.model, f.coef);
+    const RevolutionBins bins(preps[i], pred, R.feeds[i]);
+    revolution_shape(bins, R.feeds[i]);
+  }
+}
+
+/// The largest power of two of steady samples every run has.
+std::size_t spectrum_length(const std::vector<Prep>& preps) {
+  std::size_t nfft = 0;
+  for (const Prep& p : preps) {
+    std::size_t c = 0;
+    for (int r : p.rev) c += r >= 0;
+    std::size_t m2 = 1;
+    while (m2 * 2 <= c) m2 *= 2;
+    nfft = nfft == 0 ? m2 : std::min(nfft, m2);
+  }
+  return nfft;
+}
+
+/// Hann-windowed amplitude spectrum of the residual of `model`, averaged over the runs
+/// logged at rate fs, from each run's first steady sample.
+void residual_spectrum(Identifier& id, const std::vector<Prep>& preps, const ForceModel& model, double fs,
+                       std::size_t nfft, std::array<std::vector<double>, 3>& out) {
+  for (auto& v : out) v.assign(nfft / 2, 0.0);
+  const Fit f = id.solve(model, id.all());
+  int used = 0;
+  for (std::size_t i = 0; i < preps.size(); ++i) {
+    const Prep& p = preps[i];
+    if (std::abs(p.fs_hz - fs) > 1e-6 * fs) continue;
+    const Prediction pred = id.sm().predict(i, f.model, f.coef);
+    std::size_t k0 = 0;
+    while (k0 < p.rev.size() && p.rev[k0] < 0) ++k0;
+    ++used;
+    for (int a = 0; a < force_axes(p); ++a) {
+      std::vector<cd> x(nfft);
+      double wsum = 0.0;
+      for (std::size_t k = 0; k < nfft; ++k) {
+        const double win = 0.5 - 0.5 * std::cos(kTwoPi * k / nfft);
+        x[k] = win * (zeroed(p, a, k0 + k) - pred[a][k0 + k]);
+        wsum += win;
+      }
+      fft(x);
+      for (std::size_t k = 0; k < nfft / 2; ++k) out[a][k] += 2.0 * std::abs(x[k]) / wsum;
+    }
+  }
+  for (auto& v : out)
+    for (double& y : v) y /= std::max(1, used);
+}
+
+/// Residual spectra, before and after, averaged over the runs logged at the first run's rate.
+void residual_spectra(Identifier& id, const std::vector<Prep>& preps, ForceCalibration& R) {
+  R.spindle_hz = preps.front().f_rev_hz;
+  R.tooth_hz = R.spindle_hz * preps.front().run->cut.flutes;
+  const double fs = preps.front().fs_hz;
+  const std::size_t nfft = spectrum_length(preps);
+  if (nfft < 64) return;
+  R.spectrum_f_hz.resize(nfft / 2);
+  for (std::size_t k = 0; k < nfft / 2; ++k) R.spectrum_f_hz[k] = k * fs / nfft;
+  residual_spectrum(id, preps, R.before, fs, nfft, R.spectrum_before_N);
+  residual_spectrum(id, preps, R.after, fs, nfft, R.spectrum_after_N);
+}
+
+/// Feed h's mean-force error and normalised RMS error predicted by `model` fitted on `use`.
+nlohmann::json held_out_errors(Identifier& id, const Prep& p, int h, const ForceModel& model,
+                               const std::vector<int>& use) {
+  const Fit f = id.solve(model, use);
+  const Prediction pred = id.sm().predict(static_cast<std::size_t>(h), f.model, f.coef);
+  std::array<double, 3> mm{}, mp{}, num{}, den{};
+  for (std::size_t k = 0; k < p.theta.size(); ++k) {
+    if (p.rev[k] < 0) continue;
+    for (int a = 0; a < force_axes(p); ++a) {
+      const double g = zeroed(p, a, k);
+      mm[a] += g;
+      mp[a] += pred[a][k];
+      num[a] += std::pow(g - pred[a][k], 2);
+      den[a] += g * g;
+    }
+  }
+  std::array<double, 3> mean_err{}, err{};
+  for (int a = 0; a < 3; ++a) {
+    mean_err[a] = mm[a] != 0.0 ? (mp[a] - mm[a]) / std::abs(mm[a]) : 0.0;
+    err[a] = den[a] > 0.0 ? std::sqrt(num[a] / den[a]) : 0.0;
+  }
+  return {{"mean_force_error", axes_json(mean_err)}, {"error", axes_json(err)}};
+}
+
+/// A held-out feed: the middle one, predicted by a fit on the others.
+nlohmann::json held_out_feed(Identifier& id, const std::vector<Prep>& preps, const ForceCalibration& R) {
+  const std::size_t n = preps.size();
+  const int h = static_cast<int>(n / 2);
+  std::vector<int> use;
+  for (int i = 0; i < static_cast<int>(n); ++i)
+    if (i != h) use.push_back(i);
+  nlohmann::json hf = {{"run", preps[h].run->name}, {"fz_mm", preps[h].run->cut.feed_per_tooth_mm()}};
+  hf["before"] = held_out_errors(id, preps[h], h, R.before, use);
+  hf["after"] = held_out_errors(id, preps[h], h, R.after, use);
+  return hf;
+}
+
+}  // namespace
+
+ForceCalibration calibrate_forces(const std::vector<ForceRun>& runs, const ForceCalibrationOptions& opt) {
+  if (runs.empty()) throw ConfigError("calibrate: no force run");
+  ForceCalibration R;
+  std::vector<Prep> preps = prepare_runs(runs, R);
+  R.material = runs.front().cut.material;
+  Identifier id(preps, opt, R.notes);
+  const std::size_t n = preps.size();
+  average_force_regression(id, preps, R);
+
+  // Base model: linear coefficients, sensor delay (or the phase of runs without spindle_deg).
+  ForceModel m;
+  m.phi0_deg.assign(n, 0.0);
+  id.fit_phase(m);
+  const Evaluated base = id.evaluate(m);
+  R.before = base.fit.model;
+  R.error_before = base.err;
+  R.noise_floor = id.noise_floor();
+  const Evaluated found = search_effects(id, preps, R, base);
   // Refit the final model on the zero it uses.
-  cur = id.evaluate(cur.fit.model);
+  const Evaluated cur = id.evaluate(found.fit.model);
   R.after = cur.fit.model;
   R.error_after = cur.err;
   for (const Prep& p : preps) R.zero.push_back(p.zero);
 
-  // Duan's exponential K(h) over all feeds and per feed (runout and sensor path as identified).
-  {
-    ForceModel e = id.fit_exponential(R.after, id.all());
-    R.exponential_joint = id.solve(e, id.all()).model.k;
-    for (std::size_t i = 0; i < n; ++i) {
-      FeedResult fr;
-      fr.run = preps[i].run->name;
-      fr.fz_mm = preps[i].run->cut.feed_per_tooth_mm();
-      const std::vector<int> one{static_cast<int>(i)};
-      ForceModel ei = id.fit_exponential(R.after, one);
-      id.sm().build(ei.runout, ei.k.c_per_mm, kExpRegressors, &one);
-      fr.exponential = id.sm().solve(ei, one).model.k;
-      R.feeds.push_back(fr);
-    }
-  }
-  // Shapes of measured and model per feed: means, one revolution, peak-to-peak, spindle-frequency line.
-  {
-    const Fit f = id.solve(R.after, id.all());
-    for (std::size_t i = 0; i < n; ++i) {
-      const Prep& p = preps[i];
-      const auto pred = id.sm().predict(i, f.model, f.coef);
-      FeedResult& fr = R.feeds[i];
-      const int B = 360;
-      std::vector<double> w(B, 0.0), th(B, 0.0);
-      std::array<std::vector<double>, 3> bm, bp;
-      for (int a = 0; a < 3; ++a) {
-        bm[a].assign(B, 0.0);
-        bp[a].assign(B, 0.0);
-      }
-      std::array<double, 3> sm{}, smod{};
-      double cnt = 0.0;
-      for (std::size_t k = 0; k < p.theta.size(); ++k) {
-        if (p.rev[k] < 0) continue;
-        double t = std::fmod(p.theta[k], kTwoPi);
-        if (t < 0.0) t += kTwoPi;
-        const int bi = std::min(B - 1, static_cast<int>(t / kTwoPi * B));
-        w[bi] += 1.0;
-        th[bi] += t;
-        cnt += 1.0;
-        for (int a = 0; a < (p.has_fz ? 3 : 2); ++a) {
-          const double g = zeroed(p, a, k);
-          bm[a][bi] += g;
-          bp[a][bi] += pred[a][k];
-          sm[a] += g;
-          smod[a] += pred[a][k];
-        }
-      }
-      for (int a = 0; a < 3; ++a) {
-        fr.mean_measured_N[a] = sm[a] / cnt;
-        fr.mean_model_N[a] = smod[a] / cnt;
-      }
-      std::array<cd, 3> h1m{}, h1p{};
-      std::array<double, 3> lo, hi, lop, hip;
-      lo.fill(1e300);
-      hi.fill(-1e300);
-      lop.fill(1e300);
-      hip.fill(-1e300);
-      double wsum = 0.0;
-      for (int bi = 0; bi < B; ++bi) {
-        if (w[bi] <= 0.0) continue;
-        const double t = th[bi] / w[bi];
-        fr.rev_theta_deg.push_back(t * 180.0 / kPi);
-        wsum += 1.0;
-        for (int a = 0; a < 3; ++a) {
-          const double vm = bm[a][bi] / w[bi], vp = bp[a][bi] / w[bi];
-          fr.rev_measured_N[a].push_back(vm);
-          fr.rev_model_N[a].push_back(vp);
-          h1m[a] += vm * std::polar(1.0, -t);
-          h1p[a] += vp * std::polar(1.0, -t);
-          lo[a] = std::min(lo[a], vm);
-          hi[a] = std::max(hi[a], vm);
-          lop[a] = std::min(lop[a], vp);
-          hip[a] = std::max(hip[a], vp);
-        }
-      }
-      for (int a = 0; a < 3; ++a) {
-        fr.p2p_measured_N[a] = hi[a] - lo[a];
-        fr.p2p_model_N[a] = hip[a] - lop[a];
-        fr.spindle_line_measured_N[a] = 2.0 * std::abs(h1m[a]) / wsum;
-        fr.spindle_line_model_N[a] = 2.0 * std::abs(h1p[a]) / wsum;
-      }
-    }
-  }
-  // Residual spectra, before and after, averaged over the runs logged at the first run's rate.
-  {
-    R.spindle_hz = preps.front().f_rev_hz;
-    R.tooth_hz = R.spindle_hz * preps.front().run->cut.flutes;
-    const double fs = preps.front().fs_hz;
-    std::size_t nfft = 0;
-    for (const Prep& p : preps) {
-      std::size_t c = 0;
-      for (int r : p.rev) c += r >= 0;
-      std::size_t m2 = 1;
-      while (m2 * 2 <= c) m2 *= 2;
-      nfft = nfft == 0 ? m2 : std::min(nfft, m2);
-    }
-    if (nfft >= 64) {
-      R.spectrum_f_hz.resize(nfft / 2);
-      for (std::size_t k = 0; k < nfft / 2; ++k) R.spectrum_f_hz[k] = k * fs / nfft;
-      for (const auto& [which, model] :
-           {std::pair<int, ForceModel>{0, R.before}, std::pair<int, ForceModel>{1, R.after}}) {
-        auto& out = which == 0 ? R.spectrum_before_N : R.spectrum_after_N;
-        for (auto& v : out) v.assign(nfft / 2, 0.0);
-        const Fit f = id.solve(model, id.all());
-        int used = 0;
-        for (std::size_t i = 0; i < n; ++i) {
-          const Prep& p = preps[i];
-          if (std::abs(p.fs_hz - fs) > 1e-6 * fs) continue;
-          const auto pred = id.sm().predict(i, f.model, f.coef);
-          std::size_t k0 = 0;
-          while (k0 < p.rev.size() && p.rev[k0] < 0) ++k0;
-          ++used;
-          for (int a = 0; a < (p.has_fz ? 3 : 2); ++a) {
-            std::vector<cd> x(nfft);
-            double wsum = 0.0;
-            for (std::size_t k = 0; k < nfft; ++k) {
-              const double win = 0.5 - 0.5 * std::cos(kTwoPi * k / nfft);
-              x[k] = win * (zeroed(p, a, k0 + k) - pred[a][k0 + k]);
-              wsum += win;
-            }
-            fft(x);
-            for (std::size_t k = 0; k < nfft / 2; ++k) out[a][k] += 2.0 * std::abs(x[k]) / wsum;
-          }
-        }
-        for (auto& v : out)
-          for (double& y : v) y /= std::max(1, used);
-      }
-    }
-  }
-  // A held-out feed: the middle one, predicted by a fit on the others.
-  if (opt.held_out_feed && n >= 3) {
-    const int h = static_cast<int>(n / 2);
-    std::vector<int> use;
-    for (int i = 0; i < static_cast<int>(n); ++i)
-      if (i != h) use.push_back(i);
-    nlohmann::json hf = {{"run", preps[h].run->name}, {"fz_mm", preps[h].run->cut.feed_per_tooth_mm()}};
-    for (const auto& [label, model] : {std::pair<const char*, ForceModel>{"before", R.before}, {"after", R.after}}) {
-      const Fit f = id.solve(model, use);
-      const auto pred = id.sm().predict(static_cast<std::size_t>(h), f.model, f.coef);
-      const Prep& p = preps[h];
-      std::array<double, 3> mm{}, mp{}, num{}, den{};
-      for (std::size_t k = 0; k < p.theta.size(); ++k) {
-        if (p.rev[k] < 0) continue;
-        for (int a = 0; a < (p.has_fz ? 3 : 2); ++a) {
-          const double g = zeroed(p, a, k);
-          mm[a] += g;
-          mp[a] += pred[a][k];
-          num[a] += std::pow(g - pred[a][k], 2);
-          den[a] += g * g;
-        }
-      }
-      std::array<double, 3> mean_err{}, err{};
-      for (int a = 0; a < 3; ++a) {
-        mean_err[a] = mm[a] != 0.0 ? (mp[a] - mm[a]) / std::abs(mm[a]) : 0.0;
-        err[a] = den[a] > 0.0 ? std::sqrt(num[a] / den[a]) : 0.0;
-      }
-      hf[label] = {{"mean_force_error", axes_json(mean_err)}, {"error", axes_json(err)}};
-    }
-    R.held_out_feed = hf;
-  }
+  exponential_per_feed(id, preps, R);
+  feed_shapes(id, preps, R);
+  residual_spectra(id, preps, R);
+  if (opt.held_out_feed && n >= 3) R.held_out_feed = held_out_feed(id, preps, R);
+  int held_out_revolutions = 0;
+  for (const Prep& p : preps) held_out_revolutions += p.zero.revolutions / 2;
   R.validation = fmt::format(
       "normalised RMS rms(F - model)/rms(F) on held-out revolutions (every second whole revolution of the steady cut "
       "of each run; the fit uses the others), F the log less the identified zero offset and drift; {} run(s), {} "
       "held-out revolutions",
-      n, [&] {
-        int c = 0;
-        for (const Prep& p : preps) c += p.zero.revolutions / 2;
-        return c;
-      }());
+      n, held_out_revolutions);
   return R;
 }
 

@@ -294,6 +294,84 @@ void write_plot_rows(const std::filesystem::path& trace, std::size_t rows, const
 }
 }  // namespace
 
+namespace {
+
+/// The two row files of write_plot_rows in the staging folder, removed when done.
+class PlotRows {
+ public:
+  explicit PlotRows(const std::filesystem::path& dir)
+      : full_(dir / "plot-rows-full.csv"), window_(dir / "plot-rows-corner.csv"), full_guard_(full_),
+        window_guard_(window_) {}
+  ~PlotRows() {
+    std::error_code ec;
+    std::filesystem::remove(full_, ec);
+    std::filesystem::remove(window_, ec);
+  }
+  PlotRows(const PlotRows&) = delete;
+  PlotRows& operator=(const PlotRows&) = delete;
+  const std::filesystem::path& full() const { return full_; }
+  const std::filesystem::path& window() const { return window_; }
+
+ private:
+  std::filesystem::path full_, window_;
+  io::TempPathGuard full_guard_, window_guard_;
+};
+
+/// A dashed line and a label at every corner.
+std::string corner_marks(const std::vector<CornerWindow>& corners) {
+  std::ostringstream marks;
+  for (std::size_t c = 0; c < corners.size(); ++c) {
+    const double t = corners[c].corner.t_s;
+    marks << fmt::format("set arrow {} from {:.6f}, graph 0 to {:.6f}, graph 1 nohead dt 2 lc rgb '#888888'\n", c + 1,
+                         t, t);
+    marks << fmt::format("set label {} 'corner {}: {:.0f} deg, line {}' at {:.6f}, graph 0.97 rotate by 90 right "
+                         "font ',9'\n",
+                         c + 1, c + 1, corners[c].corner.turn_angle_deg, corners[c].line_after, t);
+  }
+  return marks.str();
+}
+
+/// One figure: the whole run on top and, with a `zoom` (an xrange), the first
+/// corner's window below.
+void figure(std::ostringstream& g, const std::string& zoom, const std::string& out, const std::string& title,
+            const std::string& setup, const std::string& plot_full, const std::string& plot_zoom) {
+  g << "set output " << gnuplot_output(out) << "\n";
+  if (!zoom.empty()) g << "set multiplot layout 2,1\n";
+  g << setup << "set title " << gnuplot_text(title) << "\nset autoscale x\n" << plot_full << "\n";
+  if (!zoom.empty())
+    g << "set title " << gnuplot_text(title + ", around corner 1") << "\n" << zoom << plot_zoom << "\nunset multiplot\n";
+  g << "set autoscale x\nunset y2tics\nunset y2label\nset ytics mirror\n";
+}
+
+std::string feed_plot(const std::string& file) {
+  return "plot " + file +
+         " using 't_s':'feed_programmed_mm_per_min' with lines lw 2 lc rgb '#999999' title 'programmed', '' "
+         "using 't_s':'feed_ref_mm_per_min' with lines lw 2 lc rgb '#1f77b4' title 'interpolator "
+         "reference', '' using 't_s':'feed_mm_per_min' with lines lw 1 lc rgb '#d62728' title "
+         "'real (drives)'";
+}
+
+std::string error_plot(const std::string& file, const std::vector<Axis>& axes) {
+  const std::array<const char*, 3> colours{"#1f77b4", "#2ca02c", "#9467bd"};
+  std::string p = "plot ";
+  for (std::size_t i = 0; i < axes.size(); ++i) {
+    const std::string n(axis_name(axes[i]));
+    p += (i ? ", " : "") + file + " using 't_s':(column('" + n + "_err_mm')*1000) with lines lc rgb '" +
+         colours[i % 3] + "' title '" + n + " tracking error'";
+  }
+  return p + ", ''" +
+         " using 't_s':(column('contour_error_mm')*1000) with lines lw 2 lc rgb '#d62728' title 'contour error'";
+}
+
+std::string force_plot(const std::string& file) {
+  return "plot " + file + " using 't_s':'fx_avg_N' with lines lc rgb '#1f77b4' title 'fx (tick mean)', ''" +
+         " using 't_s':'fy_avg_N' with lines lc rgb '#2ca02c' title 'fy (tick mean)', ''" +
+         " using 't_s':'fz_avg_N' with lines lc rgb '#9467bd' title 'fz (tick mean)', ''" +
+         " using 't_s':'engagement_deg' axes x1y2 with lines lc rgb '#ff7f0e' title 'engagement'";
+}
+
+}  // namespace
+
 std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::string& trace_name,
                                             std::size_t rows, const std::vector<Axis>& axes, const std::vector<CornerWindow>& corners,
                                             bool cutting, const controller::Trajectory* trajectory) {
@@ -307,79 +385,28 @@ std::vector<std::filesystem::path> plot_run(io::ResultSet& results, const std::s
   const bool corner_view = !corners.empty();
   const CornerViews views = corner_view ? corner_views(corners.front()) : CornerViews{};
   const double w0 = corner_view ? views.begin_s() : 1.0, w1 = corner_view ? views.end_s() : 0.0;
-  const auto full_path = results.staging_dir() / "plot-rows-full.csv";
-  const auto window_path = results.staging_dir() / "plot-rows-corner.csv";
-  io::TempPathGuard full_guard(full_path), window_guard(window_path);
-  struct Remove {
-    std::filesystem::path a, b;
-    ~Remove() {
-      std::error_code ec;
-      std::filesystem::remove(a, ec);
-      std::filesystem::remove(b, ec);
-    }
-  } remove_rows{full_path, window_path};
-  write_plot_rows(results.staging_dir() / trace_name, rows, full_path, window_path, w0, w1);
-  const std::string T = gnuplot_file(full_path.filename().string());
-  const std::string W = gnuplot_file(window_path.filename().string());
+  const PlotRows plot_rows(results.staging_dir());
+  write_plot_rows(results.staging_dir() / trace_name, rows, plot_rows.full(), plot_rows.window(), w0, w1);
+  // The full view draws about 20000 rows a curve (T); the corner zoom every row (W).
+  const std::string T = gnuplot_file(plot_rows.full().filename().string());
+  const std::string W = gnuplot_file(plot_rows.window().filename().string());
   std::ostringstream g;
   g << "set datafile separator ','\n"
     << "set terminal pngcairo size 1400,1000 font 'DejaVu Sans,11' noenhanced\n"
     << "set key outside top center horizontal\n"
     << "set grid\n"
     << "set xlabel 'time [s]'\n";
-  std::ostringstream marks;
-  for (std::size_t c = 0; c < corners.size(); ++c) {
-    const double t = corners[c].corner.t_s;
-    marks << fmt::format("set arrow {} from {:.6f}, graph 0 to {:.6f}, graph 1 nohead dt 2 lc rgb '#888888'\n", c + 1,
-                         t, t);
-    marks << fmt::format("set label {} 'corner {}: {:.0f} deg, line {}' at {:.6f}, graph 0.97 rotate by 90 right "
-                         "font ',9'\n",
-                         c + 1, c + 1, corners[c].corner.turn_angle_deg, corners[c].line_after, t);
-  }
-  // The full view draws about 20000 rows a curve (T); the corner zoom every row (W).
-  g << marks.str();
+  g << corner_marks(corners);
   // Each figure: the whole run on top and, when the program has corners, the
   // first corner's window below (+-0.25 s or the window, whichever is wider).
   const std::string zoom =
       corner_view ? fmt::format("set xrange [{:.6f}:{:.6f}]\n", views.zoom0_s, views.zoom1_s) : std::string();
-  auto figure = [&](const std::string& out, const std::string& title, const std::string& setup,
-                    const std::string& plot_full, const std::string& plot_zoom) {
-    g << "set output " << gnuplot_output(out) << "\n";
-    if (!zoom.empty()) g << "set multiplot layout 2,1\n";
-    g << setup << "set title " << gnuplot_text(title) << "\nset autoscale x\n" << plot_full << "\n";
-    if (!zoom.empty())
-      g << "set title " << gnuplot_text(title + ", around corner 1") << "\n" << zoom << plot_zoom << "\nunset multiplot\n";
-    g << "set autoscale x\nunset y2tics\nunset y2label\nset ytics mirror\n";
-  };
-  auto feed_plot = [&](const std::string& file) {
-    return "plot " + file +
-           " using 't_s':'feed_programmed_mm_per_min' with lines lw 2 lc rgb '#999999' title 'programmed', '' "
-           "using 't_s':'feed_ref_mm_per_min' with lines lw 2 lc rgb '#1f77b4' title 'interpolator "
-           "reference', '' using 't_s':'feed_mm_per_min' with lines lw 1 lc rgb '#d62728' title "
-           "'real (drives)'";
-  };
-  figure(outputs[0], "Feedrate (dashed lines: corners)", "set ylabel 'feed [mm/min]'\n", feed_plot(T), feed_plot(W));
-  const std::array<const char*, 3> colours{"#1f77b4", "#2ca02c", "#9467bd"};
-  auto error_plot = [&](const std::string& file) {
-    std::string p = "plot ";
-    for (std::size_t i = 0; i < axes.size(); ++i) {
-      const std::string n(axis_name(axes[i]));
-      p += (i ? ", " : "") + file + " using 't_s':(column('" + n + "_err_mm')*1000) with lines lc rgb '" +
-           colours[i % 3] + "' title '" + n + " tracking error'";
-    }
-    return p + ", ''" +
-           " using 't_s':(column('contour_error_mm')*1000) with lines lw 2 lc rgb '#d62728' title 'contour error'";
-  };
-  figure(outputs[1], "Tracking error per axis and contour error", "set ylabel 'error [um]'\n", error_plot(T),
-         error_plot(W));
+  figure(g, zoom, outputs[0], "Feedrate (dashed lines: corners)", "set ylabel 'feed [mm/min]'\n", feed_plot(T),
+         feed_plot(W));
+  figure(g, zoom, outputs[1], "Tracking error per axis and contour error", "set ylabel 'error [um]'\n",
+         error_plot(T, axes), error_plot(W, axes));
   if (cutting) {
-    auto force_plot = [&](const std::string& file) {
-      return "plot " + file + " using 't_s':'fx_avg_N' with lines lc rgb '#1f77b4' title 'fx (tick mean)', ''" +
-             " using 't_s':'fy_avg_N' with lines lc rgb '#2ca02c' title 'fy (tick mean)', ''" +
-             " using 't_s':'fz_avg_N' with lines lc rgb '#9467bd' title 'fz (tick mean)', ''" +
-             " using 't_s':'engagement_deg' axes x1y2 with lines lc rgb '#ff7f0e' title 'engagement'";
-    };
-    figure(outputs[2], "Cutting force on the workpiece and engagement",
+    figure(g, zoom, outputs[2], "Cutting force on the workpiece and engagement",
            "set ylabel 'force [N]'\nset y2label 'engagement [deg]'\nset y2tics\nset ytics nomirror\n"
            "set y2range [0:*]\n",
            force_plot(T), force_plot(W));
@@ -436,6 +463,73 @@ std::vector<std::filesystem::path> plot_calibration(io::ResultSet& results, cons
                           "dots lc rgb 'blue' notitle\nunset multiplot\n",
                           gnuplot_text(xlabel), d, cx, c0 + 1, cx, c0 + 2);
   }
+  std::vector<std::filesystem::path> written;
+  for (const auto& o : outputs) written.push_back(results.path(o));
+  run_gnuplot(results.staging_dir(), script, outputs);
+  return written;
+}
+
+namespace {
+
+/// bode.png: |L| and |S|, then arg L, of every axis before and after tuning.
+std::string bode_script(const TunePlots& p) {
+  std::string script = fmt::format("set output {}\n", gnuplot_output("bode.png"));
+  script += "set multiplot layout 2,1\nset logscale x\nset grid\nset xlabel 'f [Hz]'\nset ylabel 'dB'\n";
+  script += fmt::format("set title {}\n",
+                        gnuplot_text(fmt::format("Open loop L (broken at the command), {}: before and after tuning",
+                                                 p.machine_name)));
+  std::string mag = "plot ", ph = "plot ";
+  int idx = 0;
+  for (Axis axis : p.axes) {
+    for (const char* when : {"before", "after"}) {
+      const std::string label = fmt::format("{} {}", axis_name(axis), when);
+      if (idx > 0) {
+        mag += ", ";
+        ph += ", ";
+      }
+      mag += fmt::format("{} index {} using 1:2 with lines title {}, '' index {} using 1:4 with lines dt 2 "
+                         "title {}",
+                         gnuplot_file(p.bode_name), idx, gnuplot_text("|L| " + label), idx,
+                         gnuplot_text("|S| " + label));
+      ph += fmt::format("{} index {} using 1:3 with lines title {}", gnuplot_file(p.bode_name), idx,
+                        gnuplot_text("arg L " + label));
+      ++idx;
+    }
+  }
+  return script + mag + "\nset ylabel 'deg'\nset title 'Phase of L'\n" + ph + "\nunset multiplot\n";
+}
+
+/// corner_error.png: tracking error per axis, then the contour error, before and after.
+std::string corner_error_script(const TunePlots& p) {
+  const std::string dat = gnuplot_file(p.corner_name);
+  std::string script = fmt::format("set output {}\nset multiplot layout 2,1\nunset logscale x\nset xlabel 't [s]'\n",
+                                   gnuplot_output("corner_error.png"));
+  script += fmt::format("set ylabel 'um'\nset title {}\nplot ", gnuplot_text(p.corner_title));
+  int col = 2;
+  bool first = true;
+  for (Axis axis : p.axes) {
+    if (!first) script += ", ";
+    first = false;
+    script += fmt::format("{} using 1:{} with lines title '{} before', '' using 1:{} with lines title '{} after'", dat,
+                          col, axis_name(axis), col + 1, axis_name(axis));
+    col += 2;
+  }
+  script += fmt::format("\nset title 'Contour error'\nplot {} using 1:{} with lines title 'before', '' using 1:{} "
+                        "with lines title 'after'\nunset multiplot\n",
+                        dat, col, col + 1);
+  return script;
+}
+
+}  // namespace
+
+std::vector<std::filesystem::path> plot_tuning(io::ResultSet& results, const TunePlots& plots) {
+  std::vector<std::string> outputs{"bode.png"};
+  std::string script = "set terminal pngcairo size 1200,900 noenhanced\n" + bode_script(plots);
+  if (!plots.corner_title.empty()) {
+    script += corner_error_script(plots);
+    outputs.push_back("corner_error.png");
+  }
+  script += "unset output\n";
   std::vector<std::filesystem::path> written;
   for (const auto& o : outputs) written.push_back(results.path(o));
   run_gnuplot(results.staging_dir(), script, outputs);

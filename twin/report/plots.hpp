@@ -70,4 +70,20 @@ std::vector<std::filesystem::path> plot_calibration(io::ResultSet& results, cons
                                                     const std::vector<Axis>& axes,
                                                     const std::optional<CalibrationEvidence>& evidence);
 
+/// What twin tune's plots draw: `bode_name` (per axis of `axes`, the loop before
+/// and after tuning, one gnuplot index each: f_Hz, |L|_dB, arg L in deg, |S|_dB, ...)
+/// and, with a `corner_title`, `corner_name` (t_s, per axis the error before and
+/// after in um, then the contour error before and after), both in the result set.
+struct TunePlots {
+  std::string machine_name;
+  std::vector<Axis> axes;
+  std::string bode_name{"bode.dat"};
+  std::string corner_name{"corner_error.dat"};
+  std::string corner_title;  ///< empty: no corner_error.png
+};
+
+/// bode.png (|L| and |S|, then arg L) and with a corner corner_error.png (tracking
+/// and contour error through it). Returns the plots written (staged paths of `results`).
+std::vector<std::filesystem::path> plot_tuning(io::ResultSet& results, const TunePlots& plots);
+
 }  // namespace twin::analysis

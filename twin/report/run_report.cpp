@@ -177,9 +177,18 @@ RunStatistics::RunStatistics(const controller::Program& program, const controlle
 }
 
 void RunStatistics::add(const sim::Snapshot& s) {
+  const double F = std::sqrt(s.F_N[0] * s.F_N[0] + s.F_N[1] * s.F_N[1] + s.F_N[2] * s.F_N[2]);
+  add_run(s, F);
+  add_block(s, F);
+  // Recent ticks: |F|, |F_avg|, its one-revolution trailing mean, engagement
+  // (kept only when the program has corners to judge).
+  if (!recent_.empty()) add_recent(s, F);
+  add_corner_windows(s, F);
+}
+
+void RunStatistics::add_run(const sim::Snapshot& s, double F) {
   ++ticks_;
   t_last_s_ = s.t_s;
-  const double F = std::sqrt(s.F_N[0] * s.F_N[0] + s.F_N[1] * s.F_N[1] + s.F_N[2] * s.F_N[2]);
   bool moving = !s.reference_done;
   bool settled = true;
   for (Axis a : axes_) {
@@ -206,65 +215,72 @@ void RunStatistics::add(const sim::Snapshot& s) {
   if (s.reference_done && t_done_s_ < 0.0) t_done_s_ = s.t_s;
   if (s.reference_done && settled && t_settled_s_ < 0.0) t_settled_s_ = s.t_s;
   if (!s.reference_done) t_settled_s_ = -1.0;
+}
 
-  if (s.block >= 0 && static_cast<std::size_t>(s.block) < blocks_.size()) {
-    BlockStats& b = blocks_[static_cast<std::size_t>(s.block)];
-    ++b.ticks;
-    b.feed_real_sum += s.feed_real_mm_per_min;
-    b.feed_real_min = std::min(b.feed_real_min, s.feed_real_mm_per_min);
-    for (Axis a : axes_) b.max_err_mm[index(a)] = std::max(b.max_err_mm[index(a)], std::abs(s.axes[index(a)].e_mm));
-    b.max_contour_mm = std::max(b.max_contour_mm, s.contour_error_mm);
-    b.peak_force_N = std::max(b.peak_force_N, F);
+void RunStatistics::add_block(const sim::Snapshot& s, double F) {
+  if (s.block < 0 || static_cast<std::size_t>(s.block) >= blocks_.size()) return;
+  BlockStats& b = blocks_[static_cast<std::size_t>(s.block)];
+  ++b.ticks;
+  b.feed_real_sum += s.feed_real_mm_per_min;
+  b.feed_real_min = std::min(b.feed_real_min, s.feed_real_mm_per_min);
+  for (Axis a : axes_) b.max_err_mm[index(a)] = std::max(b.max_err_mm[index(a)], std::abs(s.axes[index(a)].e_mm));
+  b.max_contour_mm = std::max(b.max_contour_mm, s.contour_error_mm);
+  b.peak_force_N = std::max(b.peak_force_N, F);
+}
+
+void RunStatistics::add_recent(const sim::Snapshot& s, double F) {
+  const double F_avg =
+      std::sqrt(s.F_avg_N[0] * s.F_avg_N[0] + s.F_avg_N[1] * s.F_avg_N[1] + s.F_avg_N[2] * s.F_avg_N[2]);
+  cum_F_avg_N_ += F_avg;
+  Recent r;
+  r.t_s = s.t_s;
+  r.F_N = F;
+  r.F_avg_N = F_avg;
+  r.cum_F_avg_N = cum_F_avg_N_;
+  r.engagement_deg = s.engagement_deg;
+  r.spindle_rpm = s.spindle_rpm;
+  const std::size_t cap = recent_.size();
+  const std::size_t n_rev = revolution_ticks(s.spindle_rpm, Ts_s_);
+  if (n_rev > 0 && n_rev <= recent_count_) {
+    const Recent& first = recent_[(recent_head_ + cap - n_rev) % cap];
+    r.rev_mean_N = (cum_F_avg_N_ - first.cum_F_avg_N) / static_cast<double>(n_rev);
+  } else {
+    r.rev_mean_N = F_avg;
   }
-  // Recent ticks: |F|, |F_avg|, its one-revolution trailing mean, engagement
-  // (kept only when the program has corners to judge).
-  if (!recent_.empty()) {
-    const double F_avg =
-        std::sqrt(s.F_avg_N[0] * s.F_avg_N[0] + s.F_avg_N[1] * s.F_avg_N[1] + s.F_avg_N[2] * s.F_avg_N[2]);
-    cum_F_avg_N_ += F_avg;
-    Recent r;
-    r.t_s = s.t_s;
-    r.F_N = F;
-    r.F_avg_N = F_avg;
-    r.cum_F_avg_N = cum_F_avg_N_;
-    r.engagement_deg = s.engagement_deg;
-    r.spindle_rpm = s.spindle_rpm;
-    const std::size_t cap = recent_.size();
-    const std::size_t n_rev = revolution_ticks(s.spindle_rpm, Ts_s_);
-    if (n_rev > 0 && n_rev <= recent_count_) {
-      const Recent& first = recent_[(recent_head_ + cap - n_rev) % cap];
-      r.rev_mean_N = (cum_F_avg_N_ - first.cum_F_avg_N) / static_cast<double>(n_rev);
-    } else {
-      r.rev_mean_N = F_avg;
-    }
-    recent_[recent_head_] = r;
-    recent_head_ = (recent_head_ + 1) % cap;
-    recent_count_ = std::min(recent_count_ + 1, cap);
-    // Corners reached this tick: find the straight cut and the ramp in the past.
-    while (next_zone_corner_ < windows_.size() &&
-           static_cast<std::int64_t>(std::llround(windows_[next_zone_corner_].corner.t_s / Ts_s_)) <= s.k)
-      open_corner_zone(next_zone_corner_++);
-    // Open ramps: extend them until the engagement is back to the straight
-    // cut's; the revolution means count one revolution longer (a revolution
-    // ending there still holds the ramp).
-    for (std::size_t c = 0; c < next_zone_corner_; ++c) {
-      CornerStats& cs = corner_stats_[c];
-      if (cs.tail_left > 0) {
-        cs.ramp_rev_mean_peak_N = std::max(cs.ramp_rev_mean_peak_N, r.rev_mean_N);
-        --cs.tail_left;
-      }
-      if (!cs.zone_open) continue;
-      cs.ramp_t1_s = s.t_s;
-      cs.ramp_peak_N = std::max(cs.ramp_peak_N, r.F_N);
+  recent_[recent_head_] = r;
+  recent_head_ = (recent_head_ + 1) % cap;
+  recent_count_ = std::min(recent_count_ + 1, cap);
+  // Corners reached this tick: find the straight cut and the ramp in the past.
+  while (next_zone_corner_ < windows_.size() &&
+         static_cast<std::int64_t>(std::llround(windows_[next_zone_corner_].corner.t_s / Ts_s_)) <= s.k)
+    open_corner_zone(next_zone_corner_++);
+  update_ramps(s, r, n_rev);
+}
+
+void RunStatistics::update_ramps(const sim::Snapshot& s, const Recent& r, std::size_t n_rev) {
+  // Open ramps: extend them until the engagement is back to the straight
+  // cut's; the revolution means count one revolution longer (a revolution
+  // ending there still holds the ramp).
+  for (std::size_t c = 0; c < next_zone_corner_; ++c) {
+    CornerStats& cs = corner_stats_[c];
+    if (cs.tail_left > 0) {
       cs.ramp_rev_mean_peak_N = std::max(cs.ramp_rev_mean_peak_N, r.rev_mean_N);
-      const bool in_band = r.engagement_deg <= engagement_band_deg(cs.engagement_straight_deg);
-      cs.above_seen = cs.above_seen || !in_band;
-      if ((in_band && cs.above_seen) || r.engagement_deg <= 0.0 || s.t_s - windows_[c].corner.t_s >= kRecent_s / 2.0) {
-        cs.zone_open = false;
-        cs.tail_left = r.engagement_deg > 0.0 ? n_rev : 0;
-      }
+      --cs.tail_left;
+    }
+    if (!cs.zone_open) continue;
+    cs.ramp_t1_s = s.t_s;
+    cs.ramp_peak_N = std::max(cs.ramp_peak_N, r.F_N);
+    cs.ramp_rev_mean_peak_N = std::max(cs.ramp_rev_mean_peak_N, r.rev_mean_N);
+    const bool in_band = r.engagement_deg <= engagement_band_deg(cs.engagement_straight_deg);
+    cs.above_seen = cs.above_seen || !in_band;
+    if ((in_band && cs.above_seen) || r.engagement_deg <= 0.0 || s.t_s - windows_[c].corner.t_s >= kRecent_s / 2.0) {
+      cs.zone_open = false;
+      cs.tail_left = r.engagement_deg > 0.0 ? n_rev : 0;
     }
   }
+}
+
+void RunStatistics::add_corner_windows(const sim::Snapshot& s, double F) {
   while (next_corner_ < windows_.size() && windows_[next_corner_].k_end <= s.k) ++next_corner_;
   for (std::size_t c = next_corner_; c < windows_.size() && windows_[c].k_begin <= s.k; ++c) {
     if (s.k >= windows_[c].k_end) continue;
@@ -294,16 +310,8 @@ std::string kind_name(controller::MotionKind k) {
 }
 }  // namespace
 
-nlohmann::json RunStatistics::summary() const {
+nlohmann::json RunStatistics::blocks_json(double& ideal_s) const {
   using nlohmann::json;
-  json j;
-  const double mt = std::max<double>(1.0, static_cast<double>(moving_ticks_));
-  json max_err = json::object(), rms_err = json::object();
-  for (Axis a : axes_) {
-    max_err[std::string(axis_name(a))] = max_err_mm_[index(a)];
-    rms_err[std::string(axis_name(a))] = std::sqrt(sum_err2_[index(a)] / mt);
-  }
-  double ideal = 0.0;
   const auto& bt = trajectory_.block_timings();
   json blocks = json::array();
   for (std::size_t i = 0; i < program_.blocks.size(); ++i) {
@@ -320,7 +328,7 @@ nlohmann::json RunStatistics::summary() const {
       const double at_feed = bt[i].feed_programmed_mm_per_s > 0.0 ? bt[i].length_mm / bt[i].feed_programmed_mm_per_s
                                                                   : bt[i].t_end_s - bt[i].t_start_s;
       jb["time_at_programmed_feed_s"] = at_feed;
-      ideal += at_feed;
+      ideal_s += at_feed;
     }
     jb["feed_real_mean_mm_per_min"] = s.ticks > 0 ? s.feed_real_sum / static_cast<double>(s.ticks) : 0.0;
     jb["feed_real_min_mm_per_min"] = s.ticks > 0 ? s.feed_real_min : 0.0;
@@ -331,43 +339,73 @@ nlohmann::json RunStatistics::summary() const {
     jb["peak_force_N"] = s.peak_force_N;
     blocks.push_back(jb);
   }
+  return blocks;
+}
+
+nlohmann::json RunStatistics::corner_json(std::size_t c) const {
+  const auto& w = windows_[c];
+  const auto& cs = corner_stats_[c];
+  nlohmann::json jc;
+  jc["index"] = c;
+  jc["line"] = w.line_after;
+  jc["turn_angle_deg"] = w.corner.turn_angle_deg;
+  jc["p_mm"] = {w.corner.p_mm[0], w.corner.p_mm[1], w.corner.p_mm[2]};
+  jc["t_s"] = w.corner.t_s;
+  jc["exact_stop"] = w.corner.exact_stop;
+  jc["feed_programmed_mm_per_min"] = w.feed_programmed_mm_per_min;
+  jc["feed_ref_min_mm_per_min"] = w.feed_ref_min_mm_per_min;
+  jc["feed_real_min_mm_per_min"] = cs.feed_real_min < 1e299 ? cs.feed_real_min : 0.0;
+  jc["time_lost_s"] = w.time_lost_s;
+  jc["max_contour_error_mm"] = cs.max_contour_mm;
+  jc["peak_force_N"] = cs.peak_force_N;
+  // Revolution means of |F_avg| and peaks of |F|: the straight cut before
+  // the engagement ramp against the ramp through the corner (0 when no
+  // straight cut of kStraightRevolutions whole revolutions precedes it).
+  jc["mean_force_before_corner_N"] = cs.straight_mean_N;
+  jc["window_s"] = {w.t_begin_s, w.t_end_s};
+  jc["max_engagement_deg"] = cs.max_engagement_deg;
+  jc["blend_radius_mm"] = w.corner.blend_radius_mm;
+  jc["blend_deviation_mm"] = w.corner.deviation_mm;
+  jc["feed_ref_at_corner_mm_per_min"] = w.corner.v_ref_mm_per_s * kSPerMin;
+  jc["straight_cut_window_s"] = {cs.straight_t0_s, cs.straight_t1_s};
+  jc["straight_cut_engagement_deg"] = cs.engagement_straight_deg;
+  jc["straight_cut_peak_force_N"] = cs.straight_peak_N;
+  jc["engagement_ramp_s"] = {cs.ramp_t0_s, cs.ramp_t1_s};
+  jc["corner_revolution_mean_force_N"] = cs.ramp_rev_mean_peak_N;
+  jc["corner_peak_force_N"] = cs.ramp_peak_N;
+  jc["revolution_mean_force_ratio"] = cs.straight_mean_N > 0.0 ? cs.ramp_rev_mean_peak_N / cs.straight_mean_N : 0.0;
+  jc["peak_force_ratio"] = cs.straight_peak_N > 0.0 ? cs.ramp_peak_N / cs.straight_peak_N : 0.0;
+  return jc;
+}
+
+nlohmann::json RunStatistics::forces_json() const {
+  nlohmann::json forces;
+  forces["peak_N"] = {{"fx", peak_force_N_[0]}, {"fy", peak_force_N_[1]}, {"fz", peak_force_N_[2]}};
+  const double ct = std::max<double>(1.0, static_cast<double>(cutting_ticks_));
+  forces["mean_while_cutting_N"] = {
+      {"fx", sum_force_N_[0] / ct}, {"fy", sum_force_N_[1] / ct}, {"fz", sum_force_N_[2] / ct}};
+  forces["peak_resultant_N"] = peak_resultant_N_;
+  forces["cutting_time_s"] = static_cast<double>(cutting_ticks_) * Ts_s_;
+  forces["cutting_energy_J"] = energy_cut_J_;
+  return forces;
+}
+
+nlohmann::json RunStatistics::summary() const {
+  using nlohmann::json;
+  json j;
+  const double mt = std::max<double>(1.0, static_cast<double>(moving_ticks_));
+  json max_err = json::object(), rms_err = json::object();
+  for (Axis a : axes_) {
+    max_err[std::string(axis_name(a))] = max_err_mm_[index(a)];
+    rms_err[std::string(axis_name(a))] = std::sqrt(sum_err2_[index(a)] / mt);
+  }
+  double ideal = 0.0;
+  const json blocks = blocks_json(ideal);
   json corners = json::array();
   double lost_total = 0.0;
   for (std::size_t c = 0; c < windows_.size(); ++c) {
-    const auto& w = windows_[c];
-    const auto& cs = corner_stats_[c];
-    json jc;
-    jc["index"] = c;
-    jc["line"] = w.line_after;
-    jc["turn_angle_deg"] = w.corner.turn_angle_deg;
-    jc["p_mm"] = {w.corner.p_mm[0], w.corner.p_mm[1], w.corner.p_mm[2]};
-    jc["t_s"] = w.corner.t_s;
-    jc["exact_stop"] = w.corner.exact_stop;
-    jc["feed_programmed_mm_per_min"] = w.feed_programmed_mm_per_min;
-    jc["feed_ref_min_mm_per_min"] = w.feed_ref_min_mm_per_min;
-    jc["feed_real_min_mm_per_min"] = cs.feed_real_min < 1e299 ? cs.feed_real_min : 0.0;
-    jc["time_lost_s"] = w.time_lost_s;
-    jc["max_contour_error_mm"] = cs.max_contour_mm;
-    jc["peak_force_N"] = cs.peak_force_N;
-    // Revolution means of |F_avg| and peaks of |F|: the straight cut before
-    // the engagement ramp against the ramp through the corner (0 when no
-    // straight cut of kStraightRevolutions whole revolutions precedes it).
-    jc["mean_force_before_corner_N"] = cs.straight_mean_N;
-    jc["window_s"] = {w.t_begin_s, w.t_end_s};
-    jc["max_engagement_deg"] = cs.max_engagement_deg;
-    jc["blend_radius_mm"] = w.corner.blend_radius_mm;
-    jc["blend_deviation_mm"] = w.corner.deviation_mm;
-    jc["feed_ref_at_corner_mm_per_min"] = w.corner.v_ref_mm_per_s * kSPerMin;
-    jc["straight_cut_window_s"] = {cs.straight_t0_s, cs.straight_t1_s};
-    jc["straight_cut_engagement_deg"] = cs.engagement_straight_deg;
-    jc["straight_cut_peak_force_N"] = cs.straight_peak_N;
-    jc["engagement_ramp_s"] = {cs.ramp_t0_s, cs.ramp_t1_s};
-    jc["corner_revolution_mean_force_N"] = cs.ramp_rev_mean_peak_N;
-    jc["corner_peak_force_N"] = cs.ramp_peak_N;
-    jc["revolution_mean_force_ratio"] = cs.straight_mean_N > 0.0 ? cs.ramp_rev_mean_peak_N / cs.straight_mean_N : 0.0;
-    jc["peak_force_ratio"] = cs.straight_peak_N > 0.0 ? cs.ramp_peak_N / cs.straight_peak_N : 0.0;
-    lost_total += w.time_lost_s;
-    corners.push_back(jc);
+    lost_total += windows_[c].time_lost_s;
+    corners.push_back(corner_json(c));
   }
   j["ticks"] = ticks_;
   j["cycle_time_s"] = cycle_time_s();
@@ -379,15 +417,7 @@ nlohmann::json RunStatistics::summary() const {
   j["rms_tracking_error_mm"] = rms_err;
   j["max_contour_error_mm"] = max_contour_mm_;
   j["rms_contour_error_mm"] = std::sqrt(sum_contour2_ / mt);
-  json forces;
-  forces["peak_N"] = {{"fx", peak_force_N_[0]}, {"fy", peak_force_N_[1]}, {"fz", peak_force_N_[2]}};
-  const double ct = std::max<double>(1.0, static_cast<double>(cutting_ticks_));
-  forces["mean_while_cutting_N"] = {
-      {"fx", sum_force_N_[0] / ct}, {"fy", sum_force_N_[1] / ct}, {"fz", sum_force_N_[2] / ct}};
-  forces["peak_resultant_N"] = peak_resultant_N_;
-  forces["cutting_time_s"] = static_cast<double>(cutting_ticks_) * Ts_s_;
-  forces["cutting_energy_J"] = energy_cut_J_;
-  j["forces"] = forces;
+  j["forces"] = forces_json();
   j["blocks"] = blocks;
   j["corners"] = corners;
   return j;

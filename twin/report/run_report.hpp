@@ -88,6 +88,18 @@ class RunStatistics {
     double spindle_rpm{0.0};
   };
   void open_corner_zone(std::size_t c);
+  /// Steps of add(): the run's errors, forces and times; the tick's block; the recent
+  /// ticks and the engagement ramps at the corners; the corner windows holding the tick.
+  void add_run(const sim::Snapshot& s, double F);
+  void add_block(const sim::Snapshot& s, double F);
+  void add_recent(const sim::Snapshot& s, double F);
+  void update_ramps(const sim::Snapshot& s, const Recent& r, std::size_t n_rev);
+  void add_corner_windows(const sim::Snapshot& s, double F);
+  /// Parts of summary(): per block (adding each one's time at the programmed feed to
+  /// `ideal_s`), per corner, and the forces.
+  nlohmann::json blocks_json(double& ideal_s) const;
+  nlohmann::json corner_json(std::size_t c) const;
+  nlohmann::json forces_json() const;
   const controller::Program& program_;
   const controller::Trajectory& trajectory_;
   std::vector<Axis> axes_;

@@ -142,6 +142,25 @@ class Pool {
 
 void nap() { std::this_thread::sleep_for(std::chrono::milliseconds(2)); }
 
+/// The rows of a sweep as they come in, in case order, with the progress report.
+class RowCollector {
+ public:
+  RowCollector(std::size_t n, const RunnerOptions& options) : rows_(n), options_(options) {}
+  void record(std::size_t index, Row row) {
+    failed_ += row["status"] == "failed";
+    rows_.at(index) = std::move(row);
+    ++done_;
+    if (options_.progress) options_.progress(done_, failed_, rows_.size());
+  }
+  bool all_done() const { return done_ >= rows_.size(); }
+  std::vector<Row> take() { return std::move(rows_); }
+
+ private:
+  std::vector<Row> rows_;
+  const RunnerOptions& options_;
+  std::size_t done_{0}, failed_{0};
+};
+
 std::string csv_field(const nlohmann::ordered_json& v) {
   if (v.is_null()) return "";
   if (v.is_boolean()) return v.get<bool>() ? "true" : "false";
@@ -194,21 +213,16 @@ Row case_row(const SweepSpec& spec, const SweepCase& c, const std::filesystem::p
 
 std::vector<Row> run_local(const SweepSpec& spec, const RunnerOptions& options) {
   const std::size_t n = spec.cases.size();
-  std::vector<Row> rows(n);
-  std::size_t next = 0, done = 0, failed = 0;
+  RowCollector rows(n, options);
+  std::size_t next = 0;
   Pool pool(spec, options);
-  while (done < n) {
+  while (!rows.all_done()) {
     while (next < n && pool.has_room()) pool.start(next++);
     auto finished = pool.poll();
     if (finished.empty()) nap();
-    for (auto& [index, row] : finished) {
-      failed += row["status"] == "failed";
-      rows[index] = std::move(row);
-      ++done;
-      if (options.progress) options.progress(done, failed, n);
-    }
+    for (auto& [index, row] : finished) rows.record(index, std::move(row));
   }
-  return rows;
+  return rows.take();
 }
 
 bool launched_by_mpi() noexcept {
@@ -239,58 +253,50 @@ void send_text(const std::string& text) {
 }  // namespace
 
 namespace {
-std::vector<Row> run_ranks(const SweepSpec& spec, const RunnerOptions& options, bool* is_root, int* ranks) {
-  int rank = 0, size = 1;
-  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
-  MPI_Comm_size(MPI_COMM_WORLD, &size);
-  *is_root = rank == 0;
-  *ranks = size;
+
+/// Rank 0: runs cases itself between answering the other ranks' asks (a case
+/// index, or -1 when there are no more) and gathers their rows, until every
+/// case is done and every other rank has said goodbye.
+std::vector<Row> run_root(const SweepSpec& spec, const RunnerOptions& options, Pool& pool, int size) {
   const std::size_t n = spec.cases.size();
-  Pool pool(spec, options);
-  if (rank == 0) {
-    std::vector<Row> rows(n);
-    std::size_t next = 0, done = 0, failed = 0;
-    int byes = 0;
-    auto record = [&](std::size_t index, Row row) {
-      failed += row["status"] == "failed";
-      rows.at(index) = std::move(row);
-      ++done;
-      if (options.progress) options.progress(done, failed, n);
-    };
-    while (done < n || byes < size - 1) {
-      bool idle = true;
-      // Rank 0 runs cases too, between answering the others.
-      while (next < n && pool.has_room()) pool.start(next++);
-      for (auto& [index, row] : pool.poll()) {
-        record(index, std::move(row));
-        idle = false;
-      }
-      int flag = 0;
-      MPI_Status st;
-      MPI_Iprobe(MPI_ANY_SOURCE, kTagToRoot, MPI_COMM_WORLD, &flag, &st);
-      if (flag) {
-        idle = false;
-        int count = 0;
-        MPI_Get_count(&st, MPI_CHAR, &count);
-        std::string text(static_cast<std::size_t>(count), '\0');
-        MPI_Recv(text.data(), count, MPI_CHAR, st.MPI_SOURCE, kTagToRoot, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-        const nlohmann::ordered_json m = nlohmann::ordered_json::parse(text);
-        if (m.contains("bye")) {
-          ++byes;
-        } else {
-          if (!m["row"].is_null()) record(m["row"]["case"].get<std::size_t>(), m["row"]);
-          if (m["want"].get<bool>()) {
-            const long long assign = next < n ? static_cast<long long>(next++) : -1;
-            MPI_Send(&assign, 1, MPI_LONG_LONG, st.MPI_SOURCE, kTagAssign, MPI_COMM_WORLD);
-          }
+  RowCollector rows(n, options);
+  std::size_t next = 0;
+  int byes = 0;
+  while (!rows.all_done() || byes < size - 1) {
+    bool idle = true;
+    while (next < n && pool.has_room()) pool.start(next++);
+    for (auto& [index, row] : pool.poll()) {
+      rows.record(index, std::move(row));
+      idle = false;
+    }
+    int flag = 0;
+    MPI_Status st;
+    MPI_Iprobe(MPI_ANY_SOURCE, kTagToRoot, MPI_COMM_WORLD, &flag, &st);
+    if (flag) {
+      idle = false;
+      int count = 0;
+      MPI_Get_count(&st, MPI_CHAR, &count);
+      std::string text(static_cast<std::size_t>(count), '\0');
+      MPI_Recv(text.data(), count, MPI_CHAR, st.MPI_SOURCE, kTagToRoot, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+      const nlohmann::ordered_json m = nlohmann::ordered_json::parse(text);
+      if (m.contains("bye")) {
+        ++byes;
+      } else {
+        if (!m["row"].is_null()) rows.record(m["row"]["case"].get<std::size_t>(), m["row"]);
+        if (m["want"].get<bool>()) {
+          const long long assign = next < n ? static_cast<long long>(next++) : -1;
+          MPI_Send(&assign, 1, MPI_LONG_LONG, st.MPI_SOURCE, kTagAssign, MPI_COMM_WORLD);
         }
       }
-      if (idle) nap();
     }
-    return rows;
+    if (idle) nap();
   }
-  // A worker: asks for one case per free slot, runs it, sends its row back
-  // with the next ask, until the root says there are no more.
+  return rows.take();
+}
+
+/// A worker: asks for one case per free slot, runs it, sends its row back
+/// with the next ask, until the root says there are no more.
+void run_worker(const RunnerOptions& options, Pool& pool) {
   const int slots = std::max(1, options.jobs);
   int outstanding = 0;
   bool stopped = false;
@@ -321,6 +327,17 @@ std::vector<Row> run_ranks(const SweepSpec& spec, const RunnerOptions& options, 
     if (idle) nap();
   }
   send_text(R"({"bye":true})");
+}
+
+std::vector<Row> run_ranks(const SweepSpec& spec, const RunnerOptions& options, bool* is_root, int* ranks) {
+  int rank = 0, size = 1;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  MPI_Comm_size(MPI_COMM_WORLD, &size);
+  *is_root = rank == 0;
+  *ranks = size;
+  Pool pool(spec, options);
+  if (rank == 0) return run_root(spec, options, pool, size);
+  run_worker(options, pool);
   return {};
 }
 }  // namespace

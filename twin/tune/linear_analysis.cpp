@@ -411,17 +411,13 @@ std::vector<FrequencyPoint> frequency_response(const DiscreteLoopModel& m, doubl
   return out;
 }
 
-LoopAnalysis analyse_loop(const DiscreteLoopModel& m, double f_min_Hz, int points) {
-  LoopAnalysis a;
-  a.poles = m.poles();
-  a.max_pole_magnitude = std::abs(a.poles.front());
-  a.stable = m.stable();
-  const double inf = std::numeric_limits<double>::infinity();
-  const double fN = m.nyquist_Hz();
-  const auto grid = frequency_response(m, f_min_Hz, points);
+namespace {
 
-  // Gain crossovers: |L| = 1.
-  a.phase_margin_deg = inf;
+using Grid = std::vector<FrequencyPoint>;
+
+/// Gain crossovers (|L| = 1): the smallest phase margin and its frequency.
+void gain_crossovers(const DiscreteLoopModel& m, const Grid& grid, LoopAnalysis& a) {
+  a.phase_margin_deg = std::numeric_limits<double>::infinity();
   auto gain_fn = [&](double f) { return std::abs(m.loop_response(f)) - 1.0; };
   for (std::size_t i = 1; i < grid.size(); ++i) {
     const double g0 = std::abs(grid[i - 1].L) - 1.0, g1 = std::abs(grid[i].L) - 1.0;
@@ -433,8 +429,12 @@ LoopAnalysis analyse_loop(const DiscreteLoopModel& m, double f_min_Hz, int point
       a.gain_crossover_Hz = fc;
     }
   }
-  // Phase crossovers: Im L = 0 with Re L < 0, counted where |L| < 1.
-  a.gain_margin_dB = inf;
+}
+
+/// Phase crossovers (Im L = 0 with Re L < 0, counted where |L| < 1, and Nyquist,
+/// where L is real): the smallest gain margin and its frequency.
+void phase_crossovers(const DiscreteLoopModel& m, const Grid& grid, LoopAnalysis& a) {
+  a.gain_margin_dB = std::numeric_limits<double>::infinity();
   auto consider_gm = [&](double f) {
     const cd L = m.loop_response(f);
     if (L.real() < 0.0 && std::abs(L) < 1.0) {
@@ -452,9 +452,11 @@ LoopAnalysis analyse_loop(const DiscreteLoopModel& m, double f_min_Hz, int point
     if (grid[i - 1].L.real() >= 0.0 && grid[i].L.real() >= 0.0) continue;
     consider_gm(bisect_log(imag_fn, grid[i - 1].f_Hz, grid[i].f_Hz));
   }
-  consider_gm(fN);  // at Nyquist L is real
+  consider_gm(m.nyquist_Hz());  // at Nyquist L is real
+}
 
-  // Sensitivity and complementary peaks.
+/// Sensitivity peak (refined around the grid's largest |S|) and complementary peak.
+void sensitivity_peaks(const DiscreteLoopModel& m, const Grid& grid, LoopAnalysis& a) {
   std::size_t imax = 0;
   for (std::size_t i = 0; i < grid.size(); ++i) {
     if (std::abs(grid[i].S) > std::abs(grid[imax].S)) imax = i;
@@ -465,41 +467,57 @@ LoopAnalysis analyse_loop(const DiscreteLoopModel& m, double f_min_Hz, int point
   a.sensitivity_peak = std::max(ms, std::abs(grid[imax].S));
   a.sensitivity_peak_Hz = ms >= std::abs(grid[imax].S) ? fs : grid[imax].f_Hz;
   a.sensitivity_peak_dB = 20.0 * std::log10(a.sensitivity_peak);
+}
 
-  // -3 dB bandwidths.
+/// The first frequency where |response `of`| falls below -3 dB (Nyquist if none).
+double bandwidth_Hz(const DiscreteLoopModel& m, const Grid& grid, std::complex<double> FrequencyPoint::*of) {
   const double half_power = 1.0 / std::sqrt(2.0);
-  auto bandwidth = [&](std::complex<double> FrequencyPoint::*of) {
-    auto mag = [&](double f) { return std::abs(m.at(f).*of); };
-    for (std::size_t i = 1; i < grid.size(); ++i) {
-      if (std::abs(grid[i].*of) < half_power && std::abs(grid[i - 1].*of) >= half_power)
-        return bisect_log([&](double f) { return mag(f) - half_power; }, grid[i - 1].f_Hz, grid[i].f_Hz);
-    }
-    return fN;
-  };
-  a.bandwidth_Hz = bandwidth(&FrequencyPoint::X_over_R_feedback);
-  a.bandwidth_with_feedforward_Hz = bandwidth(&FrequencyPoint::X_over_R);
+  auto mag = [&](double f) { return std::abs(m.at(f).*of); };
+  for (std::size_t i = 1; i < grid.size(); ++i) {
+    if (std::abs(grid[i].*of) < half_power && std::abs(grid[i - 1].*of) >= half_power)
+      return bisect_log([&](double f) { return mag(f) - half_power; }, grid[i - 1].f_Hz, grid[i].f_Hz);
+  }
+  return m.nyquist_Hz();
+}
+
+/// Overshoot and 2 % settling time of the feedback loop's unit step (infinite when unstable).
+void step_response(const DiscreteLoopModel& m, LoopAnalysis& a) {
+  if (!a.stable) {
+    a.step_overshoot = std::numeric_limits<double>::infinity();
+    a.step_settling_time_s = std::numeric_limits<double>::infinity();
+    return;
+  }
+  const DiscreteLoopModel feedback(m.plant(), m.law().feedback_only(m.gains()));
+  const double pmax = std::max(a.max_pole_magnitude, 1e-12);
+  const double tau_ticks = pmax < 1.0 ? -1.0 / std::log(pmax) : 1e9;
+  const auto n = static_cast<std::size_t>(std::clamp(8.0 * tau_ticks + 2000.0, 2000.0, 300000.0));
+  const std::vector<double> x = feedback.simulate(std::vector<double>(n, 1.0));
+  double peak = 0.0;
+  std::size_t last_out = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    peak = std::max(peak, x[k]);
+    if (std::abs(x[k] - 1.0) > 0.02) last_out = k;
+  }
+  a.step_overshoot = std::max(0.0, peak - 1.0);
+  a.step_settling_time_s = static_cast<double>(last_out + 1) * m.Ts_s();
+}
+
+}  // namespace
+
+LoopAnalysis analyse_loop(const DiscreteLoopModel& m, double f_min_Hz, int points) {
+  LoopAnalysis a;
+  a.poles = m.poles();
+  a.max_pole_magnitude = std::abs(a.poles.front());
+  a.stable = m.stable();
+  const auto grid = frequency_response(m, f_min_Hz, points);
+  gain_crossovers(m, grid, a);
+  phase_crossovers(m, grid, a);
+  sensitivity_peaks(m, grid, a);
+  a.bandwidth_Hz = bandwidth_Hz(m, grid, &FrequencyPoint::X_over_R_feedback);
+  a.bandwidth_with_feedforward_Hz = bandwidth_Hz(m, grid, &FrequencyPoint::X_over_R);
   a.error_gain_1Hz = std::abs(m.error_response(1.0));
   a.error_gain_10Hz = std::abs(m.error_response(10.0));
-
-  // Step response of the feedback loop.
-  if (a.stable) {
-    const DiscreteLoopModel feedback(m.plant(), m.law().feedback_only(m.gains()));
-    const double pmax = std::max(a.max_pole_magnitude, 1e-12);
-    const double tau_ticks = pmax < 1.0 ? -1.0 / std::log(pmax) : 1e9;
-    const auto n = static_cast<std::size_t>(std::clamp(8.0 * tau_ticks + 2000.0, 2000.0, 300000.0));
-    const std::vector<double> x = feedback.simulate(std::vector<double>(n, 1.0));
-    double peak = 0.0;
-    std::size_t last_out = 0;
-    for (std::size_t k = 0; k < n; ++k) {
-      peak = std::max(peak, x[k]);
-      if (std::abs(x[k] - 1.0) > 0.02) last_out = k;
-    }
-    a.step_overshoot = std::max(0.0, peak - 1.0);
-    a.step_settling_time_s = static_cast<double>(last_out + 1) * m.Ts_s();
-  } else {
-    a.step_overshoot = inf;
-    a.step_settling_time_s = inf;
-  }
+  step_response(m, a);
   return a;
 }
 

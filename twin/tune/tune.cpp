@@ -110,118 +110,159 @@ SimulationWindow corner_window(const PlannedScenario& planned, double before_s, 
   return w;
 }
 
+namespace {
+
+/// Drive and loop state of axis `a` in steady motion at tick k0 (r0: the reference
+/// at k0, r1 and r2 at the two ticks before): the drive at the reference speed, the
+/// integrator holding what the feedforward does not give of B w + Tc. The FADAL law
+/// holds it with no error; the cascade's P position loop lags by the error whose Kv e
+/// gives the speed the velocity feedforward does not: e = (rg w + rg ev - kff v) / Kv,
+/// the velocity error ev = 0 with an integral, T / Kvp without one.
+void steady_axis_state(const sim::AxisDefinition& def, std::size_t a, double Ts, std::int64_t k0,
+                       const controller::ReferenceSample& r0, const controller::ReferenceSample& r1,
+                       const controller::ReferenceSample& r2, feeddrive::DriveState& ds,
+                       controller::PositionLoopState& ls) {
+  const auto& d = def.drive;
+  const auto& g = def.loop;
+  const double v = (r1.x_mm[a] - r2.x_mm[a]) / Ts;
+  const double w = r0.v_mm_per_s[a] / d.rg_mm_per_rad;
+  ds.x_mm = r0.x_mm[a];
+  ds.w_rad_per_s = w;
+  ds.stuck = w == 0.0;
+  ds.x_load_mm = ds.x_mm;
+  ds.w_load_rad_per_s = w;
+  ds.x_table_mm = ds.x_mm;
+  ds.load_stuck = ds.stuck;
+  ls = controller::PositionLoopState{};
+  const double Tc = w > 0.0 ? d.Tc_pos_Nm : (w < 0.0 ? -d.Tc_neg_Nm : 0.0);
+  const double T_needed = d.B_kg_m2_per_s * w + Tc;
+  if (g.law == controller::LoopLaw::kCascade) {
+    const controller::CascadeGains& c = g.cascade;
+    const double ev = c.Tn_s > 0.0 ? 0.0 : T_needed / c.Kvp_torque_s_per_rad;
+    const double e = (d.rg_mm_per_rad * (w + ev) - c.kff * v) / c.Kv_per_s;
+    ds.x_mm -= e;
+    ds.x_load_mm = ds.x_table_mm = ds.x_mm;
+    ls.Iv_rad = c.Tn_s > 0.0 ? c.Tn_s * T_needed / c.Kvp_torque_s_per_rad : 0.0;
+    ls.T_filtered = T_needed;
+    ls.x_meas_prev_mm = ds.x_mm - d.rg_mm_per_rad * w * Ts;
+    ls.e_prev_mm = e;
+  } else {
+    const double u_needed = T_needed / (d.Ka_A_per_V * d.Kt_Nm_per_A);
+    ls.I_mm_s = g.Ki_V_per_s_mm > 0.0 ? (u_needed - g.K2_V_s_per_mm * v) / g.Ki_V_per_s_mm : 0.0;
+    ls.e_prev_mm = 0.0;
+  }
+  ls.x_ref_prev_mm = r1.x_mm[a];
+  ls.v_ref_prev_mm_per_s = v;
+  ls.last_k = k0 - 1;
+}
+
+/// Puts the co-simulation in steady motion at tick k0 > 0 of the planned program.
+void start_in_motion(sim::CoSimulation& cosim, const sim::MachineDefinition& machine,
+                     const controller::Trajectory& trajectory, std::int64_t k0) {
+  sim::CoSimState st = cosim.get_state();
+  const auto r0 = trajectory.sample(k0);
+  const auto r1 = trajectory.sample(k0 - 1);
+  const auto r2 = trajectory.sample(std::max<std::int64_t>(0, k0 - 2));
+  const auto& axes = cosim.axes();
+  for (std::size_t i = 0; i < axes.size(); ++i) {
+    const std::size_t a = index(axes[i]);
+    steady_axis_state(machine.axes[a], a, machine.Ts_s, k0, r0, r1, r2, st.drives[i], st.loops[i]);
+  }
+  st.k = k0;
+  st.last.k = k0 - 1;
+  cosim.set_state(st);
+}
+
+/// The figures of a window, one tick after the other: command peaks, saturation and
+/// the errors after the stop over every tick, the tracking and contour errors inside
+/// the window's corners.
+class WindowFigures {
+ public:
+  WindowFigures(const std::vector<Axis>& axes, const SimulationWindow& window) : axes_(axes), window_(window) {
+    m_.u_peak_block.fill(-1);
+  }
+
+  void add(const sim::Snapshot& s, std::int64_t k) {
+    ++m_.ticks;
+    for (Axis ax : axes_) {
+      const auto& x = s.axes[index(ax)];
+      if (std::abs(x.u_V) > m_.u_peak_V[index(ax)]) {
+        m_.u_peak_V[index(ax)] = std::abs(x.u_V);
+        m_.u_peak_t_s[index(ax)] = s.t_s;
+        m_.u_peak_block[index(ax)] = s.block;
+      }
+      if (x.saturated) ++m_.saturated_ticks[index(ax)];
+      if (s.reference_done)
+        m_.max_error_after_stop_mm[index(ax)] = std::max(m_.max_error_after_stop_mm[index(ax)], std::abs(x.e_mm));
+    }
+    m_.max_contour_error_run_mm = std::max(m_.max_contour_error_run_mm, s.contour_error_mm);
+    if (!in_corner(k)) return;
+    ++n_corner_;
+    for (Axis ax : axes_) {
+      const double e = s.axes[index(ax)].e_mm;
+      m_.max_tracking_error_mm[index(ax)] = std::max(m_.max_tracking_error_mm[index(ax)], std::abs(e));
+      sum_e2_[index(ax)] += e * e;
+    }
+    m_.max_contour_error_mm = std::max(m_.max_contour_error_mm, s.contour_error_mm);
+    sum_c2_ += s.contour_error_mm * s.contour_error_mm;
+  }
+
+  ScenarioMetrics finish(bool completed, std::string failure) {
+    m_.completed = completed;
+    m_.failure = std::move(failure);
+    const double n = std::max<double>(1.0, static_cast<double>(n_corner_));
+    for (Axis ax : axes_) m_.rms_tracking_error_mm[index(ax)] = std::sqrt(sum_e2_[index(ax)] / n);
+    m_.rms_contour_error_mm = std::sqrt(sum_c2_ / n);
+    return m_;
+  }
+
+ private:
+  bool in_corner(std::int64_t k) {
+    const auto& corners = window_.corners;
+    while (next_ < corners.size() && corners[next_].k_end <= k) ++next_;
+    bool in = false;
+    for (std::size_t c = next_; c < corners.size() && corners[c].k_begin <= k; ++c)
+      if (k < corners[c].k_end) in = true;
+    return in;
+  }
+
+  const std::vector<Axis>& axes_;
+  const SimulationWindow& window_;
+  ScenarioMetrics m_;
+  AxisArray<double> sum_e2_{};
+  double sum_c2_{0.0};
+  std::int64_t n_corner_{0};
+  std::size_t next_{0};
+};
+
+}  // namespace
+
 ScenarioMetrics simulate_window(const io::Scenario& scenario, const PlannedScenario& planned,
                                 const sim::MachineDefinition& machine, const SimulationWindow& window,
                                 CornerTrace* trace, std::int64_t trace_begin, std::int64_t trace_end) {
-  ScenarioMetrics m;
-  m.u_peak_block.fill(-1);
   auto reference = std::make_shared<sim::ProgramReference>(planned.trajectory);
-  const double Ts = machine.Ts_s;
   const std::int64_t k0 = window.k_begin;
   AxisArray<double> x0 = scenario.start_mm;
   if (k0 > 0) x0 = planned.trajectory.sample(k0).x_mm;
   sim::CoSimulation cosim(machine, reference, scenario.make_process ? scenario.make_process() : nullptr, x0);
   const auto& axes = cosim.axes();
-  if (k0 > 0) {
-    // Steady motion at tick k0: the drives at the reference speed, the integrator
-    // holding what the feedforward does not give of B w + Tc. The FADAL law holds it
-    // with no error; the cascade's P position loop lags by the error whose Kv e gives
-    // the speed the velocity feedforward does not: e = (rg w + rg ev - kff v) / Kv, the
-    // velocity error ev = 0 with an integral, T / Kvp without one.
-    sim::CoSimState st = cosim.get_state();
-    const auto r0 = planned.trajectory.sample(k0);
-    const auto r1 = planned.trajectory.sample(k0 - 1);
-    const auto r2 = planned.trajectory.sample(std::max<std::int64_t>(0, k0 - 2));
-    for (std::size_t i = 0; i < axes.size(); ++i) {
-      const std::size_t a = index(axes[i]);
-      const auto& d = machine.axes[a].drive;
-      const auto& g = machine.axes[a].loop;
-      const double v = (r1.x_mm[a] - r2.x_mm[a]) / Ts;
-      const double w = r0.v_mm_per_s[a] / d.rg_mm_per_rad;
-      auto& ds = st.drives[i];
-      ds.x_mm = r0.x_mm[a];
-      ds.w_rad_per_s = w;
-      ds.stuck = w == 0.0;
-      ds.x_load_mm = ds.x_mm;
-      ds.w_load_rad_per_s = w;
-      ds.x_table_mm = ds.x_mm;
-      ds.load_stuck = ds.stuck;
-      auto& ls = st.loops[i];
-      ls = controller::PositionLoopState{};
-      const double Tc = w > 0.0 ? d.Tc_pos_Nm : (w < 0.0 ? -d.Tc_neg_Nm : 0.0);
-      const double T_needed = d.B_kg_m2_per_s * w + Tc;
-      if (g.law == controller::LoopLaw::kCascade) {
-        const controller::CascadeGains& c = g.cascade;
-        const double ev = c.Tn_s > 0.0 ? 0.0 : T_needed / c.Kvp_torque_s_per_rad;
-        const double e = (d.rg_mm_per_rad * (w + ev) - c.kff * v) / c.Kv_per_s;
-        ds.x_mm -= e;
-        ds.x_load_mm = ds.x_table_mm = ds.x_mm;
-        ls.Iv_rad = c.Tn_s > 0.0 ? c.Tn_s * T_needed / c.Kvp_torque_s_per_rad : 0.0;
-        ls.T_filtered = T_needed;
-        ls.x_meas_prev_mm = ds.x_mm - d.rg_mm_per_rad * w * Ts;
-        ls.e_prev_mm = e;
-      } else {
-        const double u_needed = T_needed / (d.Ka_A_per_V * d.Kt_Nm_per_A);
-        ls.I_mm_s = g.Ki_V_per_s_mm > 0.0 ? (u_needed - g.K2_V_s_per_mm * v) / g.Ki_V_per_s_mm : 0.0;
-        ls.e_prev_mm = 0.0;
-      }
-      ls.x_ref_prev_mm = r1.x_mm[a];
-      ls.v_ref_prev_mm_per_s = v;
-      ls.last_k = k0 - 1;
-    }
-    st.k = k0;
-    st.last.k = k0 - 1;
-    cosim.set_state(st);
-  }
+  if (k0 > 0) start_in_motion(cosim, machine, planned.trajectory, k0);
   if (trace) *trace = CornerTrace{};
-  AxisArray<double> sum_e2{};
-  double sum_c2 = 0.0;
-  std::int64_t n_corner = 0;
-  std::size_t next = 0;
+  WindowFigures figures(axes, window);
   try {
     for (std::int64_t k = k0; k < window.k_end; ++k) {
       const sim::Snapshot& s = cosim.step();
-      ++m.ticks;
-      for (Axis ax : axes) {
-        const auto& x = s.axes[index(ax)];
-        if (std::abs(x.u_V) > m.u_peak_V[index(ax)]) {
-          m.u_peak_V[index(ax)] = std::abs(x.u_V);
-          m.u_peak_t_s[index(ax)] = s.t_s;
-          m.u_peak_block[index(ax)] = s.block;
-        }
-        if (x.saturated) ++m.saturated_ticks[index(ax)];
-        if (s.reference_done)
-          m.max_error_after_stop_mm[index(ax)] = std::max(m.max_error_after_stop_mm[index(ax)], std::abs(x.e_mm));
-      }
-      m.max_contour_error_run_mm = std::max(m.max_contour_error_run_mm, s.contour_error_mm);
-      while (next < window.corners.size() && window.corners[next].k_end <= k) ++next;
-      bool in_corner = false;
-      for (std::size_t c = next; c < window.corners.size() && window.corners[c].k_begin <= k; ++c)
-        if (k < window.corners[c].k_end) in_corner = true;
-      if (in_corner) {
-        ++n_corner;
-        for (Axis ax : axes) {
-          const double e = s.axes[index(ax)].e_mm;
-          m.max_tracking_error_mm[index(ax)] = std::max(m.max_tracking_error_mm[index(ax)], std::abs(e));
-          sum_e2[index(ax)] += e * e;
-        }
-        m.max_contour_error_mm = std::max(m.max_contour_error_mm, s.contour_error_mm);
-        sum_c2 += s.contour_error_mm * s.contour_error_mm;
-      }
+      figures.add(s, k);
       if (trace && k >= trace_begin && k < trace_end) {
         trace->t_s.push_back(s.t_s);
         for (Axis ax : axes) trace->e_mm[index(ax)].push_back(s.axes[index(ax)].e_mm);
         trace->contour_mm.push_back(s.contour_error_mm);
       }
     }
-    m.completed = true;
   } catch (const ModelError& e) {
-    m.failure = e.what();
+    return figures.finish(false, e.what());
   }
-  const double n = std::max<double>(1.0, static_cast<double>(n_corner));
-  for (Axis ax : axes) m.rms_tracking_error_mm[index(ax)] = std::sqrt(sum_e2[index(ax)] / n);
-  m.rms_contour_error_mm = std::sqrt(sum_c2 / n);
-  return m;
+  return figures.finish(true, "");
 }
 
 namespace {
@@ -466,43 +507,76 @@ double reachable_feedforward(const io::Scenario& scenario, const PlannedScenario
 
 }  // namespace
 
-TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) {
-  TuneResult result;
-  const sim::MachineDefinition& m0 = scenario.machine;
-  result.machine_before = m0;
-  result.machine_after = m0;
-  if (options.axes.empty()) throw ConfigError("tune: no axis to tune");
-  if (!(options.gain_range > 1.0) || !(options.feedforward_range > 0.0) || options.max_evaluations < 1 ||
-      !(options.max_window_span_s > 0.0))
-    throw ConfigError(fmt::format("tune: gain_range {} must be > 1, feedforward_range {} > 0, max_evaluations {} >= 1, "
-                                  "--max-window {} s > 0",
-                                  options.gain_range, options.feedforward_range, options.max_evaluations,
-                                  options.max_window_span_s));
-  const TuneConstraints& c = options.constraints;
-  std::vector<AxisScales> requested;
-  for (Axis a : options.axes) {
-    const auto& def = m0.axes[index(a)];
-    if (!def.present)
-      throw ConfigError(fmt::format("tune: axis {} is not present in machine {}", axis_name(a), m0.name));
-    const LinearPlant plant = linear_plant(def.drive);
-    plant.validate(fmt::format("{}: axis {}", m0.source.empty() ? m0.name : m0.source, axis_name(a)));
-    requested.emplace_back(a, plant, def.loop);
-  }
-  const double lr = std::log(options.gain_range);
-  // Axes that keep the machine's gains, with the reason (in the order asked).
-  std::vector<std::pair<AxisScales, std::string>> kept;
+namespace {
 
-  // Stage A: nearest feedback gains that meet the linear constraints, per axis.
-  std::vector<AxisScales> scales;
-  std::vector<std::vector<double>> q0;  // per axis
-  for (const auto& s : requested) {
-    StageA data{&s, &c, std::string(axis_name(s.axis))};
+/// Axes that keep the machine's gains, with the reason (in the order found).
+using KeptAxes = std::vector<std::pair<AxisScales, std::string>>;
+
+/// One tuning of a scenario's axes: stage A (nearest feedback gains meeting the
+/// linear constraints, per axis), stage B (the coupled simulation through the
+/// corners), then the judgement on the full scenario. Each step drops the axes
+/// it cannot tune into `kept_` with the reason.
+class Tuner {
+ public:
+  Tuner(const io::Scenario& scenario, const TuneOptions& options)
+      : scenario_(scenario), options_(options), m0_(scenario.machine), c_(options.constraints) {}
+
+  TuneResult run() {
+    result_.machine_before = m0_;
+    result_.machine_after = m0_;
+    check_options();
+    lr_ = std::log(options_.gain_range);
+    for (const AxisScales& s : requested_axes()) stage_a(s);
+    if (scales_.empty()) return keep_all(ScenarioMetrics{});  // nothing is simulated
+    planned_.emplace(plan_scenario(scenario_));
+    full_ = full_window(*planned_);
+    result_.full_before = simulate_window(scenario_, *planned_, m0_, full_);
+    if (result_.full_before.completed) drop_axes_beyond_limit_on_full();
+    if (scales_.empty()) return keep_all(result_.full_before);
+    window_ = corner_window(*planned_, options_.window_before_s, options_.window_after_s, options_.max_window_span_s);
+    start_within_limit();
+    if (scales_.empty()) return keep_all(result_.full_before);
+    StageB data = stage_b_data();
+    search(data);
+    if (data.best_q.empty()) return no_feasible_point();
+    take_best(data);
+    report_tuned(judge_on_full());
+    return result_;
+  }
+
+ private:
+  void check_options() const {
+    const TuneOptions& o = options_;
+    if (o.axes.empty()) throw ConfigError("tune: no axis to tune");
+    if (!(o.gain_range > 1.0) || !(o.feedforward_range > 0.0) || o.max_evaluations < 1 || !(o.max_window_span_s > 0.0))
+      throw ConfigError(fmt::format("tune: gain_range {} must be > 1, feedforward_range {} > 0, max_evaluations {} "
+                                    ">= 1, --max-window {} s > 0",
+                                    o.gain_range, o.feedforward_range, o.max_evaluations, o.max_window_span_s));
+  }
+
+  std::vector<AxisScales> requested_axes() const {
+    std::vector<AxisScales> requested;
+    for (Axis a : options_.axes) {
+      const auto& def = m0_.axes[index(a)];
+      if (!def.present)
+        throw ConfigError(fmt::format("tune: axis {} is not present in machine {}", axis_name(a), m0_.name));
+      const LinearPlant plant = linear_plant(def.drive);
+      plant.validate(fmt::format("{}: axis {}", m0_.source.empty() ? m0_.name : m0_.source, axis_name(a)));
+      requested.emplace_back(a, plant, def.loop);
+    }
+    return requested;
+  }
+
+  /// Stage A of one axis: its nearest feedback gains that meet the linear
+  /// constraints become its starting point, or it keeps its gains.
+  void stage_a(const AxisScales& s) {
+    StageA data{&s, &c_, std::string(axis_name(s.axis))};
     const unsigned nf = static_cast<unsigned>(s.feedback_vars);
     nlopt::opt opt(nlopt::LN_COBYLA, nf);
     std::vector<double> lo(nf), hi(nf);
     for (std::size_t i = 0; i < nf; ++i) {
-      lo[i] = s.lower(i, lr);
-      hi[i] = s.upper(i, lr, options.feedforward_range);
+      lo[i] = s.lower(i, lr_);
+      hi[i] = s.upper(i, lr_, options_.feedforward_range);
     }
     opt.set_lower_bounds(lo);
     opt.set_upper_bounds(hi);
@@ -524,305 +598,339 @@ TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) 
     }
     std::vector<double> full = s.origin();
     std::copy(x.begin(), x.end(), full.begin());
-    const ConstraintValues v = linear_constraints(s.plant, s.gains(full.data()), c, std::string(axis_name(s.axis)));
-    if (!v.linear_ok) {
-      std::string names;
-      for (std::size_t i = 0; i < nf; ++i) names += fmt::format("{}{}", i > 0 ? ", " : "", s.vars[i]->name);
-      kept.emplace_back(s, fmt::format("no gains satisfy the constraints on axis {} within the search range ({} in "
-                                       "[1/{:g}, {:g}] x start): best found {} ({}); start {}",
-                                       axis_name(s.axis), names, options.gain_range, options.gain_range,
-                                       gains_text(s.gains(full.data())), v.violation, gains_text(s.start)));
-      continue;
+    const ConstraintValues v = linear_constraints(s.plant, s.gains(full.data()), c_, std::string(axis_name(s.axis)));
+    if (v.linear_ok) {
+      scales_.push_back(s);
+      q0_.push_back(full);
+      return;
     }
-    scales.push_back(s);
-    q0.push_back(full);
+    std::string names;
+    for (std::size_t i = 0; i < nf; ++i) names += fmt::format("{}{}", i > 0 ? ", " : "", s.vars[i]->name);
+    kept_.emplace_back(s, fmt::format("no gains satisfy the constraints on axis {} within the search range ({} in "
+                                      "[1/{:g}, {:g}] x start): best found {} ({}); start {}",
+                                      axis_name(s.axis), names, options_.gain_range, options_.gain_range,
+                                      gains_text(s.gains(full.data())), v.violation, gains_text(s.start)));
   }
 
-  auto finish_kept = [&](const ScenarioMetrics& fb, const ScenarioMetrics& fa) {
-    for (const auto& [s, why] : kept) {
-      AxisTuneResult ar = axis_result(s, s.start, m0, fb, fa, c);
-      ar.tuned = false;
-      ar.note = why;
-      result.axes.push_back(ar);
-    }
-    std::stable_sort(result.axes.begin(), result.axes.end(),
-                     [](const AxisTuneResult& x, const AxisTuneResult& y) { return index(x.axis) < index(y.axis); });
-  };
-  auto kept_text = [&] {
+  std::string kept_text() const {
     std::string t;
-    for (const auto& [s, why] : kept)
+    for (const auto& [s, why] : kept_)
       t += fmt::format("{}axis {} keeps the machine's gains: {}", t.empty() ? "" : "; ", axis_name(s.axis), why);
     return t;
-  };
-  if (scales.empty()) {
-    // No axis can meet the linear constraints: nothing is simulated.
-    result.feasible = false;
-    result.message = kept_text();
-    finish_kept(ScenarioMetrics{}, ScenarioMetrics{});
-    return result;
   }
 
-  // The machine's own gains on the full scenario: an axis whose peak |u| is already
-  // above the limit there cannot be judged against it (no new gains could pass where the
-  // program itself asks for that much, e.g. a rapid plunge): it keeps its gains.
-  const PlannedScenario planned = plan_scenario(scenario);
-  const SimulationWindow full = full_window(planned);
-  result.full_before = simulate_window(scenario, planned, m0, full);
-  if (result.full_before.completed) {
-    std::vector<AxisScales> reachable;
-    std::vector<std::vector<double>> q_reachable;
-    for (std::size_t i = 0; i < scales.size(); ++i) {
-      const Axis a = scales[i].axis;
-      const double limit = command_limit(m0, a, c);
-      const double peak = command_peak(result.full_before, m0, a);
-      if (peak > limit) {
-        kept.emplace_back(
-            scales[i],
-            fmt::format("its own gains already reach peak {} ({:g} x {}) on this scenario, at "
-                        "t = {:.4f} s {} ({} ticks at the limit), so the scenario cannot show that new gains keep the "
-                        "limit; axis {} is left as it is (tune it on a scenario without that move, or raise "
-                        "--u-fraction)",
-                        command_text(m0, a, peak, limit), c.u_fraction_max,
-                        linear_law(m0.axes[index(a)].loop.law).command_limit_name(),
-                        result.full_before.u_peak_t_s[index(a)],
-                        motion_text(planned, result.full_before.u_peak_block[index(a)]),
-                        result.full_before.saturated_ticks[index(a)], axis_name(a)));
-        continue;
-      }
-      reachable.push_back(scales[i]);
-      q_reachable.push_back(q0[i]);
+  /// The kept axes' results, then every axis in axis order.
+  void finish_kept(const ScenarioMetrics& fb, const ScenarioMetrics& fa) {
+    for (const auto& [s, why] : kept_) {
+      AxisTuneResult ar = axis_result(s, s.start, m0_, fb, fa, c_);
+      ar.tuned = false;
+      ar.note = why;
+      result_.axes.push_back(ar);
     }
-    scales = std::move(reachable);
-    q0 = std::move(q_reachable);
-  }
-  if (scales.empty()) {
-    result.feasible = false;
-    result.message = kept_text();
-    finish_kept(result.full_before, result.full_before);
-    result.full_after = result.full_before;
-    return result;
+    std::stable_sort(result_.axes.begin(), result_.axes.end(),
+                     [](const AxisTuneResult& x, const AxisTuneResult& y) { return index(x.axis) < index(y.axis); });
   }
 
-  // Stage B: the coupled simulation through the corners. Its starting point (stage-A
-  // feedback, model feedforward) must keep the |u| limit on the window: an axis that breaks
-  // it starts with its feedforward scaled down to what keeps it (or, if even no feedforward
-  // does, keeps its own gains), so the search starts from reachable gains.
-  const SimulationWindow window =
-      corner_window(planned, options.window_before_s, options.window_after_s, options.max_window_span_s);
-  std::vector<std::string> limited(kNumAxes);  // per axis: what limited the tuning
-  {
-    sim::MachineDefinition ms = m0;
-    for (std::size_t i = 0; i < scales.size(); ++i) ms.axes[index(scales[i].axis)].loop = scales[i].gains(q0[i].data());
-    const ScenarioMetrics start = simulate_window(scenario, planned, ms, window);
+  /// Every axis keeps its gains; `full` is the scenario with them.
+  TuneResult keep_all(const ScenarioMetrics& full) {
+    result_.feasible = false;
+    result_.message = kept_text();
+    finish_kept(full, full);
+    result_.full_after = full;
+    return result_;
+  }
+
+  /// Keeps the axes of scales_ (and their q0_) for which keep(i) is true.
+  template <typename F>
+  void filter_axes(F&& keep) {
     std::vector<AxisScales> reachable;
     std::vector<std::vector<double>> q_reachable;
-    for (std::size_t i = 0; i < scales.size(); ++i) {
-      const AxisScales& s = scales[i];
+    for (std::size_t i = 0; i < scales_.size(); ++i) {
+      if (!keep(i)) continue;
+      reachable.push_back(scales_[i]);
+      q_reachable.push_back(q0_[i]);
+    }
+    scales_ = std::move(reachable);
+    q0_ = std::move(q_reachable);
+  }
+
+  /// The machine's own gains on the full scenario: an axis whose peak |u| is already
+  /// above the limit there cannot be judged against it (no new gains could pass where the
+  /// program itself asks for that much, e.g. a rapid plunge): it keeps its gains.
+  void drop_axes_beyond_limit_on_full() {
+    const ScenarioMetrics& fb = result_.full_before;
+    filter_axes([&](std::size_t i) {
+      const Axis a = scales_[i].axis;
+      const double limit = command_limit(m0_, a, c_);
+      const double peak = command_peak(fb, m0_, a);
+      if (!(peak > limit)) return true;
+      kept_.emplace_back(
+          scales_[i],
+          fmt::format("its own gains already reach peak {} ({:g} x {}) on this scenario, at "
+                      "t = {:.4f} s {} ({} ticks at the limit), so the scenario cannot show that new gains keep the "
+                      "limit; axis {} is left as it is (tune it on a scenario without that move, or raise "
+                      "--u-fraction)",
+                      command_text(m0_, a, peak, limit), c_.u_fraction_max,
+                      linear_law(m0_.axes[index(a)].loop.law).command_limit_name(), fb.u_peak_t_s[index(a)],
+                      motion_text(*planned_, fb.u_peak_block[index(a)]), fb.saturated_ticks[index(a)], axis_name(a)));
+      return false;
+    });
+  }
+
+  /// The machine with every remaining axis at its stage-A point.
+  sim::MachineDefinition machine_at_start() const {
+    sim::MachineDefinition ms = m0_;
+    for (std::size_t i = 0; i < scales_.size(); ++i) ms.axes[index(scales_[i].axis)].loop = scales_[i].gains(q0_[i].data());
+    return ms;
+  }
+
+  /// Stage B's starting point (stage-A feedback, model feedforward) must keep the |u|
+  /// limit on the window: an axis that breaks it starts with its feedforward scaled down
+  /// to what keeps it (or, if even no feedforward does, keeps its own gains), so the
+  /// search starts from reachable gains.
+  void start_within_limit() {
+    sim::MachineDefinition ms = machine_at_start();
+    const ScenarioMetrics start = simulate_window(scenario_, *planned_, ms, window_);
+    filter_axes([&](std::size_t i) {
+      const AxisScales& s = scales_[i];
       const Axis a = s.axis;
-      const double limit = command_limit(m0, a, c);
-      std::vector<double> q = q0[i];
+      const double limit = command_limit(m0_, a, c_);
+      std::vector<double>& q = q0_[i];
       const double peak = command_peak(start, ms, a);
-      if (start.completed && peak > limit) {
-        const bool has_ff = s.feedback_vars < s.size();
-        const double alpha = reachable_feedforward(scenario, planned, ms, s, s.gains(q.data()), window, limit);
-        const std::string where =
-            fmt::format("with {} the peak {} at t = {:.4f} s {}",
-                        has_ff ? "the model feedforward" : "the machine's feedforward",
-                        command_text(ms, a, peak, limit),
-                        start.u_peak_t_s[index(a)], motion_text(planned, start.u_peak_block[index(a)]));
-        if (alpha < 0.0) {
-          kept.emplace_back(s, where + (has_ff ? ", and above it without feedforward too (feedback at the nearest "
-                                                 "gains meeting the margins): no starting point keeps the limit"
-                                               : " at the nearest feedback gains meeting the margins: no starting "
-                                                 "point keeps the limit"));
-          continue;
-        }
-        for (std::size_t j = s.feedback_vars; j < s.size(); ++j) q[j] *= alpha;
-        limited[index(a)] = fmt::format("{}; the search started from {:.3f} x the model feedforward", where, alpha);
-        ms.axes[index(a)].loop = s.gains(q.data());
+      if (!start.completed || !(peak > limit)) return true;
+      const bool has_ff = s.feedback_vars < s.size();
+      const double alpha = reachable_feedforward(scenario_, *planned_, ms, s, s.gains(q.data()), window_, limit);
+      const std::string where = fmt::format(
+          "with {} the peak {} at t = {:.4f} s {}", has_ff ? "the model feedforward" : "the machine's feedforward",
+          command_text(ms, a, peak, limit), start.u_peak_t_s[index(a)],
+          motion_text(*planned_, start.u_peak_block[index(a)]));
+      if (alpha < 0.0) {
+        kept_.emplace_back(s, where + (has_ff ? ", and above it without feedforward too (feedback at the nearest "
+                                                "gains meeting the margins): no starting point keeps the limit"
+                                              : " at the nearest feedback gains meeting the margins: no starting "
+                                                "point keeps the limit"));
+        return false;
       }
-      reachable.push_back(s);
-      q_reachable.push_back(q);
+      for (std::size_t j = s.feedback_vars; j < s.size(); ++j) q[j] *= alpha;
+      limited_[index(a)] = fmt::format("{}; the search started from {:.3f} x the model feedforward", where, alpha);
+      ms.axes[index(a)].loop = s.gains(q.data());
+      return true;
+    });
+  }
+
+  /// Stage B's data: the remaining axes, their variables one after the other, and the
+  /// objective's norms from the machine's own gains on the window (or the start's).
+  StageB stage_b_data() {
+    StageB data;
+    data.scenario = &scenario_;
+    data.planned = &*planned_;
+    data.window = &window_;
+    data.options = &options_;
+    data.scales = scales_;
+    data.machine = m0_;
+    for (std::size_t i = 0; i < scales_.size(); ++i) {
+      data.offsets.push_back(x0_.size());
+      x0_.insert(x0_.end(), q0_[i].begin(), q0_[i].end());
     }
-    scales = std::move(reachable);
-    q0 = std::move(q_reachable);
-  }
-  if (scales.empty()) {
-    result.feasible = false;
-    result.message = kept_text();
-    finish_kept(result.full_before, result.full_before);
-    result.full_after = result.full_before;
-    return result;
-  }
-  StageB data;
-  data.scenario = &scenario;
-  data.planned = &planned;
-  data.window = &window;
-  data.options = &options;
-  data.scales = scales;
-  data.machine = m0;
-  std::vector<double> x0;  // all axes' variables, one after the other
-  for (std::size_t i = 0; i < scales.size(); ++i) {
-    data.offsets.push_back(x0.size());
-    x0.insert(x0.end(), q0[i].begin(), q0[i].end());
-  }
-  result.window_before = simulate_window(scenario, planned, m0, window);
-  // An axis that does not move through the corners searched on (its error there is 0)
-  // does not enter the objective: the search's moves of its gains mean nothing, and it
-  // ends at its stage-A point.
-  std::vector<bool> idle;
-  {
-    sim::MachineDefinition ms = m0;
-    for (std::size_t i = 0; i < scales.size(); ++i) ms.axes[index(scales[i].axis)].loop = scales[i].gains(q0[i].data());
-    const ScenarioMetrics start = simulate_window(scenario, planned, ms, window);
-    for (const auto& s : scales)
-      idle.push_back(start.completed && start.max_tracking_error_mm[index(s.axis)] == 0.0 &&
-                     start.rms_tracking_error_mm[index(s.axis)] == 0.0);
-    const ScenarioMetrics& ref = result.window_before.completed ? result.window_before : start;
+    result_.window_before = simulate_window(scenario_, *planned_, m0_, window_);
+    // An axis that does not move through the corners searched on (its error there is 0)
+    // does not enter the objective: the search's moves of its gains mean nothing, and it
+    // ends at its stage-A point.
+    const ScenarioMetrics start = simulate_window(scenario_, *planned_, machine_at_start(), window_);
+    for (const auto& s : scales_)
+      idle_.push_back(start.completed && start.max_tracking_error_mm[index(s.axis)] == 0.0 &&
+                      start.rms_tracking_error_mm[index(s.axis)] == 0.0);
+    const ScenarioMetrics& ref = result_.window_before.completed ? result_.window_before : start;
     data.norm_contour = std::max(ref.max_contour_error_mm, 1e-6);
     double rms = 0.0, mx = 0.0;
-    for (const auto& s : scales) {
+    for (const auto& s : scales_) {
       rms += ref.rms_tracking_error_mm[index(s.axis)];
       mx += ref.max_tracking_error_mm[index(s.axis)];
     }
     data.norm_rms = std::max(rms, 1e-6);
     data.norm_max = std::max(mx, 1e-6);
-    result.objective_before = result.window_before.completed ? objective_of(result.window_before, scales, data) : 0.0;
+    result_.objective_before =
+        result_.window_before.completed ? objective_of(result_.window_before, scales_, data) : 0.0;
+    return data;
   }
-  const unsigned n = static_cast<unsigned>(x0.size());
-  std::vector<double> lb(n), ub(n), step(n);
-  for (std::size_t i = 0; i < scales.size(); ++i) {
-    for (std::size_t j = 0; j < scales[i].size(); ++j) {
-      lb[data.offsets[i] + j] = scales[i].lower(j, lr);
-      ub[data.offsets[i] + j] = scales[i].upper(j, lr, options.feedforward_range);
-      step[data.offsets[i] + j] = scales[i].vars[j]->feedforward ? 0.1 : 0.15;
+
+  /// Stage B: BOBYQA over every remaining axis's variables at once.
+  void search(StageB& data) {
+    const unsigned n = static_cast<unsigned>(x0_.size());
+    std::vector<double> lb(n), ub(n), step(n);
+    for (std::size_t i = 0; i < scales_.size(); ++i) {
+      for (std::size_t j = 0; j < scales_[i].size(); ++j) {
+        lb[data.offsets[i] + j] = scales_[i].lower(j, lr_);
+        ub[data.offsets[i] + j] = scales_[i].upper(j, lr_, options_.feedforward_range);
+        step[data.offsets[i] + j] = scales_[i].vars[j]->feedforward ? 0.1 : 0.15;
+      }
     }
-  }
-  {
     nlopt::opt opt(nlopt::LN_BOBYQA, n);
     opt.set_lower_bounds(lb);
     opt.set_upper_bounds(ub);
     opt.set_min_objective(stage_b_objective, &data);
-    opt.set_maxeval(options.max_evaluations);
+    opt.set_maxeval(options_.max_evaluations);
     opt.set_initial_step(step);
     opt.set_xtol_abs(1e-3);
-    std::vector<double> x = x0;
+    std::vector<double> x = x0_;
     double fval = 0.0;
     try {
       opt.optimize(x, fval);
     } catch (const std::exception&) {
       // A stop by round-off or by the evaluation budget keeps the best feasible point below.
     }
+    result_.evaluations = data.evaluations;
   }
-  result.evaluations = data.evaluations;
-  if (data.best_q.empty()) {
-    result.feasible = false;
-    result.message = "no evaluated gains met every constraint in the simulation (|u| below the limit, no runaway)";
-    if (!kept.empty()) result.message += "; " + kept_text();
-    result.window_after = result.window_before;
-    result.full_after = result.full_before;
-    for (const auto& s : scales) {
-      AxisTuneResult ar = axis_result(s, s.start, m0, result.full_before, result.full_after, c);
-      ar.tuned = false;
-      ar.note = result.message;
-      result.axes.push_back(ar);
-    }
-    finish_kept(result.full_before, result.full_after);
-    return result;
-  }
-  for (std::size_t i = 0; i < scales.size(); ++i)
-    if (idle[i])
-      std::copy(q0[i].begin(), q0[i].end(), data.best_q.begin() + static_cast<std::ptrdiff_t>(data.offsets[i]));
-  result.window_after = data.best_metrics;
-  result.objective_after = data.best_objective;
-  for (std::size_t i = 0; i < scales.size(); ++i)
-    result.machine_after.axes[index(scales[i].axis)].loop = scales[i].gains(&data.best_q[data.offsets[i]]);
 
-  // Judge on the full scenario. An axis whose tuned gains break a constraint there
-  // (the search saw only the corner window) goes back to its own gains, and the
-  // scenario is run again with the remaining tuned axes.
-  result.full_after = simulate_window(scenario, planned, result.machine_after, full);
-  std::vector<AxisScales> tuned;
-  for (const auto& s : scales) {
-    const AxisTuneResult ar =
-        axis_result(s, result.machine_after.axes[index(s.axis)].loop, m0, result.full_before, result.full_after, c);
-    if (ar.constraints_after.violation.empty() || !result.full_after.completed) {
-      tuned.push_back(s);
-      continue;
+  /// No point the search evaluated met the simulation's constraints.
+  TuneResult no_feasible_point() {
+    result_.feasible = false;
+    result_.message = "no evaluated gains met every constraint in the simulation (|u| below the limit, no runaway)";
+    if (!kept_.empty()) result_.message += "; " + kept_text();
+    result_.window_after = result_.window_before;
+    result_.full_after = result_.full_before;
+    for (const auto& s : scales_) {
+      AxisTuneResult ar = axis_result(s, s.start, m0_, result_.full_before, result_.full_after, c_);
+      ar.tuned = false;
+      ar.note = result_.message;
+      result_.axes.push_back(ar);
     }
-    if (ar.constraints_after.linear_ok) {
-      // Only the command limit is broken: scale this axis's feedforward down to what keeps it.
-      const double limit = ar.constraints_after.command_limit;
-      const double alpha = reachable_feedforward(scenario, planned, result.machine_after, s,
-                                                 result.machine_after.axes[index(s.axis)].loop, full, limit);
-      if (alpha >= 0.0) {
-        auto& g = result.machine_after.axes[index(s.axis)].loop;
-        g = s.scaled_feedforward(g, alpha);
-        limited[index(s.axis)] +=
-            fmt::format("{}on the full scenario the gains tuned on the corner window reach peak {} "
-                        "at t = {:.4f} s {}: the feedforward was scaled by {:.3f} to keep the limit",
-                        limited[index(s.axis)].empty() ? "" : "; ",
-                        command_text(m0, s.axis, ar.constraints_after.command_peak, limit),
-                        result.full_after.u_peak_t_s[index(s.axis)],
-                        motion_text(planned, result.full_after.u_peak_block[index(s.axis)]), alpha);
+    finish_kept(result_.full_before, result_.full_after);
+    return result_;
+  }
+
+  /// The search's best point (idle axes at their stage-A point) as the tuned machine.
+  void take_best(StageB& data) {
+    for (std::size_t i = 0; i < scales_.size(); ++i)
+      if (idle_[i])
+        std::copy(q0_[i].begin(), q0_[i].end(), data.best_q.begin() + static_cast<std::ptrdiff_t>(data.offsets[i]));
+    result_.window_after = data.best_metrics;
+    result_.objective_after = data.best_objective;
+    for (std::size_t i = 0; i < scales_.size(); ++i)
+      result_.machine_after.axes[index(scales_[i].axis)].loop = scales_[i].gains(&data.best_q[data.offsets[i]]);
+  }
+
+  /// Judges the tuned machine on the full scenario. An axis whose tuned gains break a
+  /// constraint there (the search saw only the corner window) has its feedforward scaled
+  /// down when only the command limit is broken, else goes back to its own gains, and the
+  /// scenario is run again with the remaining tuned axes. Returns the tuned axes.
+  std::vector<AxisScales> judge_on_full() {
+    result_.full_after = simulate_window(scenario_, *planned_, result_.machine_after, full_);
+    std::vector<AxisScales> tuned;
+    for (const auto& s : scales_) {
+      const AxisTuneResult ar = axis_result(s, result_.machine_after.axes[index(s.axis)].loop, m0_,
+                                            result_.full_before, result_.full_after, c_);
+      if (ar.constraints_after.violation.empty() || !result_.full_after.completed ||
+          (ar.constraints_after.linear_ok && scale_to_limit_on_full(s, ar))) {
         tuned.push_back(s);
         continue;
       }
+      kept_.emplace_back(s, fmt::format("the gains tuned on the corner window break a constraint on the full scenario "
+                                        "({}; peak |u| at t = {:.4f} s {}{}) where its own gains keep it, so axis {} "
+                                        "keeps its own gains",
+                                        ar.constraints_after.violation, result_.full_after.u_peak_t_s[index(s.axis)],
+                                        motion_text(*planned_, result_.full_after.u_peak_block[index(s.axis)]),
+                                        ar.constraints_after.linear_ok && s.feedback_vars < s.size()
+                                            ? ", also with no feedforward"
+                                            : "",
+                                        axis_name(s.axis)));
+      result_.machine_after.axes[index(s.axis)].loop = s.start;
     }
-    kept.emplace_back(s, fmt::format("the gains tuned on the corner window break a constraint on the full scenario "
-                                     "({}; peak |u| at t = {:.4f} s {}{}) where its own gains keep it, so axis {} "
-                                     "keeps its own gains",
-                                     ar.constraints_after.violation, result.full_after.u_peak_t_s[index(s.axis)],
-                                     motion_text(planned, result.full_after.u_peak_block[index(s.axis)]),
-                                     ar.constraints_after.linear_ok && s.feedback_vars < s.size()
-                                         ? ", also with no feedforward"
-                                         : "",
-                                     axis_name(s.axis)));
-    result.machine_after.axes[index(s.axis)].loop = s.start;
+    bool changed = tuned.size() != scales_.size();
+    for (const auto& l : limited_) changed = changed || l.find("on the full scenario") != std::string::npos;
+    if (changed) result_.full_after = simulate_window(scenario_, *planned_, result_.machine_after, full_);
+    return tuned;
   }
-  bool changed = tuned.size() != scales.size();
-  for (const auto& l : limited) changed = changed || l.find("on the full scenario") != std::string::npos;
-  if (changed) result.full_after = simulate_window(scenario, planned, result.machine_after, full);
-  result.feasible = !tuned.empty();
-  std::size_t changed_axes = 0;
-  for (const auto& s : tuned) {
-    AxisTuneResult ar =
-        axis_result(s, result.machine_after.axes[index(s.axis)].loop, m0, result.full_before, result.full_after, c);
-    ar.note = limited[index(s.axis)];
+
+  /// Only the command limit is broken on the full scenario: scales axis s's feedforward
+  /// down to what keeps it; false when even none does.
+  bool scale_to_limit_on_full(const AxisScales& s, const AxisTuneResult& ar) {
+    const double limit = ar.constraints_after.command_limit;
+    auto& g = result_.machine_after.axes[index(s.axis)].loop;
+    const double alpha = reachable_feedforward(scenario_, *planned_, result_.machine_after, s, g, full_, limit);
+    if (!(alpha >= 0.0)) return false;
+    g = s.scaled_feedforward(g, alpha);
+    limited_[index(s.axis)] +=
+        fmt::format("{}on the full scenario the gains tuned on the corner window reach peak {} "
+                    "at t = {:.4f} s {}: the feedforward was scaled by {:.3f} to keep the limit",
+                    limited_[index(s.axis)].empty() ? "" : "; ",
+                    command_text(m0_, s.axis, ar.constraints_after.command_peak, limit),
+                    result_.full_after.u_peak_t_s[index(s.axis)],
+                    motion_text(*planned_, result_.full_after.u_peak_block[index(s.axis)]), alpha);
+    return true;
+  }
+
+  /// The tuned axes' results and the run's message.
+  void report_tuned(const std::vector<AxisScales>& tuned) {
+    result_.feasible = !tuned.empty();
+    std::size_t changed_axes = 0;
+    for (const auto& s : tuned) {
+      AxisTuneResult ar = axis_result(s, result_.machine_after.axes[index(s.axis)].loop, m0_, result_.full_before,
+                                      result_.full_after, c_);
+      ar.note = limited_[index(s.axis)];
+      if (gains_unchanged(s, ar)) {
+        ar.tuned = false;
+        ar.note = unchanged_note(s.axis);
+      } else {
+        ++changed_axes;
+      }
+      if (!ar.constraints_after.violation.empty() && result_.feasible) {
+        result_.feasible = false;
+        result_.message = fmt::format("tuned gains break a constraint on the full scenario: {}",
+                                      ar.constraints_after.violation);
+      }
+      result_.axes.push_back(ar);
+    }
+    finish_kept(result_.full_before, result_.full_after);
+    if (result_.feasible) {
+      result_.message = fmt::format(
+          "tuned {} axis(es) in {} simulations: max contour error through the corners {:.3f} um -> {:.3f} um",
+          changed_axes, result_.evaluations, 1e3 * result_.full_before.max_contour_error_mm,
+          1e3 * result_.full_after.max_contour_error_mm);
+      if (!kept_.empty()) result_.message += "; " + kept_text();
+    } else if (result_.message.empty()) {
+      result_.message = kept_text();
+    }
+  }
+
+  static bool gains_unchanged(const AxisScales& s, const AxisTuneResult& ar) {
     bool same = true;
     for (const LawGain& lg : s.law->gains()) same = same && lg.get(ar.before) == lg.get(ar.after);
-    if (same) {
-      // The search's best point left this axis where it started (its start met every
-      // constraint and nothing it tried on this axis lowered the objective).
-      ar.tuned = false;
-      ar.note = result.window_before.max_tracking_error_mm[index(s.axis)] == 0.0
-                    ? fmt::format("axis {} does not move through the corners searched on (its tracking error there "
-                                  "is 0), so the search cannot judge its gains; the machine's meet every constraint "
-                                  "and are kept",
-                                  axis_name(s.axis))
-                    : std::string("the machine's gains meet every constraint and no change of them lowered the "
-                                  "objective; they are kept");
-    } else {
-      ++changed_axes;
-    }
-    if (!ar.constraints_after.violation.empty() && result.feasible) {
-      result.feasible = false;
-      result.message = fmt::format("tuned gains break a constraint on the full scenario: {}",
-                                   ar.constraints_after.violation);
-    }
-    result.axes.push_back(ar);
+    return same;
   }
-  finish_kept(result.full_before, result.full_after);
-  if (result.feasible) {
-    result.message = fmt::format(
-        "tuned {} axis(es) in {} simulations: max contour error through the corners {:.3f} um -> {:.3f} um",
-        changed_axes, result.evaluations, 1e3 * result.full_before.max_contour_error_mm,
-        1e3 * result.full_after.max_contour_error_mm);
-    if (!kept.empty()) result.message += "; " + kept_text();
-  } else if (result.message.empty()) {
-    result.message = kept_text();
+
+  /// The search's best point left this axis where it started (its start met every
+  /// constraint and nothing it tried on this axis lowered the objective).
+  std::string unchanged_note(Axis a) const {
+    if (result_.window_before.max_tracking_error_mm[index(a)] == 0.0)
+      return fmt::format("axis {} does not move through the corners searched on (its tracking error there "
+                         "is 0), so the search cannot judge its gains; the machine's meet every constraint "
+                         "and are kept",
+                         axis_name(a));
+    return "the machine's gains meet every constraint and no change of them lowered the objective; they are kept";
   }
-  return result;
+
+  const io::Scenario& scenario_;
+  const TuneOptions& options_;
+  const sim::MachineDefinition& m0_;
+  const TuneConstraints& c_;
+  double lr_{0.0};  ///< ln(gain_range): the feedback variables' range
+  TuneResult result_;
+  KeptAxes kept_;
+  std::vector<AxisScales> scales_;        ///< axes still being tuned
+  std::vector<std::vector<double>> q0_;   ///< their starting variables
+  std::vector<std::string> limited_ = std::vector<std::string>(kNumAxes);  ///< per axis: what limited the tuning
+  std::optional<PlannedScenario> planned_;
+  SimulationWindow full_;
+  SimulationWindow window_;
+  std::vector<double> x0_;  ///< all axes' starting variables, one after the other
+  std::vector<bool> idle_;  ///< per axis of scales_: no error through the corners searched on
+};
+
+}  // namespace
+
+TuneResult tune_gains(const io::Scenario& scenario, const TuneOptions& options) {
+  return Tuner(scenario, options).run();
 }
 
 namespace {
@@ -957,112 +1065,78 @@ nlohmann::json tune_report(const io::Scenario& scenario, const TuneOptions& opti
   return j;
 }
 
+namespace {
+
+/// bode.dat: per axis, the loop before and after tuning, one gnuplot index each
+/// (f_Hz, |L|_dB, unwrapped arg L in deg, |S|_dB, |T|_dB, |E/R|_dB).
+std::string bode_data(const TuneResult& r) {
+  std::string text = "# f_Hz |L|_dB argL_deg |S|_dB |T|_dB |E/R|_dB\n";
+  for (const auto& a : r.axes) {
+    for (const auto* g : {&a.before, &a.after}) {
+      const DiscreteLoopModel m(linear_plant(r.machine_before.axes[index(a.axis)].drive), *g);
+      double unwrap = 0.0, prev = 0.0;
+      bool first = true;
+      for (const auto& p : frequency_response(m, 0.1, 600)) {
+        double ph = std::arg(p.L) * kDegPerRad;
+        if (!first) {
+          while (ph + unwrap - prev > 180.0) unwrap -= 360.0;
+          while (ph + unwrap - prev < -180.0) unwrap += 360.0;
+        }
+        first = false;
+        prev = ph + unwrap;
+        text += fmt::format("{:.6g} {:.6g} {:.6g} {:.6g} {:.6g} {:.6g}\n", p.f_Hz, 20.0 * std::log10(std::abs(p.L)),
+                            prev, 20.0 * std::log10(std::abs(p.S)), 20.0 * std::log10(std::abs(p.T)),
+                            20.0 * std::log10(std::max(std::abs(p.E_over_R), 1e-300)));
+      }
+      text += "\n\n";
+    }
+  }
+  return text;
+}
+
+/// corner_error.dat: the tracking and contour errors through the first tuning corner
+/// (with 0.02 s on either side) with the gains before and after, in um.
+std::string corner_error_data(const io::Scenario& scenario, const PlannedScenario& planned, const TuneResult& r) {
+  const auto& cw = planned.tuning_corners.front();
+  const double Ts = planned.trajectory.Ts_s();
+  const std::int64_t pad = static_cast<std::int64_t>(std::llround(0.02 / Ts));
+  const std::int64_t t0 = std::max<std::int64_t>(0, cw.k_begin - pad), t1 = cw.k_end + pad;
+  SimulationWindow w{std::max<std::int64_t>(0, t0 - static_cast<std::int64_t>(std::llround(0.1 / Ts))),
+                     std::min(planned.total_ticks, t1), {cw}};
+  CornerTrace before, after;
+  simulate_window(scenario, planned, r.machine_before, w, &before, t0, t1);
+  simulate_window(scenario, planned, r.machine_after, w, &after, t0, t1);
+  std::string text = "# t_s";
+  for (const auto& a : r.axes) text += fmt::format(" {0}_err_before_um {0}_err_after_um", axis_name(a.axis));
+  text += " contour_before_um contour_after_um\n";
+  const std::size_t n = std::min(before.t_s.size(), after.t_s.size());
+  for (std::size_t k = 0; k < n; ++k) {
+    text += fmt::format("{:.6f}", before.t_s[k]);
+    for (const auto& a : r.axes)
+      text += fmt::format(" {:.6g} {:.6g}", 1e3 * before.e_mm[index(a.axis)][k], 1e3 * after.e_mm[index(a.axis)][k]);
+    text += fmt::format(" {:.6g} {:.6g}\n", 1e3 * before.contour_mm[k], 1e3 * after.contour_mm[k]);
+  }
+  return text;
+}
+
+}  // namespace
+
 std::vector<std::filesystem::path> plot_tune(io::ResultSet& results, const io::Scenario& scenario,
                                              const TuneResult& r) {
-  std::vector<std::string> outputs;
-  // Bode data: one block per axis and gain set.
-  const std::string bode_dat = "bode.dat";
-  {
-    std::string text = "# f_Hz |L|_dB argL_deg |S|_dB |T|_dB |E/R|_dB\n";
-    for (const auto& a : r.axes) {
-      for (const auto* g : {&a.before, &a.after}) {
-        const DiscreteLoopModel m(linear_plant(r.machine_before.axes[index(a.axis)].drive), *g);
-        double unwrap = 0.0, prev = 0.0;
-        bool first = true;
-        for (const auto& p : frequency_response(m, 0.1, 600)) {
-          double ph = std::arg(p.L) * kDegPerRad;
-          if (!first) {
-            while (ph + unwrap - prev > 180.0) unwrap -= 360.0;
-            while (ph + unwrap - prev < -180.0) unwrap += 360.0;
-          }
-          first = false;
-          prev = ph + unwrap;
-          text += fmt::format("{:.6g} {:.6g} {:.6g} {:.6g} {:.6g} {:.6g}\n", p.f_Hz, 20.0 * std::log10(std::abs(p.L)),
-                              prev, 20.0 * std::log10(std::abs(p.S)), 20.0 * std::log10(std::abs(p.T)),
-                              20.0 * std::log10(std::max(std::abs(p.E_over_R), 1e-300)));
-        }
-        text += "\n\n";
-      }
-    }
-    io::write_file_atomic(results.path(bode_dat), text);
-  }
-  std::string script = "set terminal pngcairo size 1200,900 noenhanced\n";
-  const std::string bode_png = "bode.png";
-  script += fmt::format("set output {}\n", gnuplot_output(bode_png));
-  script += "set multiplot layout 2,1\nset logscale x\nset grid\nset xlabel 'f [Hz]'\nset ylabel 'dB'\n";
-  script += fmt::format("set title {}\n",
-                        gnuplot_text(fmt::format("Open loop L (broken at the command), {}: before and after tuning",
-                                                 scenario.machine.name)));
-  std::string mag = "plot ", ph = "plot ";
-  int idx = 0;
-  for (const auto& a : r.axes) {
-    for (const char* when : {"before", "after"}) {
-      const std::string label = fmt::format("{} {}", axis_name(a.axis), when);
-      if (idx > 0) {
-        mag += ", ";
-        ph += ", ";
-      }
-      mag += fmt::format("{} index {} using 1:2 with lines title {}, '' index {} using 1:4 with lines dt 2 "
-                         "title {}",
-                         gnuplot_file(bode_dat), idx, gnuplot_text("|L| " + label), idx, gnuplot_text("|S| " + label));
-      ph += fmt::format("{} index {} using 1:3 with lines title {}", gnuplot_file(bode_dat), idx,
-                        gnuplot_text("arg L " + label));
-      ++idx;
-    }
-  }
-  script += mag + "\nset ylabel 'deg'\nset title 'Phase of L'\n" + ph + "\nunset multiplot\n";
-  outputs.push_back(bode_png);
-
+  TunePlots plots;
+  plots.machine_name = scenario.machine.name;
+  for (const auto& a : r.axes) plots.axes.push_back(a.axis);
+  io::write_file_atomic(results.path(plots.bode_name), bode_data(r));
   // Tracking error through the first tuning corner, before and after.
   const PlannedScenario planned = plan_scenario(scenario);
   if (!planned.tuning_corners.empty()) {
-    const auto& cw = planned.tuning_corners.front();
-    const double Ts = planned.trajectory.Ts_s();
-    const std::int64_t pad = static_cast<std::int64_t>(std::llround(0.02 / Ts));
-    const std::int64_t t0 = std::max<std::int64_t>(0, cw.k_begin - pad), t1 = cw.k_end + pad;
-    SimulationWindow w{std::max<std::int64_t>(0, t0 - static_cast<std::int64_t>(std::llround(0.1 / Ts))), std::min(planned.total_ticks, t1),
-                       {cw}};
-    CornerTrace before, after;
-    simulate_window(scenario, planned, r.machine_before, w, &before, t0, t1);
-    simulate_window(scenario, planned, r.machine_after, w, &after, t0, t1);
-    const std::string dat = "corner_error.dat";
-    std::string text = "# t_s";
-    for (const auto& a : r.axes) text += fmt::format(" {0}_err_before_um {0}_err_after_um", axis_name(a.axis));
-    text += " contour_before_um contour_after_um\n";
-    const std::size_t n = std::min(before.t_s.size(), after.t_s.size());
-    for (std::size_t k = 0; k < n; ++k) {
-      text += fmt::format("{:.6f}", before.t_s[k]);
-      for (const auto& a : r.axes)
-        text += fmt::format(" {:.6g} {:.6g}", 1e3 * before.e_mm[index(a.axis)][k], 1e3 * after.e_mm[index(a.axis)][k]);
-      text += fmt::format(" {:.6g} {:.6g}\n", 1e3 * before.contour_mm[k], 1e3 * after.contour_mm[k]);
-    }
-    io::write_file_atomic(results.path(dat), text);
-    const std::string png = "corner_error.png";
-    script += fmt::format("set output {}\nset multiplot layout 2,1\nunset logscale x\nset xlabel 't [s]'\n",
-                          gnuplot_output(png));
-    script += fmt::format("set ylabel 'um'\nset title {}\nplot ",
-                          gnuplot_text(planned.corners.empty()
-                                           ? std::string("Tracking error over the whole scenario (it has no corner)")
-                                           : fmt::format("Tracking error through the corner at line {}", cw.line_after)));
-    int col = 2;
-    bool first = true;
-    for (const auto& a : r.axes) {
-      if (!first) script += ", ";
-      first = false;
-      script += fmt::format("{} using 1:{} with lines title '{} before', '' using 1:{} with lines title '{} after'",
-                            gnuplot_file(dat), col, axis_name(a.axis), col + 1, axis_name(a.axis));
-      col += 2;
-    }
-    script += fmt::format("\nset title 'Contour error'\nplot {} using 1:{} with lines title 'before', '' using 1:{} "
-                          "with lines title 'after'\nunset multiplot\n",
-                          gnuplot_file(dat), col, col + 1);
-    outputs.push_back(png);
+    io::write_file_atomic(results.path(plots.corner_name), corner_error_data(scenario, planned, r));
+    plots.corner_title = planned.corners.empty()
+                             ? std::string("Tracking error over the whole scenario (it has no corner)")
+                             : fmt::format("Tracking error through the corner at line {}",
+                                           planned.tuning_corners.front().line_after);
   }
-  script += "unset output\n";
-  std::vector<std::filesystem::path> written;
-  for (const auto& o : outputs) written.push_back(results.path(o));
-  run_gnuplot(results.staging_dir(), script, outputs);
-  return written;
+  return plot_tuning(results, plots);
 }
 
 }  // namespace twin::analysis
