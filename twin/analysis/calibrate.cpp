@@ -39,7 +39,6 @@ std::vector<double> tracking_residual(const MeasuredRun& run, const ReplayResult
 bool choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& machine, const ReplayResult& current,
                         EffectCandidate& c, std::size_t n_fit, double max_hunt_ratio, int& replays) {
   if ((c.param_grid.empty() && c.refine.empty()) || n_fit < 2) return true;
-  using ParamSet = std::vector<std::pair<std::string, double>>;
   std::vector<ParamSet> sets{c.params};
   sets.insert(sets.end(), c.param_grid.begin(), c.param_grid.end());
   // Each error relative to the current model's on the same rows (the
@@ -94,7 +93,7 @@ bool choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
   for (int round = 0; round < 2; ++round)
     for (const auto& [name, step0] : c.refine) {
       const double step = round == 0 ? step0 : std::sqrt(step0);
-      const auto& key = name;  // a structured binding cannot be captured before clang 16
+      const EffectParam key = name;  // a structured binding cannot be captured before clang 16
       const auto it = std::find_if(c.params.begin(), c.params.end(), [&](const auto& p) { return p.first == key; });
       if (it == c.params.end() || !(step > 1.0)) continue;
       const auto i = static_cast<std::size_t>(it - c.params.begin());
@@ -111,7 +110,7 @@ bool choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
       }
     }
   c.evidence += fmt::format("; of {} parameter sets replayed on the fitting part, the best:", tried);
-  for (const auto& [k, v] : c.params) c.evidence += fmt::format(" {} = {:.4g}", k, v);
+  for (const auto& [k, v] : c.params) c.evidence += fmt::format(" {} = {:.4g}", param_key(c.kind, k), v);
   c.evidence += fmt::format(" (fitting-part {} {:.3f} of the current model's)",
                             best_score.first == 0 ? "errors" : "hunting statistic", best_score.second);
   c.param_grid.clear();
@@ -197,7 +196,7 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
 
   AxisArray<AxisSignals> sig;
   AxisArray<std::vector<double>> T_cur;
-  AxisArray<std::vector<std::string>> present;
+  AxisArray<std::vector<EffectKind>> present;
   AxisArray<bool> hunting_on{};
   for (Axis a : run.axes) {
     std::string note;
@@ -260,7 +259,7 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
         r.considered.back().T_after_Nm.clear();
         if (c.signal_gain < opt.min_signal_gain || c.t_stat < c.min_t) continue;
         const bool seen = std::any_of(cands[i].begin(), cands[i].end(),
-                                      [&](const EffectCandidate& o) { return o.effect == c.effect; });
+                                      [&](const EffectCandidate& o) { return o.kind == c.kind; });
         if (seen)
           variants.push_back(std::move(c));
         else if (cands[i].size() < static_cast<std::size_t>(opt.replays_per_round))
@@ -364,7 +363,7 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
         ad.before = cur_err[i];
         ad.after = best_err[i];
         apply_candidate(machine.axes[i], ad.candidate);
-        present[i].push_back(ad.candidate.effect);
+        present[i].push_back(ad.candidate.kind);
         hunting_on[i] = hunting_on[i] || ad.candidate.judged_by_hunting;
         T_cur[i] = ad.candidate.T_after_Nm;
         copy_axis(current, best_replay[i], a);
@@ -408,7 +407,7 @@ nlohmann::json calibration_report_json(const CalibrationResult& r) {
   j["effects_added"] = nlohmann::json::array();
   for (const auto& ad : r.added) {
     nlohmann::json p = nlohmann::json::object();
-    for (const auto& [k, v] : ad.candidate.params) p[k] = v;
+    for (const auto& [k, v] : ad.candidate.params) p[param_key(ad.candidate.kind, k)] = v;
     j["effects_added"].push_back({{"effect", ad.candidate.effect},
                                   {"axis", std::string(axis_name(ad.candidate.axis))},
                                   {"params", p},
@@ -461,7 +460,7 @@ std::string calibration_report_markdown(const CalibrationResult& r, const std::s
   if (r.added.empty()) s += "none: no candidate improved the held-out error by more than the threshold.\n";
   for (const auto& ad : r.added) {
     s += fmt::format("- **{}** on {}:", ad.candidate.effect, axis_name(ad.candidate.axis));
-    for (const auto& [k, v] : ad.candidate.params) s += fmt::format(" {} = {:.5g}", k, v);
+    for (const auto& [k, v] : ad.candidate.params) s += fmt::format(" {} = {:.5g}", param_key(ad.candidate.kind, k), v);
     s += fmt::format(". {}\n", ad.candidate.evidence);
   }
   s += "\n## Candidates replayed and rejected\n\n";

@@ -10,6 +10,8 @@
 
 #include <fmt/format.h>
 
+#include "feeddrive/effect_torques.hpp"
+#include "twin/analysis/effect_detectors.hpp"
 #include "twin/analysis/signal.hpp"
 #include "twin/core/error.hpp"
 
@@ -685,17 +687,15 @@ DriveRefit drive_moved(const feeddrive::DriveParams& cur, const LsqResult& joint
 /// A candidate: the effect, one or more parameter sets (the fitting rows'
 /// replay chooses among them), the drive refitted with each, the loop
 /// gains it carries, and the torque it adds at the detector's rows (taken
-/// out of the torque the later detectors fit, where kept).
+/// out of the torque the later detectors fit, where kept). The channels it
+/// is judged on are the registry's.
 struct Trial {
-  std::string effect;
-  std::vector<std::map<std::string, double>> sets;
+  EffectKind kind{EffectKind::kStribeck};
+  std::vector<ParamSet> sets;
   std::vector<DriveRefit> drives;  ///< one per set, or empty: the drive stays
   std::optional<controller::CascadeGains> gains;
   std::string evidence;
-  /// The channels (suffixes of the axis's keys: "torque", "_err_mm") where
-  /// the catalogue says the effect shows: their held-out NRMS must fall.
-  std::vector<std::string> judge;
-  std::function<double(std::size_t row, const std::map<std::string, double>& p, const DriveRefit* d)> torque;
+  std::function<double(std::size_t row, const ParamSet& p, const DriveRefit* d)> torque;
 };
 
 sim::MachineDefinition with_trial(const sim::MachineDefinition& base, Axis a, const Trial& t, std::size_t set) {
@@ -711,11 +711,13 @@ sim::MachineDefinition with_trial(const sim::MachineDefinition& base, Axis a, co
     def.drive.effects.constant_load.torque_Nm = d.c;
   }
   if (t.gains) def.loop.cascade = *t.gains;
-  // Both describe the friction at low speed: the drive holds one.
-  if (t.effect == "stribeck") def.drive.effects.smooth_friction.enabled = false;
-  for (const auto& [name, value] : t.sets[set]) {
-    const sim::AxisParamSpec* spec = sim::find_axis_param(t.effect + "." + name);
-    if (spec == nullptr) throw InternalError(fmt::format("calibrate: no machine parameter {}.{}", t.effect, name));
+  // Two effects that describe the same thing: the drive holds one.
+  if (const auto replaced = registry_entry(t.kind).replaces)
+    feeddrive::effect_def(*replaced).enabled(def.drive.effects) = false;
+  for (const auto& [param, value] : t.sets[set]) {
+    const std::string_view name = feeddrive::effect_param_def(param).qualified;
+    const sim::AxisParamSpec* spec = sim::find_axis_param(name);
+    if (spec == nullptr) throw InternalError(fmt::format("calibrate: no machine parameter {}", name));
     sim::set_axis_param(def, *spec, value);
   }
   return m;
@@ -736,9 +738,10 @@ double t_pair(const LsqResult& ls, std::size_t j) {
 /// or speeds does not pass on noise alone.
 constexpr double kMinT = 8.0;
 
-void search_catalogue_effects(DataCalibration& out, const std::vector<RunData>& runs) {
-  const double dt = runs.front().run->sample_period_s;
-  // The measured positions' own step (the reference may be logged finer).
+/// The step of the logged positions: the coarsest power of ten all measured
+/// positions are multiples of (the reference may be logged finer), at least
+/// the rounding's quantum.
+double measured_position_step(const DataCalibration& out, const std::vector<RunData>& runs) {
   double q = 0.0;
   for (int d = 0; d <= 6 && q == 0.0; ++d) {
     const double step = std::pow(10.0, -d);
@@ -750,505 +753,616 @@ void search_catalogue_effects(DataCalibration& out, const std::vector<RunData>& 
     if (all) q = step;
   }
   if (q == 0.0) q = out.identified.encoder_resolution_mm;
-  q = std::max(q, out.rounding.kind == PositionRounding::Kind::kSignificant ? out.rounding.quantum_mm : 0.0);
-  const bool fast = dt <= 2e-3 + 1e-12, fine = q <= 0.005;
-  const double corr = std::max(1.0, 0.01 / dt);
-  FitRunErrors current = errors_on_fit_runs(runs, out.final_machine, out.axes, out.rounding, out.replays);
-  if (!current.ok) return;
-  for (const AxisFromData& ax : out.axis) {
-    if (!ax.identified) continue;
-    const Axis a = ax.axis;
-    const std::size_t ai = index(a);
-    AxisRows rows = axis_rows(runs, ax);
-    if (rows.moving.size() < 200) continue;
-    const auto keys = axis_keys(ax);
-    const std::vector<const std::vector<double>*> base_cols{&rows.acc, &rows.vel, &rows.pos, &rows.neg, &rows.one};
-    auto with_base = [&](std::vector<const std::vector<double>*> extra) {
-      std::vector<const std::vector<double>*> c = base_cols;
-      c.insert(c.end(), extra.begin(), extra.end());
-      return c;
-    };
+  return std::max(q, out.rounding.kind == PositionRounding::Kind::kSignificant ? out.rounding.quantum_mm : 0.0);
+}
 
-    auto attempt = [&](const Trial& t) {
-      DataEffect eff;
-      eff.effect = t.effect;
-      eff.axis = a;
-      eff.evidence = t.evidence;
-      std::size_t best = 0;
-      FitRunErrors best_e;
-      double best_fit = 1e300;
-      for (std::size_t s = 0; s < t.sets.size(); ++s) {
-        FitRunErrors e;
-        try {
-          e = errors_on_fit_runs(runs, with_trial(out.final_machine, a, t, s), out.axes, out.rounding, out.replays);
-        } catch (const Error&) {
-          continue;
-        }
-        if (!e.ok || !e.fit.nrms.count(ax.channel.column)) continue;
-        const double f = keys_sum(e.fit, keys);
-        if (f < best_fit) {
-          best_fit = f;
-          best = s;
-          best_e = std::move(e);
-        }
-      }
-      for (const auto& [k, v] : t.sets[best]) eff.params[k] = v;
-      for (const auto& k : keys)
-        if (const auto it = current.held.nrms.find(k); it != current.held.nrms.end()) eff.before_channels[k] = it->second;
-      eff.before = eff.before_channels.count(ax.channel.column) ? eff.before_channels.at(ax.channel.column) : 0.0;
-      eff.after = eff.before;
-      if (best_e.ok) {
-        bool no_rise = true;
-        for (const auto& [k, b] : eff.before_channels) {
-          const auto it = best_e.held.nrms.find(k);
-          if (it == best_e.held.nrms.end()) {
-            no_rise = false;
-            continue;
-          }
-          eff.after_channels[k] = it->second;
-          no_rise = no_rise && it->second <= b * (1.0 + kRiseAllowed);
-        }
-        eff.after = eff.after_channels.count(ax.channel.column) ? eff.after_channels.at(ax.channel.column) : eff.before;
-        std::vector<std::string> jk;
-        for (const auto& j : t.judge) jk.push_back(j == "torque" ? ax.channel.column : col(a, j.c_str()));
-        const double sb = keys_sum(current.held, jk), sa = keys_sum(best_e.held, jk);
-        eff.kept = no_rise && sa < (1.0 - kKeepMargin) * sb;
-        eff.evidence += fmt::format("; held-out NRMS of {} {:.4g} -> {:.4g}{}", fmt::join(jk, " + "), sb, sa,
-                                    eff.kept ? "" : " (not kept)");
-      } else {
-        eff.evidence += "; the replay with it failed (not kept)";
-      }
-      if (eff.kept) {
-        if (t.effect == "stribeck" && out.final_machine.axes[ai].drive.effects.smooth_friction.enabled)
-          for (DataEffect& other : out.effects)
-            if (other.effect == "smooth_friction" && other.axis == a && other.kept) {
-              other.kept = false;
-              other.evidence += "; replaced by stribeck, which lowers the held-out error further";
-            }
-        out.final_machine = with_trial(out.final_machine, a, t, best);
-        if (t.torque) {
-          const DriveRefit* d = t.drives.empty() ? nullptr : &t.drives[best];
-          for (std::size_t k : rows.all) rows.T[k] -= t.torque(k, t.sets[best], d);
-        }
-        current = std::move(best_e);
-      }
-      out.effects.push_back(std::move(eff));
-    };
-
-    // The channel the replay gives at the detector's rows.
-    auto model_at = [&](std::size_t k) {
-      const auto [run, row] = rows.at[k];
-      const auto* m = model_channel(current.replays[run], a, ax.channel, true);
-      return m ? (*m)[row] : 0.0;
-    };
-
-    // delay: a torque that follows the loop's command late.
-    if (fast) {
-      std::size_t lag = 0;
-      std::optional<controller::CascadeGains> gains;
-      std::string why;
-      if (ax.velocity_loop_from_data) {
-        lag = ax.torque_lag_samples;
-        gains = ax.gains_at_lag;
-        why = fmt::format("the logged torque follows the PI law on the logged speed error best {} samples late "
-                          "(the law refitted at that lag: Kvp {:.4g}, Tn {:.4g} s)",
-                          lag, ax.gains_at_lag.Kvp_torque_s_per_rad, ax.gains_at_lag.Tn_s);
-      } else {
-        const auto max_lag = static_cast<std::size_t>(std::clamp(std::lround(0.01 / dt), 1L, 10L));
-        std::vector<double> mse(max_lag + 1, 0.0);
-        for (std::size_t L = 0; L <= max_lag; ++L)
-          for (std::size_t k : rows.all) {
-            const auto [run, row] = rows.at[k];
-            if (row < L) continue;
-            const auto* m = model_channel(current.replays[run], a, ax.channel, true);
-            const double d = rows.T[k] - (m ? (*m)[row - L] : 0.0);
-            mse[L] += d * d;
-          }
-        const auto it = std::min_element(mse.begin(), mse.end());
-        lag = static_cast<std::size_t>(it - mse.begin());
-        if (lag > 0 && *it < 0.8 * mse[0])
-          why = fmt::format("the logged torque matches the replay's {} samples later (mean square {:.3g} of {:.3g} "
-                            "at no lag)",
-                            lag, *it / static_cast<double>(rows.all.size()), mse[0] / static_cast<double>(rows.all.size()));
-        else
-          lag = 0;
-      }
-      if (lag > 0) {
-        Trial t;
-        t.effect = "delay";
-        t.sets = {{{"delay_s", static_cast<double>(lag) * dt}}};
-        t.gains = gains;
-        t.evidence = why;
-        t.judge = {"torque", "_err_mm"};
-        attempt(t);
-      }
+/// A scan of a period over [P_min, P_max] (steps of 1.5 %, then refined
+/// to 0.1 % and 0.01 % about the best): the period whose fit leaves the
+/// smallest residual.
+std::pair<double, LsqResult> scan_period(double P_min, double P_max, const std::function<LsqResult(double)>& fit) {
+  std::pair<double, LsqResult> best{0.0, LsqResult{}};
+  double best_res = 1e300;
+  auto one = [&](double P) {
+    LsqResult ls = fit(P);
+    if (ls.ok && ls.residual_rms < best_res) {
+      best_res = ls.residual_rms;
+      best = {P, std::move(ls)};
     }
+  };
+  for (double P = P_min; P <= P_max; P *= 1.015) one(P);
+  for (const auto& [span, step] : {std::pair{1.015, 1.001}, std::pair{1.001, 1.0001}}) {
+    if (best.first <= 0.0) break;
+    const double P0 = best.first;
+    for (double P = P0 / span; P <= std::min(P_max, P0 * span); P *= step) one(P);
+  }
+  return best;
+}
 
-    // current_saturation: the log's torque clips where the replay's goes beyond.
-    {
-      double log_max = 0.0, model_max = 0.0;
-      for (std::size_t k : rows.all) {
-        const auto [run, row] = rows.at[k];
-        log_max = std::max(log_max, std::abs(runs[run].run->trace.at(ax.channel.column)[row]));
-        model_max = std::max(model_max, std::abs(model_at(k)));
-      }
-      std::vector<double> top;
-      for (std::size_t k : rows.all) {
-        const auto [run, row] = rows.at[k];
-        const double v = std::abs(runs[run].run->trace.at(ax.channel.column)[row]);
-        if (v >= 0.98 * log_max) top.push_back(v);
-      }
-      if (log_max > 0.0 && model_max > 1.05 * log_max && top.size() >= 10) {
-        std::nth_element(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(top.size() / 2), top.end());
-        const double level = top[top.size() / 2];
-        Trial t;
-        t.effect = "current_saturation";
-        t.sets = {{{"i_max_A", level}}};
-        t.judge = {"torque", "_err_mm"};
-        t.evidence = fmt::format("the log's {} holds {} samples within 2 % of its largest value {:.4g} while the "
-                                 "replay asks for up to {:.4g}: a limit at {:.4g} (in the channel's unit)",
-                                 ax.channel.column, top.size(), log_max, model_max, level);
-        attempt(t);
-      }
-    }
+}  // namespace
 
-    // stribeck: friction above the Coulomb level at low speed, the drive
-    // refitted with the curve, T = J a + B v + Tc_dir [dir] (1 - g) + Ts sgn g + c, g = exp(-(v/ws)^2).
-    {
-      const LsqResult base = least_squares(base_cols, rows.T, rows.all, corr);
-      std::vector<double> p1(rows.all.size()), n1(rows.all.size()), sg(rows.all.size());
-      auto fit_at = [&](double ws) {
-        for (std::size_t k : rows.all) {
-          const double g = std::exp(-std::pow(rows.vel[k] / ws, 2));
-          p1[k] = rows.pos[k] * (1.0 - g);
-          n1[k] = rows.neg[k] * (1.0 - g);
-          sg[k] = rows.dir[k] * g;
-        }
-        return least_squares({&rows.acc, &rows.vel, &p1, &n1, &rows.one, &sg}, rows.T, rows.all, corr);
-      };
-      double best_ws = 0.0, best_res = base.ok ? base.residual_rms : 0.0;
-      LsqResult best;
-      auto try_ws = [&](double ws) {
-        const LsqResult ls = fit_at(ws);
-        if (ls.ok && ls.residual_rms < best_res) {
-          best_res = ls.residual_rms;
-          best_ws = ws;
-          best = ls;
-        }
-      };
-      // Steps of 1.35, then of 1.02 about the best (the levels are linear
-      // given ws, so the scan is the whole search).
-      for (double ws = rows.v_move; base.ok && ws < 0.5 * rows.v_high; ws *= 1.35) try_ws(ws);
-      if (best_ws > 0.0) {
-        const double w0 = best_ws;
-        for (double ws = w0 / 1.35; ws <= w0 * 1.35; ws *= 1.02) try_ws(ws);
-      }
-      if (best_ws > 0.0) {
-        const double Ts = best.theta[5], Tc_mean = 0.5 * (best.theta[2] + best.theta[3]);
-        const double t_ex = best.stderr_theta[5] > 0.0 ? (Ts - Tc_mean) / best.stderr_theta[5] : 0.0;
-        if (t_ex >= kMinT && best_res < 0.99 * base.residual_rms) {
-          Trial t;
-          t.effect = "stribeck";
-          t.judge = {"torque", "_err_mm"};
-          for (double f : {0.7, 1.0, 1.4}) {
-            const LsqResult ls = fit_at(f * best_ws);
-            if (!ls.ok) continue;
-            const DriveRefit d = drive_moved(out.final_machine.axes[ai].drive, ls, base);
-            // The breakaway level as fitted on the axis's own motion.
-            const double Ts_set = ls.theta[5];
-            if (!(Ts_set > std::max(d.Tc_pos, d.Tc_neg))) continue;
-            t.sets.push_back({{"Ts_static", Ts_set}, {"ws", f * best_ws}});
-            t.drives.push_back(d);
-          }
-          t.evidence = fmt::format("friction rising to {:.4g} (t = {:.1f} over the Coulomb mean {:.4g}) below "
-                                   "{:.3g} mm/s cuts the fitting rows' torque residual from {:.4g} to {:.4g}",
-                                   Ts, t_ex, Tc_mean, best_ws, base.residual_rms, best_res);
-          t.torque = [&rows](std::size_t k, const std::map<std::string, double>& p, const DriveRefit* d) {
-            const double g = std::exp(-std::pow(rows.vel[k] / p.at("ws"), 2));
-            const double Tc = rows.dir[k] > 0 ? d->Tc_pos : d->Tc_neg;
-            return rows.dir[k] * (p.at("Ts_static") - Tc) * g;
-          };
-          if (!t.sets.empty()) attempt(t);
-        }
-      }
-    }
+/// A detector's view of one identified axis: the runs, the axis's rows with
+/// the torque the machine so far leaves, the replays of that machine, and
+/// the rule every candidate is kept by (attempt).
+struct DataSearch {
+  DataCalibration& out;
+  const std::vector<RunData>& runs;
+  const AxisFromData& ax;
+  FitRunErrors& current;  ///< the machine so far on the fitting runs
+  AxisRows rows;
+  std::vector<std::string> keys;  ///< the axis's channels
+  std::vector<const std::vector<double>*> base_cols;
+  double dt{0.0};    ///< the log's sample period
+  double q{0.0};     ///< the logged positions' step
+  double corr{1.0};  ///< rows over which the residual is correlated
+  bool fast{false};  ///< samples every 2 ms or faster
+  bool fine{false};  ///< positions to 5 um or finer
 
-    // position_dependent_friction: the base fit's residual, signed by the
-    // direction of motion, averaged in 60 bins along the travel; the band of
-    // bins with the largest excess, fitted with the drive.
-    {
-      // On moving rows the constant is the mean of the two Coulomb columns.
-      const std::vector<const std::vector<double>*> moving_cols{&rows.acc, &rows.vel, &rows.pos, &rows.neg};
-      const LsqResult b = least_squares(moving_cols, rows.T, rows.moving, corr);
-      if (b.ok && rows.x_hi > rows.x_lo) {
-        std::vector<double> rho(rows.all.size(), 0.0);
-        for (std::size_t k : rows.moving) {
-          double pred = 0.0;
-          for (std::size_t j = 0; j < moving_cols.size(); ++j) pred += (*moving_cols[j])[k] * b.theta[j];
-          rho[k] = (rows.T[k] - pred) * rows.dir[k];
-        }
-        constexpr std::size_t kBins = 60;
-        const Bins bins = bin_means(rows.x, rho, rows.moving, rows.x_lo, rows.x_hi, kBins);
-        const double min_rows = std::max(200.0, 0.02 * static_cast<double>(rows.moving.size()));
-        double best = 0.0;
-        std::size_t bi = 0, bj = 0;
-        for (std::size_t i = 0; i < kBins; ++i) {
-          double sum = 0.0, cnt = 0.0;
-          for (std::size_t j = i; j < kBins && j - i + 1 < (3 * kBins) / 4; ++j) {
-            sum += bins.mean[j] * static_cast<double>(bins.count[j]);
-            cnt += static_cast<double>(bins.count[j]);
-            if (cnt < min_rows || sum <= 0.0) continue;
-            if (sum * sum / cnt > best) {
-              best = sum * sum / cnt;
-              bi = i;
-              bj = j;
-            }
-          }
-        }
-        if (best > 0.0) {
-          const double w = (rows.x_hi - rows.x_lo) / static_cast<double>(kBins);
-          const double x0 = rows.x_lo + w * static_cast<double>(bi), x1 = rows.x_lo + w * static_cast<double>(bj + 1);
-          std::vector<double> psi(rows.all.size(), 0.0);
-          for (std::size_t k : rows.all)
-            if (rows.x[k] >= x0 && rows.x[k] <= x1) psi[k] = rows.dir[k];
-          const LsqResult f = least_squares(with_base({&psi}), rows.T, rows.all, corr);
-          const LsqResult f0 = least_squares(base_cols, rows.T, rows.all, corr);
-          if (f.ok && f0.ok && f.theta[5] > 0.0 && t_of(f, 5) >= kMinT) {
-            Trial t;
-            t.effect = "position_dependent_friction";
-            t.sets = {{{"dTc_Nm", f.theta[5]}, {"x_start_mm", x0}, {"x_end_mm", x1}}};
-            t.drives = {drive_moved(out.final_machine.axes[ai].drive, f, f0)};
-            t.judge = {"torque"};
-            t.evidence = fmt::format("friction {:+.4g} (t = {:.1f}) between x = {:.4g} and {:.4g} mm, in the "
-                                     "channel's unit",
-                                     f.theta[5], t_of(f, 5), x0, x1);
-            t.torque = [&rows](std::size_t k, const std::map<std::string, double>& p, const DriveRefit*) {
-              return rows.x[k] >= p.at("x_start_mm") && rows.x[k] <= p.at("x_end_mm") ? p.at("dTc_Nm") * rows.dir[k]
-                                                                                        : 0.0;
-            };
-            attempt(t);
-          }
-        }
-      }
-    }
-
-    // A scan of a period over [P_min, P_max] (steps of 1.5 %, then refined
-    // to 0.1 % and 0.01 % about the best): the period whose fit leaves the
-    // smallest residual.
-    auto scan_period = [](double P_min, double P_max, const std::function<LsqResult(double)>& fit) {
-      std::pair<double, LsqResult> best{0.0, LsqResult{}};
-      double best_res = 1e300;
-      auto one = [&](double P) {
-        LsqResult ls = fit(P);
-        if (ls.ok && ls.residual_rms < best_res) {
-          best_res = ls.residual_rms;
-          best = {P, std::move(ls)};
-        }
-      };
-      for (double P = P_min; P <= P_max; P *= 1.015) one(P);
-      for (const auto& [span, step] : {std::pair{1.015, 1.001}, std::pair{1.001, 1.0001}}) {
-        if (best.first <= 0.0) break;
-        const double P0 = best.first;
-        for (double P = P0 / span; P <= std::min(P_max, P0 * span); P *= step) one(P);
-      }
-      return best;
-    };
-
-    // cogging: a torque ripple periodic in the motor angle (x / rg, rg = 1
-    // mm/rad here), fitted with the drive on the axis's own motion (its
-    // logged speed, where there is one: a ripple the loop does not follow
-    // shows in the speed, not in the commanded motion).
-    if (fast) {
-      const double P_min = std::max(0.1, 8.0 * dt * rows.v_high), P_max = std::min(40.0, (rows.x_hi - rows.x_lo) / 3.0);
-      std::vector<double> sn(rows.all.size()), cs(rows.all.size());
-      const std::vector<const std::vector<double>*> cols{&rows.acc, &rows.vel, &rows.pos, &rows.neg, &sn, &cs};
-      auto fit = [&](double P) {
-        for (std::size_t k : rows.all) {
-          sn[k] = std::sin(2.0 * M_PI * rows.x[k] / P);
-          cs[k] = std::cos(2.0 * M_PI * rows.x[k] / P);
-        }
-        return least_squares(cols, rows.T, rows.moving, corr);
-      };
-      const LsqResult base = least_squares({&rows.acc, &rows.vel, &rows.pos, &rows.neg}, rows.T, rows.moving, corr);
-      if (base.ok && P_max > P_min) {
-        const auto [P, ls] = scan_period(P_min, P_max, fit);
-        if (P > 0.0 && t_pair(ls, 4) >= kMinT && ls.residual_rms < 0.98 * base.residual_rms) {
-          const double A = std::hypot(ls.theta[4], ls.theta[5]), phase = std::atan2(ls.theta[5], ls.theta[4]);
-          Trial t;
-          t.effect = "cogging";
-          t.judge = {"torque"};
-          t.sets = {{{"amplitude_Nm", A}, {"cycles_per_rev", 2.0 * M_PI / P}, {"phase_rad", phase}}};
-          t.evidence = fmt::format("a ripple of {:.4g} (in the channel's unit) with a period of {:.4g} mm of travel "
-                                   "(t = {:.1f}) cuts the moving rows' torque residual from {:.4g} to {:.4g}",
-                                   A, P, t_pair(ls, 4), base.residual_rms, ls.residual_rms);
-          t.torque = [&rows](std::size_t k, const std::map<std::string, double>& p, const DriveRefit*) {
-            return p.at("amplitude_Nm") * std::sin(p.at("cycles_per_rev") * rows.x[k] + p.at("phase_rad"));
-          };
-          attempt(t);
-        }
-      }
-    }
-
-    // screw_pitch_error: the encoder reads x + A sin(2 pi x / P + phase)
-    // while the motor moves x; the logged motor speed then differs from the
-    // speed of the logged position by A (2 pi / P) v cos(2 pi x / P + phase).
-    // Regressed on that with the speed, the acceleration and a constant as
-    // nuisances (a logged speed filtered or late).
+  Axis axis() const { return ax.axis; }
+  std::size_t ai() const { return index(ax.axis); }
+  /// The drive's columns and `extra`.
+  std::vector<const std::vector<double>*> with_base(std::vector<const std::vector<double>*> extra) const {
+    std::vector<const std::vector<double>*> c = base_cols;
+    c.insert(c.end(), extra.begin(), extra.end());
+    return c;
+  }
+  /// The channel the replay gives at the detector's row k.
+  double model_at(std::size_t k) const {
+    const auto [run, row] = rows.at[k];
+    const auto* m = model_channel(current.replays[run], ax.axis, ax.channel, true);
+    return m ? (*m)[row] : 0.0;
+  }
+  /// Whether every fitting run logs the axis's measured position.
+  bool logs_position() const {
     bool logs_x = true;
-    for (const RunData& rd : runs) logs_x = logs_x && rd.run->trace.find(col(a, "_mm")) != nullptr;
-    if (fast && fine && rows.measured_speed && logs_x) {
-      std::vector<double> r(rows.all.size()), vd(rows.all.size()), ad(rows.all.size(), 0.0);
+    for (const RunData& rd : runs) logs_x = logs_x && rd.run->trace.find(col(ax.axis, "_mm")) != nullptr;
+    return logs_x;
+  }
+  /// The channels `kind` is judged on (the registry's), as keys.
+  std::vector<std::string> judged_keys(EffectKind kind) const {
+    const std::uint8_t on = registry_entry(kind).judged_on;
+    std::vector<std::string> jk;
+    if (on & kJudgeTorque) jk.push_back(ax.channel.column);
+    if (on & kJudgeTracking) jk.push_back(col(ax.axis, "_err_mm"));
+    return jk;
+  }
+  void attempt(const Trial& t);
+
+ private:
+  struct BestSet {
+    std::size_t set{0};
+    FitRunErrors errors;
+  };
+  BestSet best_set_on_fit_rows(const Trial& t);
+  void judge_held_out(const Trial& t, const FitRunErrors& best_e, DataEffect& eff) const;
+  void keep(const Trial& t, std::size_t best, FitRunErrors&& best_e);
+};
+
+/// The set whose replay has the lowest error on the fitting rows.
+DataSearch::BestSet DataSearch::best_set_on_fit_rows(const Trial& t) {
+  BestSet b;
+  double best_fit = 1e300;
+  for (std::size_t s = 0; s < t.sets.size(); ++s) {
+    FitRunErrors e;
+    try {
+      e = errors_on_fit_runs(runs, with_trial(out.final_machine, ax.axis, t, s), out.axes, out.rounding, out.replays);
+    } catch (const Error&) {
+      continue;
+    }
+    if (!e.ok || !e.fit.nrms.count(ax.channel.column)) continue;
+    const double f = keys_sum(e.fit, keys);
+    if (f < best_fit) {
+      best_fit = f;
+      b.set = s;
+      b.errors = std::move(e);
+    }
+  }
+  return b;
+}
+
+/// Kept where no channel of the axis rises by more than kRiseAllowed and the
+/// channels the effect is judged on fall by more than kKeepMargin.
+void DataSearch::judge_held_out(const Trial& t, const FitRunErrors& best_e, DataEffect& eff) const {
+  bool no_rise = true;
+  for (const auto& [k, b] : eff.before_channels) {
+    const auto it = best_e.held.nrms.find(k);
+    if (it == best_e.held.nrms.end()) {
+      no_rise = false;
+      continue;
+    }
+    eff.after_channels[k] = it->second;
+    no_rise = no_rise && it->second <= b * (1.0 + kRiseAllowed);
+  }
+  eff.after = eff.after_channels.count(ax.channel.column) ? eff.after_channels.at(ax.channel.column) : eff.before;
+  const std::vector<std::string> jk = judged_keys(t.kind);
+  const double sb = keys_sum(current.held, jk), sa = keys_sum(best_e.held, jk);
+  eff.kept = no_rise && sa < (1.0 - kKeepMargin) * sb;
+  eff.evidence += fmt::format("; held-out NRMS of {} {:.4g} -> {:.4g}{}", fmt::join(jk, " + "), sb, sa,
+                              eff.kept ? "" : " (not kept)");
+}
+
+/// The kept effect goes into the machine (an effect it replaces on the axis
+/// is dropped), its torque out of the rows the later detectors fit.
+void DataSearch::keep(const Trial& t, std::size_t best, FitRunErrors&& best_e) {
+  const Axis a = ax.axis;
+  if (const auto replaced = registry_entry(t.kind).replaces;
+      replaced && feeddrive::effect_def(*replaced).enabled(out.final_machine.axes[ai()].drive.effects))
+    for (DataEffect& other : out.effects)
+      if (other.kind == *replaced && other.axis == a && other.kept) {
+        other.kept = false;
+        other.evidence += fmt::format("; replaced by {}, which lowers the held-out error further",
+                                      feeddrive::effect_name(t.kind));
+      }
+  out.final_machine = with_trial(out.final_machine, a, t, best);
+  if (t.torque) {
+    const DriveRefit* d = t.drives.empty() ? nullptr : &t.drives[best];
+    for (std::size_t k : rows.all) rows.T[k] -= t.torque(k, t.sets[best], d);
+  }
+  current = std::move(best_e);
+}
+
+/// Replays each of the trial's sets on the fitting rows, the best on the
+/// held-out rows, and keeps the effect where the held-out error falls.
+void DataSearch::attempt(const Trial& t) {
+  DataEffect eff;
+  eff.set_kind(t.kind);
+  eff.axis = ax.axis;
+  eff.evidence = t.evidence;
+  BestSet b = best_set_on_fit_rows(t);
+  for (const auto& [k, v] : t.sets[b.set]) eff.params[param_key(t.kind, k)] = v;
+  for (const auto& k : keys)
+    if (const auto it = current.held.nrms.find(k); it != current.held.nrms.end()) eff.before_channels[k] = it->second;
+  eff.before = eff.before_channels.count(ax.channel.column) ? eff.before_channels.at(ax.channel.column) : 0.0;
+  eff.after = eff.before;
+  if (b.errors.ok)
+    judge_held_out(t, b.errors, eff);
+  else
+    eff.evidence += "; the replay with it failed (not kept)";
+  if (eff.kept) keep(t, b.set, std::move(b.errors));
+  out.effects.push_back(std::move(eff));
+}
+
+// delay: a torque that follows the loop's command late.
+void detect_delay_in_data(DataSearch& s) {
+  if (!s.fast) return;
+  const AxisFromData& ax = s.ax;
+  const AxisRows& rows = s.rows;
+  const double dt = s.dt;
+  std::size_t lag = 0;
+  std::optional<controller::CascadeGains> gains;
+  std::string why;
+  if (ax.velocity_loop_from_data) {
+    lag = ax.torque_lag_samples;
+    gains = ax.gains_at_lag;
+    why = fmt::format("the logged torque follows the PI law on the logged speed error best {} samples late "
+                      "(the law refitted at that lag: Kvp {:.4g}, Tn {:.4g} s)",
+                      lag, ax.gains_at_lag.Kvp_torque_s_per_rad, ax.gains_at_lag.Tn_s);
+  } else {
+    const auto max_lag = static_cast<std::size_t>(std::clamp(std::lround(0.01 / dt), 1L, 10L));
+    std::vector<double> mse(max_lag + 1, 0.0);
+    for (std::size_t L = 0; L <= max_lag; ++L)
       for (std::size_t k : rows.all) {
         const auto [run, row] = rows.at[k];
-        const auto& xm = runs[run].run->trace.at(col(a, "_mm"));
-        vd[k] = (xm[row + 1] - xm[row - 1]) / (2.0 * dt);
-        r[k] = rows.vel_m[k] - vd[k];
-        ad[k] = rows.acc[k];
+        if (row < L) continue;
+        const auto* m = model_channel(s.current.replays[run], ax.axis, ax.channel, true);
+        const double d = rows.T[k] - (m ? (*m)[row - L] : 0.0);
+        mse[L] += d * d;
       }
-      std::vector<double> c1(rows.all.size()), c2(rows.all.size());
-      auto fit = [&](double P) {
-        const double w = 2.0 * M_PI / P;
-        for (std::size_t k : rows.all) {
-          c1[k] = -w * vd[k] * std::cos(w * rows.x[k]);
-          c2[k] = w * vd[k] * std::sin(w * rows.x[k]);
-        }
-        return least_squares({&rows.one, &vd, &ad, &c1, &c2}, r, rows.moving, corr);
-      };
-      const double P_min = std::max(0.5, 8.0 * dt * rows.v_high), P_max = (rows.x_hi - rows.x_lo) / 2.0;
-      if (P_max > P_min) {
-        const auto [P, ls] = scan_period(P_min, P_max, fit);
-        const double A = P > 0.0 ? std::hypot(ls.theta[3], ls.theta[4]) : 0.0;
-        if (P > 0.0 && t_pair(ls, 3) >= kMinT && A >= 0.5 * q) {
-          Trial t;
-          t.effect = "screw_pitch_error";
-          t.judge = {"_err_mm"};
-          t.sets = {{{"amplitude_mm", A}, {"period_mm", P}, {"phase_rad", std::atan2(ls.theta[4], ls.theta[3])}}};
-          t.evidence = fmt::format("the logged speed differs from the speed of the logged position as a lead error "
-                                   "of {:.4g} mm with a period of {:.4g} mm would make it (t = {:.1f})",
-                                   A, P, t_pair(ls, 3));
-          attempt(t);
-        }
-      }
-    }
+    const auto it = std::min_element(mse.begin(), mse.end());
+    lag = static_cast<std::size_t>(it - mse.begin());
+    if (lag > 0 && *it < 0.8 * mse[0])
+      why = fmt::format("the logged torque matches the replay's {} samples later (mean square {:.3g} of {:.3g} "
+                        "at no lag)",
+                        lag, *it / static_cast<double>(rows.all.size()), mse[0] / static_cast<double>(rows.all.size()));
+    else
+      lag = 0;
+  }
+  if (lag == 0) return;
+  Trial t;
+  t.kind = EffectKind::kDelay;
+  t.sets = {{{EffectParam::delay_delay_s, static_cast<double>(lag) * dt}}};
+  t.gains = gains;
+  t.evidence = why;
+  s.attempt(t);
+}
 
-    // backlash, where a fast log has the motor's speed beside the encoder's
-    // position (a linear scale on the table, the loop closed across the
-    // gap): the motor's travel (the logged speed integrated) runs ahead of
-    // the table by half the gap while it pushes one way and behind by half
-    // while it pushes the other, so across each reversal of the command
-    // their difference steps by the gap, signed by the new direction. Read
-    // over the 50 ms of motion before the stop and 30 to 80 ms into the new
-    // move (the gap crossed at any acceleration over 100 mm/s^2), where the
-    // motor's speed has the direction of each; the median over the fitting
-    // part's reversals is the gap. A run without a gap steps by the
-    // encoder's rounding and the integration's drift, well under 3 counts
-    // (and so does a log whose speed is the encoder's own, derived from the
-    // position: then the lost motion in the position below is looked for).
-    bool gap_from_speed = false;
-    if (fast && fine && rows.measured_speed && logs_x) {
-      const auto w = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.05 / dt)));
-      const auto skip = static_cast<std::size_t>(std::lround(0.03 / dt));
-      std::vector<double> steps;
-      for (const RunData& rd : runs) {
-        const auto& xm = rd.run->trace.at(col(a, "_mm"));
-        const auto& vm = rd.run->trace.at(col(a, "_v_mm_s"));
-        std::vector<double> d(rd.n_fit, 0.0);
-        std::vector<std::size_t> seg(rd.n_fit, 0);
-        double travel = 0.0;
-        for (std::size_t s = 0; s < rd.segments.size(); ++s)
-          for (std::size_t k = rd.segments[s].begin; k < std::min(rd.segments[s].end, rd.n_fit); ++k) {
-            travel = k == rd.segments[s].begin ? xm[k] : travel + 0.5 * (vm[k] + vm[k - 1]) * dt;
-            d[k] = travel - xm[k];
-            seg[k] = s;
-          }
-        // Mean of d over rows [b, e) whose logged speed has direction `dir`.
-        auto mean_d = [&](std::size_t b, std::size_t e, int dir, std::size_t s) {
-          double sum = 0.0;
-          std::size_t n = 0;
-          for (std::size_t k = b; k < e; ++k)
-            if (seg[k] == s && rd.interior[k] && direction(vm[k], rd.v_move[ai]) == dir) {
-              sum += d[k];
-              ++n;
-            }
-          return n >= w / 2 ? std::optional<double>(sum / static_cast<double>(n)) : std::nullopt;
-        };
-        int last = 0;
-        std::size_t last_end = 0;
-        for (std::size_t k = 0; k < rd.n_fit; ++k) {
-          const int dr = direction(rd.kin[ai].v_mm_per_s[k], rd.v_move[ai]);
-          if (dr == 0) continue;
-          if (last != 0 && dr != last && last_end + 1 >= w && k + skip + w <= rd.n_fit && seg[last_end] == seg[k]) {
-            const auto before = mean_d(last_end + 1 - w, last_end + 1, last, seg[k]);
-            const auto after = mean_d(k + skip, k + skip + w, dr, seg[k]);
-            if (before && after) steps.push_back(dr * (*after - *before));
-          }
-          last = dr;
-          last_end = k;
-        }
-      }
-      if (steps.size() >= 4) {
-        std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
-        const double g = steps[steps.size() / 2];
-        // A step beyond 1 mm is no feed drive's gap but a run whose motor
-        // and encoder have parted (a diverging loop, a slipping coupling).
-        if (g >= 3.0 * q && g <= 1.0) {
-          gap_from_speed = true;
-          Trial t;
-          t.effect = "backlash";
-          t.judge = {"_err_mm"};
-          for (double m : {0.85, 1.0, 1.15}) t.sets.push_back({{"gap_mm", m * g}});
-          t.evidence = fmt::format("across {} reversals of the command the motor's travel (the logged speed "
-                                   "integrated) and the logged position part by a median {:.4g} mm ({:.1f} "
-                                   "position quanta), signed by the new direction: a gap of that size (0.85 to "
-                                   "1.15 times it replayed)",
-                                   steps.size(), g, g / q);
-          attempt(t);
-        }
-      }
-    }
+// current_saturation: the log's torque clips where the replay's goes beyond.
+void detect_current_saturation_in_data(DataSearch& s) {
+  const AxisFromData& ax = s.ax;
+  const AxisRows& rows = s.rows;
+  double log_max = 0.0, model_max = 0.0;
+  for (std::size_t k : rows.all) {
+    const auto [run, row] = rows.at[k];
+    log_max = std::max(log_max, std::abs(s.runs[run].run->trace.at(ax.channel.column)[row]));
+    model_max = std::max(model_max, std::abs(s.model_at(k)));
+  }
+  std::vector<double> top;
+  for (std::size_t k : rows.all) {
+    const auto [run, row] = rows.at[k];
+    const double v = std::abs(s.runs[run].run->trace.at(ax.channel.column)[row]);
+    if (v >= 0.98 * log_max) top.push_back(v);
+  }
+  if (!(log_max > 0.0 && model_max > 1.05 * log_max && top.size() >= 10)) return;
+  std::nth_element(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(top.size() / 2), top.end());
+  const double level = top[top.size() / 2];
+  Trial t;
+  t.kind = EffectKind::kCurrentSaturation;
+  t.sets = {{{EffectParam::current_saturation_i_max_A, level}}};
+  t.evidence = fmt::format("the log's {} holds {} samples within 2 % of its largest value {:.4g} while the "
+                           "replay asks for up to {:.4g}: a limit at {:.4g} (in the channel's unit)",
+                           ax.channel.column, top.size(), log_max, model_max, level);
+  s.attempt(t);
+}
 
-    // backlash, from the position: after a reversal of the command the measured position lags
-    // the replay's in the new direction while the motor crosses the gap: the
-    // median over the fitting part's reversals of the peak of that lag in the
-    // 50 ms after each sizes the gap; gaps of 0.5 to 2 times it are replayed.
-    if (fine && !gap_from_speed) {
-      const auto span = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.05 / dt)));
-      std::vector<double> peaks;
-      for (std::size_t run = 0; run < runs.size(); ++run) {
-        const RunData& rd = runs[run];
-        const auto* xm = rd.run->trace.find(col(a, "_mm"));
-        if (xm == nullptr || current.replays[run].x_mm[ai].empty()) continue;
-        const auto& xr = current.replays[run].x_mm[ai];
-        int last = 0;
-        for (std::size_t k = 0; k < rd.n_fit; ++k) {
-          const int d = direction(rd.kin[ai].v_mm_per_s[k], rd.v_move[ai]);
-          if (d == 0) continue;
-          if (last != 0 && d != last && k + span <= rd.n_fit) {
-            double peak = -1e300;
-            for (std::size_t j = k; j < k + span; ++j)
-              if (rd.interior[j]) peak = std::max(peak, d * (xr[j] - (*xm)[j]));
-            if (peak > -1e300) peaks.push_back(peak);
-          }
-          last = d;
-        }
-      }
-      if (peaks.size() >= 4) {
-        std::nth_element(peaks.begin(), peaks.begin() + static_cast<std::ptrdiff_t>(peaks.size() / 2), peaks.end());
-        const double p = peaks[peaks.size() / 2];
-        if (p >= 3.0 * q) {
-          Trial t;
-          t.effect = "backlash";
-          t.judge = {"_err_mm"};
-          for (double m : {0.5, 1.0, 1.5, 2.0, 3.0}) t.sets.push_back({{"gap_mm", m * 2.0 * p}});
-          t.evidence = fmt::format("after a reversal the position lags the replay's by a median peak of {:.4g} mm "
-                                   "({} reversals, {:.1f} position quanta): lost motion of a gap of about {:.4g} mm (0.5 to 3 times it replayed)",
-                                   p, peaks.size(), p / q, 2.0 * p);
-          attempt(t);
-        }
+// stribeck: friction above the Coulomb level at low speed, the drive
+// refitted with the curve, T = J a + B v + Tc_dir [dir] (1 - g) + Ts sgn g + c, g = exp(-(v/ws)^2).
+void detect_stribeck_in_data(DataSearch& s) {
+  const AxisRows& rows = s.rows;
+  const LsqResult base = least_squares(s.base_cols, rows.T, rows.all, s.corr);
+  std::vector<double> p1(rows.all.size()), n1(rows.all.size()), sg(rows.all.size());
+  auto fit_at = [&](double ws) {
+    for (std::size_t k : rows.all) {
+      const double g = feeddrive::stribeck_shape(rows.vel[k], ws);
+      p1[k] = rows.pos[k] * (1.0 - g);
+      n1[k] = rows.neg[k] * (1.0 - g);
+      sg[k] = rows.dir[k] * g;
+    }
+    return least_squares({&rows.acc, &rows.vel, &p1, &n1, &rows.one, &sg}, rows.T, rows.all, s.corr);
+  };
+  double best_ws = 0.0, best_res = base.ok ? base.residual_rms : 0.0;
+  LsqResult best;
+  auto try_ws = [&](double ws) {
+    const LsqResult ls = fit_at(ws);
+    if (ls.ok && ls.residual_rms < best_res) {
+      best_res = ls.residual_rms;
+      best_ws = ws;
+      best = ls;
+    }
+  };
+  // Steps of 1.35, then of 1.02 about the best (the levels are linear
+  // given ws, so the scan is the whole search).
+  for (double ws = rows.v_move; base.ok && ws < 0.5 * rows.v_high; ws *= 1.35) try_ws(ws);
+  if (best_ws > 0.0) {
+    const double w0 = best_ws;
+    for (double ws = w0 / 1.35; ws <= w0 * 1.35; ws *= 1.02) try_ws(ws);
+  }
+  if (!(best_ws > 0.0)) return;
+  const double Ts = best.theta[5], Tc_mean = 0.5 * (best.theta[2] + best.theta[3]);
+  const double t_ex = best.stderr_theta[5] > 0.0 ? (Ts - Tc_mean) / best.stderr_theta[5] : 0.0;
+  if (!(t_ex >= kMinT && best_res < 0.99 * base.residual_rms)) return;
+  Trial t;
+  t.kind = EffectKind::kStribeck;
+  for (double f : {0.7, 1.0, 1.4}) {
+    const LsqResult ls = fit_at(f * best_ws);
+    if (!ls.ok) continue;
+    const DriveRefit d = drive_moved(s.out.final_machine.axes[s.ai()].drive, ls, base);
+    // The breakaway level as fitted on the axis's own motion.
+    const double Ts_set = ls.theta[5];
+    if (!(Ts_set > std::max(d.Tc_pos, d.Tc_neg))) continue;
+    t.sets.push_back({{EffectParam::stribeck_Ts_static, Ts_set}, {EffectParam::stribeck_ws, f * best_ws}});
+    t.drives.push_back(d);
+  }
+  t.evidence = fmt::format("friction rising to {:.4g} (t = {:.1f} over the Coulomb mean {:.4g}) below "
+                           "{:.3g} mm/s cuts the fitting rows' torque residual from {:.4g} to {:.4g}",
+                           Ts, t_ex, Tc_mean, best_ws, base.residual_rms, best_res);
+  t.torque = [&rows](std::size_t k, const ParamSet& p, const DriveRefit* d) {
+    const double Tc = rows.dir[k] > 0 ? d->Tc_pos : d->Tc_neg;
+    return rows.dir[k] * feeddrive::stribeck_excess_Nm(param_value(p, EffectParam::stribeck_Ts_static), Tc,
+                                                       rows.vel[k], param_value(p, EffectParam::stribeck_ws));
+  };
+  if (!t.sets.empty()) s.attempt(t);
+}
+
+namespace {
+
+/// The band of bins along the travel with the largest excess of the signed
+/// residual (sum squared over count), at least `min_rows` rows and under
+/// three quarters of the travel: its first and last bin, or nullopt.
+std::optional<std::pair<std::size_t, std::size_t>> friction_band(const Bins& bins, std::size_t n_bins,
+                                                                 double min_rows) {
+  double best = 0.0;
+  std::size_t bi = 0, bj = 0;
+  for (std::size_t i = 0; i < n_bins; ++i) {
+    double sum = 0.0, cnt = 0.0;
+    for (std::size_t j = i; j < n_bins && j - i + 1 < (3 * n_bins) / 4; ++j) {
+      sum += bins.mean[j] * static_cast<double>(bins.count[j]);
+      cnt += static_cast<double>(bins.count[j]);
+      if (cnt < min_rows || sum <= 0.0) continue;
+      if (sum * sum / cnt > best) {
+        best = sum * sum / cnt;
+        bi = i;
+        bj = j;
       }
     }
   }
+  if (!(best > 0.0)) return std::nullopt;
+  return std::pair{bi, bj};
 }
+
+}  // namespace
+
+// position_dependent_friction: the base fit's residual, signed by the
+// direction of motion, averaged in 60 bins along the travel; the band of
+// bins with the largest excess, fitted with the drive.
+void detect_position_dependent_friction_in_data(DataSearch& s) {
+  const AxisRows& rows = s.rows;
+  // On moving rows the constant is the mean of the two Coulomb columns.
+  const std::vector<const std::vector<double>*> moving_cols{&rows.acc, &rows.vel, &rows.pos, &rows.neg};
+  const LsqResult b = least_squares(moving_cols, rows.T, rows.moving, s.corr);
+  if (!(b.ok && rows.x_hi > rows.x_lo)) return;
+  std::vector<double> rho(rows.all.size(), 0.0);
+  for (std::size_t k : rows.moving) {
+    double pred = 0.0;
+    for (std::size_t j = 0; j < moving_cols.size(); ++j) pred += (*moving_cols[j])[k] * b.theta[j];
+    rho[k] = (rows.T[k] - pred) * rows.dir[k];
+  }
+  constexpr std::size_t kBins = 60;
+  const Bins bins = bin_means(rows.x, rho, rows.moving, rows.x_lo, rows.x_hi, kBins);
+  const double min_rows = std::max(200.0, 0.02 * static_cast<double>(rows.moving.size()));
+  const auto band = friction_band(bins, kBins, min_rows);
+  if (!band) return;
+  const double w = (rows.x_hi - rows.x_lo) / static_cast<double>(kBins);
+  const double x0 = rows.x_lo + w * static_cast<double>(band->first);
+  const double x1 = rows.x_lo + w * static_cast<double>(band->second + 1);
+  std::vector<double> psi(rows.all.size(), 0.0);
+  for (std::size_t k : rows.all)
+    if (feeddrive::in_friction_band(rows.x[k], x0, x1)) psi[k] = rows.dir[k];
+  const LsqResult f = least_squares(s.with_base({&psi}), rows.T, rows.all, s.corr);
+  const LsqResult f0 = least_squares(s.base_cols, rows.T, rows.all, s.corr);
+  if (!(f.ok && f0.ok && f.theta[5] > 0.0 && t_of(f, 5) >= kMinT)) return;
+  Trial t;
+  t.kind = EffectKind::kPositionDependentFriction;
+  t.sets = {{{EffectParam::position_dependent_friction_dTc_Nm, f.theta[5]},
+             {EffectParam::position_dependent_friction_x_start_mm, x0},
+             {EffectParam::position_dependent_friction_x_end_mm, x1}}};
+  t.drives = {drive_moved(s.out.final_machine.axes[s.ai()].drive, f, f0)};
+  t.evidence = fmt::format("friction {:+.4g} (t = {:.1f}) between x = {:.4g} and {:.4g} mm, in the "
+                           "channel's unit",
+                           f.theta[5], t_of(f, 5), x0, x1);
+  t.torque = [&rows](std::size_t k, const ParamSet& p, const DriveRefit*) {
+    return feeddrive::in_friction_band(rows.x[k], param_value(p, EffectParam::position_dependent_friction_x_start_mm),
+                                       param_value(p, EffectParam::position_dependent_friction_x_end_mm))
+               ? param_value(p, EffectParam::position_dependent_friction_dTc_Nm) * rows.dir[k]
+               : 0.0;
+  };
+  s.attempt(t);
+}
+
+// cogging: a torque ripple periodic in the motor angle (x / rg, rg = 1
+// mm/rad here), fitted with the drive on the axis's own motion (its
+// logged speed, where there is one: a ripple the loop does not follow
+// shows in the speed, not in the commanded motion).
+void detect_cogging_in_data(DataSearch& s) {
+  if (!s.fast) return;
+  const AxisRows& rows = s.rows;
+  const double P_min = std::max(0.1, 8.0 * s.dt * rows.v_high), P_max = std::min(40.0, (rows.x_hi - rows.x_lo) / 3.0);
+  std::vector<double> sn(rows.all.size()), cs(rows.all.size());
+  const std::vector<const std::vector<double>*> cols{&rows.acc, &rows.vel, &rows.pos, &rows.neg, &sn, &cs};
+  auto fit = [&](double P) {
+    for (std::size_t k : rows.all) {
+      sn[k] = std::sin(2.0 * M_PI * rows.x[k] / P);
+      cs[k] = std::cos(2.0 * M_PI * rows.x[k] / P);
+    }
+    return least_squares(cols, rows.T, rows.moving, s.corr);
+  };
+  const LsqResult base = least_squares({&rows.acc, &rows.vel, &rows.pos, &rows.neg}, rows.T, rows.moving, s.corr);
+  if (!(base.ok && P_max > P_min)) return;
+  const auto [P, ls] = scan_period(P_min, P_max, fit);
+  if (!(P > 0.0 && t_pair(ls, 4) >= kMinT && ls.residual_rms < 0.98 * base.residual_rms)) return;
+  const double A = std::hypot(ls.theta[4], ls.theta[5]), phase = std::atan2(ls.theta[5], ls.theta[4]);
+  Trial t;
+  t.kind = EffectKind::kCogging;
+  t.sets = {{{EffectParam::cogging_amplitude_Nm, A},
+             {EffectParam::cogging_cycles_per_rev, 2.0 * M_PI / P},
+             {EffectParam::cogging_phase_rad, phase}}};
+  t.evidence = fmt::format("a ripple of {:.4g} (in the channel's unit) with a period of {:.4g} mm of travel "
+                           "(t = {:.1f}) cuts the moving rows' torque residual from {:.4g} to {:.4g}",
+                           A, P, t_pair(ls, 4), base.residual_rms, ls.residual_rms);
+  t.torque = [&rows](std::size_t k, const ParamSet& p, const DriveRefit*) {
+    // rg = 1 mm/rad in a machine identified from data.
+    return feeddrive::cogging_torque_Nm(param_value(p, EffectParam::cogging_amplitude_Nm),
+                                        param_value(p, EffectParam::cogging_cycles_per_rev),
+                                        param_value(p, EffectParam::cogging_phase_rad), rows.x[k], 1.0);
+  };
+  s.attempt(t);
+}
+
+// screw_pitch_error: the encoder reads x + A sin(2 pi x / P + phase)
+// while the motor moves x; the logged motor speed then differs from the
+// speed of the logged position by A (2 pi / P) v cos(2 pi x / P + phase).
+// Regressed on that with the speed, the acceleration and a constant as
+// nuisances (a logged speed filtered or late).
+void detect_screw_pitch_error_in_data(DataSearch& s) {
+  if (!(s.fast && s.fine && s.rows.measured_speed && s.logs_position())) return;
+  const AxisRows& rows = s.rows;
+  std::vector<double> r(rows.all.size()), vd(rows.all.size()), ad(rows.all.size(), 0.0);
+  for (std::size_t k : rows.all) {
+    const auto [run, row] = rows.at[k];
+    const auto& xm = s.runs[run].run->trace.at(col(s.axis(), "_mm"));
+    vd[k] = (xm[row + 1] - xm[row - 1]) / (2.0 * s.dt);
+    r[k] = rows.vel_m[k] - vd[k];
+    ad[k] = rows.acc[k];
+  }
+  std::vector<double> c1(rows.all.size()), c2(rows.all.size());
+  auto fit = [&](double P) {
+    const double w = 2.0 * M_PI / P;
+    for (std::size_t k : rows.all) {
+      c1[k] = -w * vd[k] * std::cos(w * rows.x[k]);
+      c2[k] = w * vd[k] * std::sin(w * rows.x[k]);
+    }
+    return least_squares({&rows.one, &vd, &ad, &c1, &c2}, r, rows.moving, s.corr);
+  };
+  const double P_min = std::max(0.5, 8.0 * s.dt * rows.v_high), P_max = (rows.x_hi - rows.x_lo) / 2.0;
+  if (!(P_max > P_min)) return;
+  const auto [P, ls] = scan_period(P_min, P_max, fit);
+  const double A = P > 0.0 ? std::hypot(ls.theta[3], ls.theta[4]) : 0.0;
+  if (!(P > 0.0 && t_pair(ls, 3) >= kMinT && A >= 0.5 * s.q)) return;
+  Trial t;
+  t.kind = EffectKind::kScrewPitchError;
+  t.sets = {{{EffectParam::screw_pitch_error_amplitude_mm, A},
+             {EffectParam::screw_pitch_error_period_mm, P},
+             {EffectParam::screw_pitch_error_phase_rad, std::atan2(ls.theta[4], ls.theta[3])}}};
+  t.evidence = fmt::format("the logged speed differs from the speed of the logged position as a lead error "
+                           "of {:.4g} mm with a period of {:.4g} mm would make it (t = {:.1f})",
+                           A, P, t_pair(ls, 3));
+  s.attempt(t);
+}
+
+namespace {
+
+// The steps, signed by the new direction, of the motor's travel (the logged
+// speed integrated) less the logged position across the fitting part's
+// reversals of one run: the mean over the 50 ms of motion before the stop
+// against the mean 30 to 80 ms into the new move, each over rows whose
+// logged speed has the direction of its side.
+void travel_steps_at_reversals(const RunData& rd, Axis a, double dt, std::vector<double>& steps) {
+  const std::size_t ai = index(a);
+  const auto w = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.05 / dt)));
+  const auto skip = static_cast<std::size_t>(std::lround(0.03 / dt));
+  const auto& xm = rd.run->trace.at(col(a, "_mm"));
+  const auto& vm = rd.run->trace.at(col(a, "_v_mm_s"));
+  std::vector<double> d(rd.n_fit, 0.0);
+  std::vector<std::size_t> seg(rd.n_fit, 0);
+  double travel = 0.0;
+  for (std::size_t s = 0; s < rd.segments.size(); ++s)
+    for (std::size_t k = rd.segments[s].begin; k < std::min(rd.segments[s].end, rd.n_fit); ++k) {
+      travel = k == rd.segments[s].begin ? xm[k] : travel + 0.5 * (vm[k] + vm[k - 1]) * dt;
+      d[k] = travel - xm[k];
+      seg[k] = s;
+    }
+  // Mean of d over rows [b, e) whose logged speed has direction `dir`.
+  auto mean_d = [&](std::size_t b, std::size_t e, int dir, std::size_t s) {
+    double sum = 0.0;
+    std::size_t n = 0;
+    for (std::size_t k = b; k < e; ++k)
+      if (seg[k] == s && rd.interior[k] && direction(vm[k], rd.v_move[ai]) == dir) {
+        sum += d[k];
+        ++n;
+      }
+    return n >= w / 2 ? std::optional<double>(sum / static_cast<double>(n)) : std::nullopt;
+  };
+  int last = 0;
+  std::size_t last_end = 0;
+  for (std::size_t k = 0; k < rd.n_fit; ++k) {
+    const int dr = direction(rd.kin[ai].v_mm_per_s[k], rd.v_move[ai]);
+    if (dr == 0) continue;
+    if (last != 0 && dr != last && last_end + 1 >= w && k + skip + w <= rd.n_fit && seg[last_end] == seg[k]) {
+      const auto before = mean_d(last_end + 1 - w, last_end + 1, last, seg[k]);
+      const auto after = mean_d(k + skip, k + skip + w, dr, seg[k]);
+      if (before && after) steps.push_back(dr * (*after - *before));
+    }
+    last = dr;
+    last_end = k;
+  }
+}
+
+// backlash, where a fast log has the motor's speed beside the encoder's
+// position (a linear scale on the table, the loop closed across the
+// gap): the motor's travel (the logged speed integrated) runs ahead of
+// the table by half the gap while it pushes one way and behind by half
+// while it pushes the other, so across each reversal of the command
+// their difference steps by the gap, signed by the new direction. Read
+// over the 50 ms of motion before the stop and 30 to 80 ms into the new
+// move (the gap crossed at any acceleration over 100 mm/s^2), where the
+// motor's speed has the direction of each; the median over the fitting
+// part's reversals is the gap. A run without a gap steps by the
+// encoder's rounding and the integration's drift, well under 3 counts
+// (and so does a log whose speed is the encoder's own, derived from the
+// position: then the lost motion in the position is looked for).
+// Returns whether a gap was found this way.
+bool backlash_from_speed(DataSearch& s) {
+  if (!(s.fast && s.fine && s.rows.measured_speed && s.logs_position())) return false;
+  std::vector<double> steps;
+  for (const RunData& rd : s.runs) travel_steps_at_reversals(rd, s.axis(), s.dt, steps);
+  if (steps.size() < 4) return false;
+  std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
+  const double g = steps[steps.size() / 2];
+  // A step beyond 1 mm is no feed drive's gap but a run whose motor
+  // and encoder have parted (a diverging loop, a slipping coupling).
+  if (!(g >= 3.0 * s.q && g <= 1.0)) return false;
+  Trial t;
+  t.kind = EffectKind::kBacklash;
+  for (double m : {0.85, 1.0, 1.15}) t.sets.push_back({{EffectParam::backlash_gap_mm, m * g}});
+  t.evidence = fmt::format("across {} reversals of the command the motor's travel (the logged speed "
+                           "integrated) and the logged position part by a median {:.4g} mm ({:.1f} "
+                           "position quanta), signed by the new direction: a gap of that size (0.85 to "
+                           "1.15 times it replayed)",
+                           steps.size(), g, g / s.q);
+  s.attempt(t);
+  return true;
+}
+
+// backlash, from the position: after a reversal of the command the measured position lags
+// the replay's in the new direction while the motor crosses the gap: the
+// median over the fitting part's reversals of the peak of that lag in the
+// 50 ms after each sizes the gap; gaps of 0.5 to 2 times it are replayed.
+void backlash_from_position(DataSearch& s) {
+  if (!s.fine) return;
+  const std::size_t ai = s.ai();
+  const auto span = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.05 / s.dt)));
+  std::vector<double> peaks;
+  for (std::size_t run = 0; run < s.runs.size(); ++run) {
+    const RunData& rd = s.runs[run];
+    const auto* xm = rd.run->trace.find(col(s.axis(), "_mm"));
+    if (xm == nullptr || s.current.replays[run].x_mm[ai].empty()) continue;
+    const auto& xr = s.current.replays[run].x_mm[ai];
+    int last = 0;
+    for (std::size_t k = 0; k < rd.n_fit; ++k) {
+      const int d = direction(rd.kin[ai].v_mm_per_s[k], rd.v_move[ai]);
+      if (d == 0) continue;
+      if (last != 0 && d != last && k + span <= rd.n_fit) {
+        double peak = -1e300;
+        for (std::size_t j = k; j < k + span; ++j)
+          if (rd.interior[j]) peak = std::max(peak, d * (xr[j] - (*xm)[j]));
+        if (peak > -1e300) peaks.push_back(peak);
+      }
+      last = d;
+    }
+  }
+  if (peaks.size() < 4) return;
+  std::nth_element(peaks.begin(), peaks.begin() + static_cast<std::ptrdiff_t>(peaks.size() / 2), peaks.end());
+  const double p = peaks[peaks.size() / 2];
+  if (!(p >= 3.0 * s.q)) return;
+  Trial t;
+  t.kind = EffectKind::kBacklash;
+  for (double m : {0.5, 1.0, 1.5, 2.0, 3.0}) t.sets.push_back({{EffectParam::backlash_gap_mm, m * 2.0 * p}});
+  t.evidence = fmt::format("after a reversal the position lags the replay's by a median peak of {:.4g} mm "
+                           "({} reversals, {:.1f} position quanta): lost motion of a gap of about {:.4g} mm (0.5 to 3 times it replayed)",
+                           p, peaks.size(), p / s.q, 2.0 * p);
+  s.attempt(t);
+}
+
+}  // namespace
+
+void detect_backlash_in_data(DataSearch& s) {
+  if (!backlash_from_speed(s)) backlash_from_position(s);
+}
+
+namespace {
+
+/// The catalogue effects the log's rate and resolution can show, each
+/// detected on the residual of the machine so far (the registry's from-data
+/// detectors, in its order), replayed, and kept only where the held-out
+/// error falls.
+void search_catalogue_effects(DataCalibration& out, const std::vector<RunData>& runs) {
+  const double dt = runs.front().run->sample_period_s;
+  const double q = measured_position_step(out, runs);
+  FitRunErrors current = errors_on_fit_runs(runs, out.final_machine, out.axes, out.rounding, out.replays);
+  if (!current.ok) return;
+  const auto detectors = from_data_search_order();
+  for (const AxisFromData& ax : out.axis) {
+    if (!ax.identified) continue;
+    DataSearch s{out, runs, ax, current, axis_rows(runs, ax), axis_keys(ax), {}};
+    if (s.rows.moving.size() < 200) continue;
+    s.base_cols = {&s.rows.acc, &s.rows.vel, &s.rows.pos, &s.rows.neg, &s.rows.one};
+    s.dt = dt;
+    s.q = q;
+    s.corr = std::max(1.0, 0.01 / dt);
+    s.fast = dt <= 2e-3 + 1e-12;
+    s.fine = q <= 0.005;
+    for (const EffectEntry* e : detectors) e->from_data(s);
+  }
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------
@@ -1545,18 +1659,18 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
   const double dt = r0.sample_period_s;
   const double q = out.rounding.quantum_mm;
   if (dt > 2e-3) {
-    out.skipped.emplace_back("delay", fmt::format("a delay of a few loop periods is far below the {:g} s sample "
+    out.skipped.emplace_back(feeddrive::effect_name(EffectKind::kDelay), fmt::format("a delay of a few loop periods is far below the {:g} s sample "
                                                   "period: it cannot be told from the loop's lag",
                                                   dt));
-    out.skipped.emplace_back("compliance", fmt::format("a resonance above the Nyquist frequency {:.3g} Hz of the log "
+    out.skipped.emplace_back(feeddrive::effect_name(EffectKind::kCompliance), fmt::format("a resonance above the Nyquist frequency {:.3g} Hz of the log "
                                                        "cannot be seen",
                                                        0.5 / dt));
-    out.skipped.emplace_back("cogging", fmt::format("a ripple periodic in motor angle needs several samples per "
+    out.skipped.emplace_back(feeddrive::effect_name(EffectKind::kCogging), fmt::format("a ripple periodic in motor angle needs several samples per "
                                                     "period; at {:g} s per sample it aliases",
                                                     dt));
   }
   if (dt <= 2e-3 + 1e-12)
-    out.skipped.emplace_back("compliance", "not searched on a machine identified from data: its drive is one inertia "
+    out.skipped.emplace_back(feeddrive::effect_name(EffectKind::kCompliance), "not searched on a machine identified from data: its drive is one inertia "
                                            "in the log's unit, and a two-mass resonance needs the split of that "
                                            "inertia and a stiffness the replay of a cascade loop does not resolve");
   if (dt <= 2e-3 + 1e-12 && q <= 0.005) {
@@ -1564,15 +1678,15 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
     for (Axis a : out.axes)
       for (const MeasuredRun& r : fit) speed = speed && r.trace.find(col(a, "_v_mm_s")) != nullptr;
     if (!speed)
-      out.skipped.emplace_back("screw_pitch_error", "a lead error moves the encoder and not the motor: it is told "
+      out.skipped.emplace_back(feeddrive::effect_name(EffectKind::kScrewPitchError), "a lead error moves the encoder and not the motor: it is told "
                                                     "from the logged motor speed against the speed of the logged "
                                                     "position, and this log has no speed column");
   }
   if (q > 0.005) {
-    out.skipped.emplace_back("screw_pitch_error", fmt::format("a lead error of microns is below the log's position "
+    out.skipped.emplace_back(feeddrive::effect_name(EffectKind::kScrewPitchError), fmt::format("a lead error of microns is below the log's position "
                                                               "quantum {:g} mm",
                                                               q));
-    out.skipped.emplace_back("backlash", fmt::format("lost motion at reversals below the log's position quantum "
+    out.skipped.emplace_back(feeddrive::effect_name(EffectKind::kBacklash), fmt::format("lost motion at reversals below the log's position quantum "
                                                      "{:g} mm is not seen in the position",
                                                      q));
   }
@@ -1729,7 +1843,7 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
       const bool resolves_rest = runs.front().run->sample_period_s <= 2e-3 + 1e-12;
       if (resolves_rest && !(rest_rows >= 10 && held_log < 0.5 * held_model)) {
         DataEffect eff;
-        eff.effect = "smooth_friction";
+        eff.set_kind(EffectKind::kSmoothFriction);
         eff.axis = ax.axis;
         eff.before = eff.after = bh->second;
         eff.evidence = rest_rows < 10
@@ -1754,7 +1868,7 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
         }
       }
       DataEffect eff;
-      eff.effect = "smooth_friction";
+      eff.set_kind(EffectKind::kSmoothFriction);
       eff.axis = ax.axis;
       eff.before = bh->second;
       eff.after = bh->second;
@@ -1763,7 +1877,7 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
         out.effects.push_back(eff);
         continue;
       }
-      eff.params["ws"] = best_ws;
+      eff.params[param_key(EffectKind::kSmoothFriction, EffectParam::smooth_friction_ws)] = best_ws;
       const ChannelErrors held = held_out_nrms(with_smooth(out.identified, ax.axis, best_ws));
       const auto hh = held.nrms.find(key);
       eff.after = hh != held.nrms.end() ? hh->second : bh->second;

@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "twin/analysis/calibrate.hpp"
+#include "twin/analysis/effect_registry.hpp"
 #include "twin/analysis/force_calibrate.hpp"
 #include "twin/analysis/machine_from_data.hpp"
 #include "twin/analysis/plots.hpp"
@@ -101,7 +102,7 @@ std::vector<std::filesystem::path> make_plots(io::ResultSet& results, const anal
     if (it != axes.end())
       evidence = analysis::CalibrationEvidence{
           c.effect, c.axis, static_cast<std::size_t>(it - axes.begin()),
-          c.effect == "cogging" || c.effect == "screw_pitch_error" || c.effect == "position_dependent_friction"};
+          analysis::registry_entry(c.kind).plot == analysis::PlotAlong::kPosition};
   }
   return analysis::plot_calibration(results, "residuals.csv", axes, evidence);
 }
