@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <optional>
 
 #include <fmt/format.h>
 
@@ -827,23 +828,30 @@ void detect_constant_load(const DiagnoseContext& c, std::vector<EffectCandidate>
 
 namespace {
 
-}  // namespace
+// The replay decides: a peak 2.5 times the median level is enough to try
+// the two-mass model (a run without one shows about 1.6; the S-curves of a
+// real program excite a 170 Hz resonance to only 3 to 4 times the median).
+constexpr double kMinProminence = 2.5;
 
-void detect_compliance(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
+// The strongest band of the tracking-error residual's spectrum between
+// 20 Hz and 1 kHz on the fitting part, and its prominence over the median level.
+struct ResidualPeak {
+  double f_Hz{0.0};
+  double prominence{0.0};
+};
+std::optional<ResidualPeak> residual_peak(const DiagnoseContext& c) {
   const std::vector<double>& e_res = c.e_residual;
-  // The same peak from a gap in the coupling is tried while backlash is still to be looked for.
-  const bool with_coupling_gap = c.wants(EffectKind::kBacklash);
-  if (e_res.size() != c.s.n) return;
+  if (e_res.size() != c.s.n) return std::nullopt;
   const double fs = 1.0 / c.s.dt_s;
   double df = 0.0;
   // The fitting part only: the held-out part judges the replay.
   const auto spec = amplitude_spectrum(std::span<const double>(e_res).subspan(0, c.s.n_fit), fs, &df);
-  if (spec.size() < 64 || !(df > 0.0)) return;
+  if (spec.size() < 64 || !(df > 0.0)) return std::nullopt;
   const auto k_lo = static_cast<std::size_t>(std::ceil(20.0 / df));
   // Up to 1 kHz: the ballscrew and coupling resonances of such drives lie in
   // the tens to hundreds of Hz; above, the residual holds the encoder-count chatter.
   const auto k_hi = std::min(spec.size() - 1, static_cast<std::size_t>(std::min(0.4 * fs, 1000.0) / df));
-  if (k_hi <= k_lo + 8) return;
+  if (k_hi <= k_lo + 8) return std::nullopt;
   const double median = median_of(
       std::vector<double>(spec.begin() + static_cast<std::ptrdiff_t>(k_lo), spec.begin() + static_cast<std::ptrdiff_t>(k_hi)));
   // Smooth over a few bins so a peak is a band, not one bin of noise.
@@ -860,12 +868,50 @@ void detect_compliance(const DiagnoseContext& c, std::vector<EffectCandidate>& o
   }
   const double peak = std::sqrt(best / static_cast<double>(2 * hw + 1));
   const double prominence = median > 0.0 ? peak / median : 0.0;
-  // The replay decides: a peak 2.5 times the median level is enough to try
-  // the two-mass model (a run without one shows about 1.6; the S-curves of a
-  // real program excite a 170 Hz resonance to only 3 to 4 times the median).
-  constexpr double kMinProminence = 2.5;
-  if (prominence < kMinProminence) return;
-  const double f_Hz = static_cast<double>(kb) * df;
+  if (prominence < kMinProminence) return std::nullopt;
+  return ResidualPeak{static_cast<double>(kb) * df, prominence};
+}
+
+void add_coupling_gap(const DiagnoseContext& c, const ResidualPeak& pk, double mu, double frac,
+                      std::vector<EffectCandidate>& out) {
+  const double f_Hz = pk.f_Hz, prominence = pk.prominence;
+  // The same peak from a gap in the coupling: with the encoder on the motor
+  // the gap never shows as lost motion in the position; the motor crosses it
+  // free of the table's inertia and friction at each reversal and strikes the
+  // table's flank, and at standstill it rests in the gap. Tried where the run
+  // reverses often enough to judge it (4 reversals fitted, 2 held out): gaps
+  // of 3 to 24 um against contact stiffnesses of 5000 and 20000 N m/rad
+  // (damping ratio 0.1), then gap, stiffness and damping refined.
+  std::size_t rev_fit = 0, rev_held = 0;
+  for (const auto& [k, sg] : c.reversals) ++(k < c.s.n_fit ? rev_fit : rev_held);
+  if (rev_fit < 4 || rev_held < 2) return;
+  auto gap_set = [&](double gap_mm, double K) {
+    return ParamSet{{EffectParam::backlash_gap_mm, gap_mm},
+                                                       {EffectParam::compliance_K_Nm_per_rad, K},
+                                                       {EffectParam::compliance_C_Nm_s_per_rad, 2.0 * 0.1 * std::sqrt(K * mu)},
+                                                       {EffectParam::compliance_load_fraction, frac}};
+  };
+  EffectCandidate gap = out.back();
+  gap.set_kind(EffectKind::kBacklash);
+  gap.params = gap_set(0.006, 20000.0);
+  gap.param_grid.clear();
+  for (double K : {20000.0, 5000.0})
+    for (double g_mm : {0.003, 0.006, 0.012, 0.024})
+      if (!(K == 20000.0 && g_mm == 0.006)) gap.param_grid.push_back(gap_set(g_mm, K));
+  gap.refine = {{EffectParam::backlash_gap_mm, 1.4}, {EffectParam::compliance_K_Nm_per_rad, 2.0}, {EffectParam::compliance_C_Nm_s_per_rad, 2.5}};
+  gap.evidence = fmt::format(
+      "the tracking-error residual of the fitting part has a peak at {:.0f} Hz, {:.1f} times the median level of its "
+      "spectrum, and the run reverses {} times ({} held out): a gap in the coupling, the encoder on the motor",
+      f_Hz, prominence, rev_fit + rev_held, rev_held);
+  out.push_back(std::move(gap));
+}
+
+}  // namespace
+
+void detect_compliance(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
+  const auto pk = residual_peak(c);
+  if (!pk) return;
+  const double f_Hz = pk->f_Hz, prominence = pk->prominence;
   Fit g;
   g.ok = true;
   g.with = least_squares({&c.reg.acc, &c.reg.vel, &c.reg.pos, &c.reg.neg}, c.T, c.fit_moving, corr_len(c.s));
@@ -898,36 +944,8 @@ void detect_compliance(const DiagnoseContext& c, std::vector<EffectCandidate>& o
   // Then the stiffness and the damping of the best set, finer, on the same rows.
   out.back().refine = {{EffectParam::compliance_K_Nm_per_rad, 1.3}, {EffectParam::compliance_C_Nm_s_per_rad, 2.5}};
 
-  // The same peak from a gap in the coupling: with the encoder on the motor
-  // the gap never shows as lost motion in the position; the motor crosses it
-  // free of the table's inertia and friction at each reversal and strikes the
-  // table's flank, and at standstill it rests in the gap. Tried where the run
-  // reverses often enough to judge it (4 reversals fitted, 2 held out): gaps
-  // of 3 to 24 um against contact stiffnesses of 5000 and 20000 N m/rad
-  // (damping ratio 0.1), then gap, stiffness and damping refined.
-  if (!with_coupling_gap) return;
-  std::size_t rev_fit = 0, rev_held = 0;
-  for (const auto& [k, sg] : c.reversals) ++(k < c.s.n_fit ? rev_fit : rev_held);
-  if (rev_fit < 4 || rev_held < 2) return;
-  auto gap_set = [&](double gap_mm, double K) {
-    return ParamSet{{EffectParam::backlash_gap_mm, gap_mm},
-                                                       {EffectParam::compliance_K_Nm_per_rad, K},
-                                                       {EffectParam::compliance_C_Nm_s_per_rad, 2.0 * 0.1 * std::sqrt(K * mu)},
-                                                       {EffectParam::compliance_load_fraction, frac}};
-  };
-  EffectCandidate gap = out.back();
-  gap.set_kind(EffectKind::kBacklash);
-  gap.params = gap_set(0.006, 20000.0);
-  gap.param_grid.clear();
-  for (double K : {20000.0, 5000.0})
-    for (double g_mm : {0.003, 0.006, 0.012, 0.024})
-      if (!(K == 20000.0 && g_mm == 0.006)) gap.param_grid.push_back(gap_set(g_mm, K));
-  gap.refine = {{EffectParam::backlash_gap_mm, 1.4}, {EffectParam::compliance_K_Nm_per_rad, 2.0}, {EffectParam::compliance_C_Nm_s_per_rad, 2.5}};
-  gap.evidence = fmt::format(
-      "the tracking-error residual of the fitting part has a peak at {:.0f} Hz, {:.1f} times the median level of its "
-      "spectrum, and the run reverses {} times ({} held out): a gap in the coupling, the encoder on the motor",
-      f_Hz, prominence, rev_fit + rev_held, rev_held);
-  out.push_back(std::move(gap));
+  // The same peak from a gap in the coupling, while backlash is still to be looked for.
+  if (c.wants(EffectKind::kBacklash)) add_coupling_gap(c, *pk, mu, frac, out);
 }
 
 namespace {
