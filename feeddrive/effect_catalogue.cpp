@@ -28,10 +28,17 @@ constexpr std::array kParams{
 #undef TWIN_EFFECT_PARAM_DEF
 };
 
-}  // namespace
+// The tables are indexed by their enums: both are built from the same lines.
+constexpr bool tables_in_enum_order() {
+  for (std::size_t i = 0; i < kEffects.size(); ++i)
+    if (static_cast<std::size_t>(kEffects[i].kind) != i) return false;
+  for (std::size_t i = 0; i < kParams.size(); ++i)
+    if (static_cast<std::size_t>(kParams[i].id) != i) return false;
+  return kEffects.size() == kDriveEffectCount;
+}
+static_assert(tables_in_enum_order(), "effect tables out of their enums' order");
 
-std::span<const EffectDef> drive_effects() { return kEffects; }
-std::span<const EffectParamDef> drive_effect_params() { return kParams; }
+}  // namespace
 
 const EffectDef& effect_def(EffectKind kind) {
   const auto i = static_cast<std::size_t>(kind);
@@ -46,11 +53,5 @@ const EffectParamDef& effect_param_def(EffectParam p) {
 }
 
 std::string_view effect_name(EffectKind kind) { return effect_def(kind).name; }
-
-std::optional<EffectKind> find_effect(std::string_view name) {
-  for (const EffectDef& d : kEffects)
-    if (d.name == name) return d.kind;
-  return std::nullopt;
-}
 
 }  // namespace twin::feeddrive

@@ -7,8 +7,6 @@
 /// these lines.
 #include <cstddef>
 #include <cstdint>
-#include <optional>
-#include <span>
 #include <string_view>
 
 #include "feeddrive/drive_params.hpp"
@@ -85,16 +83,9 @@ struct EffectParamDef {
   double& (*ref)(DriveEffects&);
 };
 
-/// Every effect, in catalogue order.
-std::span<const EffectDef> drive_effects();
-/// Every effect parameter, in the order of TWIN_DRIVE_EFFECT_PARAMS.
-std::span<const EffectParamDef> drive_effect_params();
-
 const EffectDef& effect_def(EffectKind kind);
 const EffectParamDef& effect_param_def(EffectParam p);
 std::string_view effect_name(EffectKind kind);
-/// The effect named so in the catalogue (nullopt: no drive effect of that name).
-std::optional<EffectKind> find_effect(std::string_view name);
 
 /// A parameter equals a name when the name is its own ("ws") or its
 /// qualified one ("stribeck.ws").
