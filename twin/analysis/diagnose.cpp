@@ -196,7 +196,8 @@ void detect_stribeck(const DiagnoseContext& c, std::vector<EffectCandidate>& out
   const Fit& f = fits[best].fit;
   const double excess = f.with.theta[4];
   const double Tc_mean = 0.5 * (std::max(0.0, f.with.theta[2]) + std::max(0.0, f.with.theta[3]));
-  add(out, c, EffectKind::kStribeck, f, {{EffectParam::stribeck_Ts_static, Tc_mean + excess}, {EffectParam::stribeck_ws, ws_best}},
+  add(out, c, EffectKind::kStribeck, f,
+      {{EffectParam::stribeck_Ts_static, Tc_mean + excess}, {EffectParam::stribeck_ws, ws_best}},
       fmt::format("friction excess {:.3f} N m (t = {:.1f}) below ws = {:.2g} rad/s cuts the held-out low-speed "
                   "torque residual by {:.0f} %",
                   excess, f.t_stat, ws_best, 100.0 * f.gain));
@@ -259,7 +260,10 @@ void detect_cogging(const DiagnoseContext& c, std::vector<EffectCandidate>& out)
   if (!best.ok) return;
   const double A = std::hypot(best.with.theta[4], best.with.theta[5]);
   const double phase = std::atan2(best.with.theta[5], best.with.theta[4]);
-  add(out, c, EffectKind::kCogging, best, {{EffectParam::cogging_amplitude_Nm, A}, {EffectParam::cogging_cycles_per_rev, best_n}, {EffectParam::cogging_phase_rad, phase}},
+  add(out, c, EffectKind::kCogging, best,
+      {{EffectParam::cogging_amplitude_Nm, A},
+       {EffectParam::cogging_cycles_per_rev, best_n},
+       {EffectParam::cogging_phase_rad, phase}},
       fmt::format("torque ripple {:.3f} N m at {} cycles per motor revolution (period {:.3g} mm, t = {:.1f}) cuts the "
                   "held-out torque residual by {:.0f} %",
                   A, best_n, 2.0 * kPi * c.s.rg_mm_per_rad / best_n, best.t_stat, 100.0 * best.gain));
@@ -308,7 +312,10 @@ void detect_screw_pitch_error(const DiagnoseContext& c, std::vector<EffectCandid
   // A lead error under half an encoder count is not resolved by the data;
   // replayed, it only moves the quantisation boundaries.
   if (c.s.encoder_resolution_mm > 0.0 && A < 0.5 * c.s.encoder_resolution_mm) return;
-  add(out, c, EffectKind::kScrewPitchError, best, {{EffectParam::screw_pitch_error_amplitude_mm, A}, {EffectParam::screw_pitch_error_period_mm, best_P}, {EffectParam::screw_pitch_error_phase_rad, phase}},
+  add(out, c, EffectKind::kScrewPitchError, best,
+      {{EffectParam::screw_pitch_error_amplitude_mm, A},
+       {EffectParam::screw_pitch_error_period_mm, best_P},
+       {EffectParam::screw_pitch_error_phase_rad, phase}},
       fmt::format("lead error {:.4f} mm with period {:.3g} mm (t = {:.1f}): the torque to follow it cuts the held-out "
                   "torque residual by {:.0f} %",
                   A, best_P, best.t_stat, 100.0 * best.gain));
@@ -408,7 +415,8 @@ bool try_backlash_hunting(const DiagnoseContext& c, std::vector<EffectCandidate>
   // Gaps from 0.6 to 1.6 times the spread. (A finer grid finds sets closer
   // on the fitting part whose hunt is no more in phase on the held-out part:
   // the phase of a limit cycle is not a smooth function of the gap.)
-  for (double m : {0.6, 0.7, 0.8, 0.9, 1.1, 1.25, 1.4, 1.6}) e_c.param_grid.push_back({{EffectParam::backlash_gap_mm, m * s_fit}});
+  for (double m : {0.6, 0.7, 0.8, 0.9, 1.1, 1.25, 1.4, 1.6})
+    e_c.param_grid.push_back({{EffectParam::backlash_gap_mm, m * s_fit}});
   e_c.signal_gain = 1.0 - q_spread / s_held;
   e_c.t_stat = s_held / q_spread;
   e_c.judged_by_hunting = true;
@@ -479,7 +487,10 @@ void detect_position_dependent_friction(const DiagnoseContext& c, std::vector<Ef
   const auto held = filter_rows(c.held_moving, [&](std::size_t k) { return psi[k] != 0.0; });
   Fit f = fit_additive(c.s, c.T, c.reg, {&psi}, c.fit_moving, held);
   if (!f.ok || f.with.theta[4] <= 0.0) return;
-  add(out, c, EffectKind::kPositionDependentFriction, f, {{EffectParam::position_dependent_friction_dTc_Nm, f.with.theta[4]}, {EffectParam::position_dependent_friction_x_start_mm, x0}, {EffectParam::position_dependent_friction_x_end_mm, x1}},
+  add(out, c, EffectKind::kPositionDependentFriction, f,
+      {{EffectParam::position_dependent_friction_dTc_Nm, f.with.theta[4]},
+       {EffectParam::position_dependent_friction_x_start_mm, x0},
+       {EffectParam::position_dependent_friction_x_end_mm, x1}},
       fmt::format("friction {:+.3f} N m (t = {:.1f}) between x = {:.1f} and {:.1f} mm cuts the held-out torque "
                   "residual there by {:.0f} % ({} held-out samples in the band)",
                   f.with.theta[4], f.t_stat, x0, x1, 100.0 * f.gain, held.size()));
@@ -887,9 +898,9 @@ void add_coupling_gap(const DiagnoseContext& c, const ResidualPeak& pk, double m
   if (rev_fit < 4 || rev_held < 2) return;
   auto gap_set = [&](double gap_mm, double K) {
     return ParamSet{{EffectParam::backlash_gap_mm, gap_mm},
-                                                       {EffectParam::compliance_K_Nm_per_rad, K},
-                                                       {EffectParam::compliance_C_Nm_s_per_rad, 2.0 * 0.1 * std::sqrt(K * mu)},
-                                                       {EffectParam::compliance_load_fraction, frac}};
+                    {EffectParam::compliance_K_Nm_per_rad, K},
+                    {EffectParam::compliance_C_Nm_s_per_rad, 2.0 * 0.1 * std::sqrt(K * mu)},
+                    {EffectParam::compliance_load_fraction, frac}};
   };
   EffectCandidate gap = out.back();
   gap.set_kind(EffectKind::kBacklash);
@@ -898,7 +909,9 @@ void add_coupling_gap(const DiagnoseContext& c, const ResidualPeak& pk, double m
   for (double K : {20000.0, 5000.0})
     for (double g_mm : {0.003, 0.006, 0.012, 0.024})
       if (!(K == 20000.0 && g_mm == 0.006)) gap.param_grid.push_back(gap_set(g_mm, K));
-  gap.refine = {{EffectParam::backlash_gap_mm, 1.4}, {EffectParam::compliance_K_Nm_per_rad, 2.0}, {EffectParam::compliance_C_Nm_s_per_rad, 2.5}};
+  gap.refine = {{EffectParam::backlash_gap_mm, 1.4},
+                {EffectParam::compliance_K_Nm_per_rad, 2.0},
+                {EffectParam::compliance_C_Nm_s_per_rad, 2.5}};
   gap.evidence = fmt::format(
       "the tracking-error residual of the fitting part has a peak at {:.0f} Hz, {:.1f} times the median level of its "
       "spectrum, and the run reverses {} times ({} held out): a gap in the coupling, the encoder on the motor",
@@ -930,8 +943,9 @@ void detect_compliance(const DiagnoseContext& c, std::vector<EffectCandidate>& o
   const double zeta = 0.05;
   auto set_for = [&](double K) {
     const double C = 2.0 * zeta * std::sqrt(K * mu);
-    return ParamSet{
-        {EffectParam::compliance_K_Nm_per_rad, K}, {EffectParam::compliance_C_Nm_s_per_rad, C}, {EffectParam::compliance_load_fraction, frac}};
+    return ParamSet{{EffectParam::compliance_K_Nm_per_rad, K},
+                    {EffectParam::compliance_C_Nm_s_per_rad, C},
+                    {EffectParam::compliance_load_fraction, frac}};
   };
   const double w_peak = 2.0 * kPi * f_Hz;
   add(out, c, EffectKind::kCompliance, g, set_for(w_peak * w_peak * mu),

@@ -1713,7 +1713,9 @@ sim::MachineDefinition identify_machine(const AxisFit& f, DataCalibration& out) 
 void skip_unseen_effects(const std::vector<MeasuredRun>& fit, DataCalibration& out) {
   const double dt = fit.front().sample_period_s;
   const double q = out.rounding.quantum_mm;
-  auto skip = [&](EffectKind k, std::string why) { out.skipped.emplace_back(feeddrive::effect_name(k), std::move(why)); };
+  auto skip = [&](EffectKind k, std::string why) {
+    out.skipped.emplace_back(feeddrive::effect_name(k), std::move(why));
+  };
   if (dt > 2e-3) {
     skip(EffectKind::kDelay, fmt::format("a delay of a few loop periods is far below the {:g} s sample "
                                          "period: it cannot be told from the loop's lag",
@@ -1907,7 +1909,8 @@ void try_smooth_friction_on_axis(DataCalibration& out, const std::vector<RunData
   for (const RunData& rd : runs) v_move = std::max(v_move, rd.v_move[index(ax.axis)]);
   double best_ws = 0.0, best_fit = bf->second;
   for (double f : {0.1, 0.3, 1.0}) {
-    const ChannelErrors e = pooled_on_fit_runs(out, runs, with_smooth_friction(out.identified, ax.axis, f * v_move), false);
+    const sim::MachineDefinition trial = with_smooth_friction(out.identified, ax.axis, f * v_move);
+    const ChannelErrors e = pooled_on_fit_runs(out, runs, trial, false);
     const auto it = e.nrms.find(key);
     if (it != e.nrms.end() && it->second < best_fit) {
       best_fit = it->second;
@@ -1920,7 +1923,8 @@ void try_smooth_friction_on_axis(DataCalibration& out, const std::vector<RunData
     return;
   }
   eff.params[param_key(EffectKind::kSmoothFriction, EffectParam::smooth_friction_ws)] = best_ws;
-  const ChannelErrors held = pooled_on_fit_runs(out, runs, with_smooth_friction(out.identified, ax.axis, best_ws), true);
+  const ChannelErrors held =
+      pooled_on_fit_runs(out, runs, with_smooth_friction(out.identified, ax.axis, best_ws), true);
   const auto hh = held.nrms.find(key);
   eff.after = hh != held.nrms.end() ? hh->second : bh->second;
   eff.kept = eff.after < eff.before;

@@ -259,7 +259,8 @@ Start replay_start(const MeasuredRun& run, std::size_t n_rows, std::int64_t m, s
   for (Axis a : run.axes) {
     const std::string n(axis_name(a));
     const auto& r = run.trace.at(n + "_ref_mm");
-    st.ref[index(a)] = upsample_reference(std::vector<double>(r.begin(), r.begin() + static_cast<std::ptrdiff_t>(n_rows)), m);
+    st.ref[index(a)] =
+        upsample_reference(std::vector<double>(r.begin(), r.begin() + static_cast<std::ptrdiff_t>(n_rows)), m);
     const auto* xm = run.trace.find(n + "_mm");
     st.x0[index(a)] = xm ? (*xm)[0] : r[0];
     if (!xm) continue;
@@ -291,8 +292,8 @@ using TickSums = AxisArray<std::array<std::vector<double>, 3>>;
 
 // Steps the co-simulation over every tick, keeping the outputs at the trace's
 // samples (and the running sums where `sums` is given).
-void run_ticks(sim::CoSimulation& cosim, const MeasuredRun& run, std::int64_t n_ticks, std::int64_t m, ReplayResult& res,
-               TickSums* sums) {
+void run_ticks(sim::CoSimulation& cosim, const MeasuredRun& run, std::int64_t n_ticks, std::int64_t m,
+               ReplayResult& res, TickSums* sums) {
   const auto& t = run.trace.at("t_s");
   for (std::int64_t k = 0; k < n_ticks; ++k) {
     const sim::Snapshot& s = cosim.step();

@@ -249,7 +249,8 @@ nlohmann::json validation_errors(const analysis::MeasuredRun& v, const sim::Mach
       const std::string n(axis_name(a));
       e[n + "_err_mm"] = ae.err_not_computed.empty() ? nlohmann::json(ae.err_mm) : nlohmann::json(nullptr);
       if (ae.has_u || ae.has_current)
-        e[n + (ae.has_u ? "_u_V" : "_i_A")] = ae.u_not_computed.empty() ? nlohmann::json(ae.u) : nlohmann::json(nullptr);
+        e[n + (ae.has_u ? "_u_V" : "_i_A")] =
+            ae.u_not_computed.empty() ? nlohmann::json(ae.u) : nlohmann::json(nullptr);
     }
   } catch (const Error& err) {
     e["not_computed"] = fmt::format("the replay failed: {}", err.what());
@@ -299,7 +300,8 @@ void calibrate_known_machine(const CalibrateCommand& opt, const std::vector<anal
                                                                          "identified J, B, Tc and added effects",
                                                                          opt.runs.front())));
   nlohmann::json report = analysis::calibration_report_json(r);
-  if (!validate_runs.empty()) report["validation_runs"] = validation_runs_json(validate_runs, opt.machine, r.final_machine);
+  if (!validate_runs.empty())
+    report["validation_runs"] = validation_runs_json(validate_runs, opt.machine, r.final_machine);
   io::write_file_atomic(results.path("report.json"), report.dump(2) + "\n");
   if (!opt.no_plots) {
     try {
