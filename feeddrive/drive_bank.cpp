@@ -7,6 +7,7 @@
 
 #include <fmt/format.h>
 
+#include "feeddrive/effect_torques.hpp"
 #include "feeddrive/ode_solver.hpp"
 #include "twin/core/axis.hpp"
 #include "twin/core/check.hpp"
@@ -121,7 +122,7 @@ struct AxisRun {
 double position_friction_Nm(const DriveParams& p, double x_mm) {
   const auto& e = p.effects.position_dependent_friction;
   if (!e.enabled) return 0.0;
-  return (x_mm >= e.x_start_mm && x_mm <= e.x_end_mm) ? e.dTc_Nm : 0.0;
+  return band_friction_Nm(e.dTc_Nm, e.x_start_mm, e.x_end_mm, x_mm);
 }
 
 // Coulomb level moving in direction s.
@@ -139,28 +140,20 @@ double breakaway_Nm(const DriveParams& p, int s, double x_mm) {
 double sliding_friction_Nm(const DriveParams& p, int s, double w, double x_mm) {
   double T = coulomb_Nm(p, s, x_mm);
   const auto& st = p.effects.stribeck;
-  if (st.enabled) {
-    const double r = w / st.ws_rad_per_s;
-    T += (st.Ts_static_Nm - (s > 0 ? p.Tc_pos_Nm : p.Tc_neg_Nm)) * std::exp(-r * r);
-  }
+  if (st.enabled) T += stribeck_excess_Nm(st.Ts_static_Nm, s > 0 ? p.Tc_pos_Nm : p.Tc_neg_Nm, w, st.ws_rad_per_s);
   return T;
 }
 
 double cogging_Nm(const DriveParams& p, double x_motor_mm) {
   const auto& c = p.effects.cogging;
   if (!c.enabled) return 0.0;
-  return c.amplitude_Nm * std::sin(c.cycles_per_rev * x_motor_mm / p.rg_mm_per_rad + c.phase_rad);
+  return cogging_torque_Nm(c.amplitude_Nm, c.cycles_per_rev, c.phase_rad, x_motor_mm, p.rg_mm_per_rad);
 }
 
-// Work done against the cogging torque from motor position xa to xb (exact:
-// the integral of A sin(n theta + phi) d theta).
 double cogging_work_J(const DriveParams& p, double xa_mm, double xb_mm) {
   const auto& c = p.effects.cogging;
   if (!c.enabled) return 0.0;
-  const double n = c.cycles_per_rev;
-  const double ta = xa_mm / p.rg_mm_per_rad;
-  const double tb = xb_mm / p.rg_mm_per_rad;
-  return -(c.amplitude_Nm / n) * (std::cos(n * tb + c.phase_rad) - std::cos(n * ta + c.phase_rad));
+  return feeddrive::cogging_work_J(c.amplitude_Nm, c.cycles_per_rev, c.phase_rad, xa_mm, xb_mm, p.rg_mm_per_rad);
 }
 
 // Deflection of the coupling spring, rad: the twist between motor and load,
@@ -207,7 +200,8 @@ void axis_rhs(const AxisConst& a, const AxisRun& r, const double* y, double* yd)
     const double w = y[1];
     const double x_mm = r.x0_mm + y[0];
     const double Tf = p.effects.smooth_friction.enabled
-                          ? coulomb_Nm(p, w >= 0.0 ? +1 : -1, x_mm) * std::tanh(w / p.effects.smooth_friction.ws_rad_per_s)
+                          ? smooth_friction_Nm(coulomb_Nm(p, w >= 0.0 ? +1 : -1, x_mm), w,
+                                               p.effects.smooth_friction.ws_rad_per_s)
                           : r.mode * sliding_friction_Nm(p, r.mode, w, x_mm);
     yd[0] = p.rg_mm_per_rad * w;
     yd[1] = (r.Tm_Nm - p.B_kg_m2_per_s * w - Tf - r.Tload_Nm - cogging_Nm(p, x_mm)) / a.Jm_kg_m2;
@@ -268,9 +262,8 @@ double fastest_rate_per_s(const AxisConst& a) {
   if (p.effects.smooth_friction.enabled)  // max |d/dw Tc tanh(w/ws)| = Tc / ws
     rate += std::max(p.Tc_pos_Nm, p.Tc_neg_Nm) / p.effects.smooth_friction.ws_rad_per_s / a.Jm_kg_m2;
   if (p.effects.stribeck.enabled) {
-    // max |d/dw (Ts - Tc) exp(-(w/ws)^2)| = (Ts - Tc) sqrt(2/e) / ws
-    const double slope = (p.effects.stribeck.Ts_static_Nm - std::min(p.Tc_pos_Nm, p.Tc_neg_Nm)) *
-                         std::sqrt(2.0 / std::exp(1.0)) / p.effects.stribeck.ws_rad_per_s;
+    const double slope = stribeck_max_slope(p.effects.stribeck.Ts_static_Nm, std::min(p.Tc_pos_Nm, p.Tc_neg_Nm),
+                                            p.effects.stribeck.ws_rad_per_s);
     rate += slope / (a.compliant ? a.Jl_kg_m2 : a.Jm_kg_m2);
   }
   if (a.compliant) {
@@ -680,7 +673,7 @@ void DriveBank::advance(double t_from_s, double t_to_s, const std::vector<DriveI
     if (a.p.effects.current_saturation.enabled) {
       const double lim = a.p.effects.current_saturation.i_max_A;
       r.clamped = std::abs(r.i_A) >= lim;
-      r.i_A = std::clamp(r.i_A, -lim, lim);
+      r.i_A = saturated_current_A(r.i_A, lim);
     }
     r.Tm_Nm = a.p.Kt_Nm_per_A * r.i_A;
     r.Tload_Nm = inputs[i].Td_Nm + (a.p.effects.constant_load.enabled ? a.p.effects.constant_load.torque_Nm : 0.0);
@@ -714,7 +707,7 @@ DriveOutput DriveBank::output(std::size_t i) const {
   o.x_meas_mm = sensor_mm;
   if (p.effects.screw_pitch_error.enabled) {
     const auto& e = p.effects.screw_pitch_error;
-    o.x_meas_mm += e.amplitude_mm * std::sin(2.0 * kPi * o.x_mm / e.period_mm + e.phase_rad);
+    o.x_meas_mm += screw_pitch_error_mm(e.amplitude_mm, e.period_mm, e.phase_rad, o.x_mm);
   }
   o.w_rad_per_s = s.w_rad_per_s;
   o.v_mm_per_s = p.rg_mm_per_rad * (a.compliant ? s.w_load_rad_per_s : s.w_rad_per_s);

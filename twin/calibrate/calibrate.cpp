@@ -28,57 +28,68 @@ std::vector<double> tracking_residual(const MeasuredRun& run, const ReplayResult
   return r;
 }
 
-// Chooses among the candidate's parameter sets (its own and its grid) the one
-// whose replay has the lowest error on the fitting rows; the held-out rows
-// play no part. Then, for the parameters the candidate names in `refine`, a
-// coordinate search on the fitting rows: each parameter times and divided by
-// its step, the step's square root in a second round. Other axes keep
-// `machine`'s model.
-// Returns false when no set improves the fitting part (a candidate judged by
-// the hunting statistic excepted): it is not tried on the held-out part.
-bool choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& machine, const ReplayResult& current,
-                        EffectCandidate& c, std::size_t n_fit, double max_hunt_ratio, int& replays) {
-  if ((c.param_grid.empty() && c.refine.empty()) || n_fit < 2) return true;
-  using ParamSet = std::vector<std::pair<std::string, double>>;
-  std::vector<ParamSet> sets{c.params};
-  sets.insert(sets.end(), c.param_grid.begin(), c.param_grid.end());
-  // Each error relative to the current model's on the same rows (the
-  // tracking error sits on an encoder-noise floor that no model moves).
-  const AxisErrors base = axis_errors(run, current, c.axis, 0, n_fit);
-  // Only the fitting rows and the candidate's axis are replayed (the axes are
-  // independent without a cut).
-  MeasuredRun one = run;
-  one.axes = {c.axis};
-  // (rank, score): rank 1 for a hunting candidate's set that does not
-  // reproduce the hunt's size, ranked after every set that does; nullopt
-  // when the set cannot be replayed.
-  auto score_of = [&](const ParamSet& params, const DriveIdentification& drive) -> std::optional<std::pair<int, double>> {
-    sim::MachineDefinition trial = machine;
-    EffectCandidate v = c;
+// (rank, score) of a parameter set replayed on the fitting rows: rank 1 for a
+// hunting candidate's set that does not reproduce the hunt's size, ranked
+// after every set that does.
+using SetScore = std::pair<int, double>;
+
+// Scores a candidate's parameter sets by their replay on the fitting rows of
+// its own axis (the axes are independent without a cut), each error relative
+// to the current model's on the same rows (the tracking error sits on an
+// encoder-noise floor that no model moves). Other axes keep `machine`'s model.
+class FitPartScorer {
+ public:
+  FitPartScorer(const MeasuredRun& run, const sim::MachineDefinition& machine, const ReplayResult& current,
+                const EffectCandidate& c, std::size_t n_fit, double max_hunt_ratio, int& replays)
+      : run_(run), machine_(machine), c_(c), n_fit_(n_fit), max_hunt_ratio_(max_hunt_ratio), replays_(replays),
+        base_(axis_errors(run, current, c.axis, 0, n_fit)), one_(run) {
+    one_.axes = {c.axis};
+  }
+
+  // nullopt when the set cannot be replayed.
+  std::optional<SetScore> operator()(const ParamSet& params, const DriveIdentification& drive) const {
+    sim::MachineDefinition trial = machine_;
+    EffectCandidate v = c_;
     v.params = params;
     v.base = drive;
     try {
-      apply_candidate(trial.axes[index(c.axis)], v);
+      apply_candidate(trial.axes[index(c_.axis)], v);
       trial.validate();
-      const ReplayResult rep = replay_run(one, trial, n_fit);
-      ++replays;
-      const AxisErrors e = axis_errors(run, rep, c.axis, 0, n_fit);
+      const ReplayResult rep = replay_run(one_, trial, n_fit_);
+      ++replays_;
+      const AxisErrors e = axis_errors(run_, rep, c_.axis, 0, n_fit_);
       // A hunt: among the sets that reproduce its size (hunting statistic at
       // most max_hunt_ratio of the current model's), the one closest point
       // by point, i.e. most nearly in phase with the run.
-      const double hunt_ratio = base.hunt > 0.0 ? e.hunt / base.hunt : 1.0;
-      const bool off_hunt = c.judged_by_hunting && hunt_ratio > max_hunt_ratio;
-      return std::pair<int, double>{off_hunt ? 1 : 0, off_hunt ? hunt_ratio : base.relative(e)};
+      const double hunt_ratio = base_.hunt > 0.0 ? e.hunt / base_.hunt : 1.0;
+      const bool off_hunt = c_.judged_by_hunting && hunt_ratio > max_hunt_ratio_;
+      return SetScore{off_hunt ? 1 : 0, off_hunt ? hunt_ratio : base_.relative(e)};
     } catch (const Error&) {
       return std::nullopt;
     }
-  };
-  // J, B, Tc of set j: its own refit where the grid carries one.
+  }
+
+ private:
+  const MeasuredRun& run_;
+  const sim::MachineDefinition& machine_;
+  const EffectCandidate& c_;
+  std::size_t n_fit_;
+  double max_hunt_ratio_;
+  int& replays_;
+  AxisErrors base_;
+  MeasuredRun one_;
+};
+
+// The best of the candidate's own set and its grid (J, B, Tc of a grid set
+// its own refit where the grid carries one) goes into `c`; false when none
+// can be replayed.
+bool choose_from_grid(EffectCandidate& c, const FitPartScorer& score_of, SetScore& best_score) {
+  std::vector<ParamSet> sets{c.params};
+  sets.insert(sets.end(), c.param_grid.begin(), c.param_grid.end());
   const bool per_set_base = c.grid_base.size() == c.param_grid.size();
   auto base_for = [&](std::size_t j) -> const DriveIdentification& {
     return j > 0 && per_set_base ? c.grid_base[j - 1] : c.base;
   };
-  std::pair<int, double> best_score{0, 0.0};
   std::size_t best = sets.size();
   for (std::size_t j = 0; j < sets.size(); ++j) {
     const auto score = score_of(sets[j], base_for(j));
@@ -87,14 +98,21 @@ bool choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
       best = j;
     }
   }
-  if (best == sets.size()) return true;
+  if (best == sets.size()) return false;
   c.params = sets[best];
   c.base = DriveIdentification(base_for(best));
-  std::size_t tried = sets.size();
+  return true;
+}
+
+// A coordinate search on the parameters the candidate names in `refine`:
+// each times and divided by its step, the step's square root in a second
+// round. Returns the number of sets replayed.
+std::size_t refine_on_fit_part(EffectCandidate& c, const FitPartScorer& score_of, SetScore& best_score) {
+  std::size_t tried = 0;
   for (int round = 0; round < 2; ++round)
     for (const auto& [name, step0] : c.refine) {
       const double step = round == 0 ? step0 : std::sqrt(step0);
-      const auto& key = name;  // a structured binding cannot be captured before clang 16
+      const EffectParam key = name;  // a structured binding cannot be captured before clang 16
       const auto it = std::find_if(c.params.begin(), c.params.end(), [&](const auto& p) { return p.first == key; });
       if (it == c.params.end() || !(step > 1.0)) continue;
       const auto i = static_cast<std::size_t>(it - c.params.begin());
@@ -110,8 +128,24 @@ bool choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& ma
         }
       }
     }
+  return tried;
+}
+
+// Chooses among the candidate's parameter sets (its own and its grid) the one
+// whose replay has the lowest error on the fitting rows; the held-out rows
+// play no part. Then refines the parameters it names in `refine` on the same
+// rows.
+// Returns false when no set improves the fitting part (a candidate judged by
+// the hunting statistic excepted): it is not tried on the held-out part.
+bool choose_on_fit_part(const MeasuredRun& run, const sim::MachineDefinition& machine, const ReplayResult& current,
+                        EffectCandidate& c, std::size_t n_fit, double max_hunt_ratio, int& replays) {
+  if ((c.param_grid.empty() && c.refine.empty()) || n_fit < 2) return true;
+  const FitPartScorer score_of(run, machine, current, c, n_fit, max_hunt_ratio, replays);
+  SetScore best_score{0, 0.0};
+  if (!choose_from_grid(c, score_of, best_score)) return true;
+  const std::size_t tried = 1 + c.param_grid.size() + refine_on_fit_part(c, score_of, best_score);
   c.evidence += fmt::format("; of {} parameter sets replayed on the fitting part, the best:", tried);
-  for (const auto& [k, v] : c.params) c.evidence += fmt::format(" {} = {:.4g}", k, v);
+  for (const auto& [k, v] : c.params) c.evidence += fmt::format(" {} = {:.4g}", param_key(c.kind, k), v);
   c.evidence += fmt::format(" (fitting-part {} {:.3f} of the current model's)",
                             best_score.first == 0 ? "errors" : "hunting statistic", best_score.second);
   c.param_grid.clear();
@@ -183,6 +217,251 @@ AxisErrors axis_errors(const MeasuredRun& run, const ReplayResult& model, Axis a
   return e;
 }
 
+namespace {
+
+// The state of one calibration as it adds effects: the machine so far, per
+// axis the signals, the torque left to explain, the effects present, and the
+// replay of the machine so far with its held-out errors.
+struct EffectSearch {
+  const MeasuredRun& run;
+  const CalibrateOptions& opt;
+  CalibrationResult& r;
+  sim::MachineDefinition machine;
+  AxisArray<AxisSignals> sig{};
+  AxisArray<std::vector<double>> T_cur{};
+  AxisArray<std::vector<EffectKind>> present{};
+  AxisArray<bool> hunting_on{};
+  ReplayResult current{};
+  AxisArray<AxisErrors> cur_err{};
+};
+
+// The best replay slot of each axis in one round.
+struct RoundBest {
+  AxisArray<int> k{-1, -1, -1};
+  AxisArray<AxisErrors> err{};
+  AxisArray<double> ratio{1.0, 1.0, 1.0};
+  AxisArray<ReplayResult> replay{};
+};
+
+using AxisCandidates = AxisArray<std::vector<EffectCandidate>>;
+
+// Signals, loop gains, amplifier and J, B, Tc of one axis; false where the
+// drive could not be identified.
+bool identify_axis(EffectSearch& st, Axis a) {
+  CalibrationResult& r = st.r;
+  std::string note;
+  auto& ax = st.machine.axes[index(a)];
+  AxisSignals& sig = st.sig[index(a)];
+  sig = prepare_axis_signals(st.run, a, ax.drive, st.machine.encoder_resolution_mm, st.machine.Ts_s,
+                             st.opt.fit_fraction, &note);
+  if (!note.empty()) r.notes.push_back(note);
+  if (sig.n == 0) return false;
+  r.loop[index(a)] = identify_loop_gains(sig, ax.loop);
+  if (!r.loop[index(a)].note.empty()) r.notes.push_back(r.loop[index(a)].note);
+  if (r.loop[index(a)].differs) ax.loop = r.loop[index(a)].gains;
+  r.amplifier[index(a)] = check_amplifier(sig, ax.drive.Ka_A_per_V);
+  const AmplifierCheck& amp = r.amplifier[index(a)];
+  if (!amp.note.empty()) r.notes.push_back(amp.note);
+  if (amp.gain_differs) ax.drive.Ka_A_per_V = amp.gain_A_per_V;
+  if (amp.sign_flipped) set_torque_source(sig, true, ax.drive);
+  if (!sig.has_u)
+    r.notes.push_back(fmt::format("axis {}: no {}_u_V: torque from the current (Tm = Kt i); the u error is measured "
+                                  "on the current",
+                                  axis_name(a), axis_name(a)));
+  const DriveIdentification id = identify_drive(sig, sig.T_Nm, ax.drive);
+  r.identification[index(a)] = id;
+  if (!id.note.empty()) r.notes.push_back(id.note);
+  st.T_cur[index(a)] = sig.T_Nm;
+  if (!id.ok) return false;
+  ax.drive.J_kg_m2 = id.J_kg_m2;
+  ax.drive.B_kg_m2_per_s = id.B_kg_m2_per_s;
+  ax.drive.Tc_pos_Nm = id.Tc_pos_Nm;
+  ax.drive.Tc_neg_Nm = id.Tc_neg_Nm;
+  return true;
+}
+
+// The identified machine replayed (the nominal one where it cannot be), and
+// its held-out errors: the starting point of the effect search.
+void replay_identified(EffectSearch& st, const sim::MachineDefinition& start) {
+  CalibrationResult& r = st.r;
+  try {
+    st.machine.validate();
+    r.replay_before = replay_run(st.run, st.machine);
+  } catch (const Error& e) {
+    r.notes.push_back(fmt::format("the identified model could not be replayed ({}): the nominal parameters are kept",
+                                  e.what()));
+    st.machine = start;
+    r.identified_axis = {};
+    r.replay_before = replay_run(st.run, st.machine);
+  }
+  ++r.replays;
+  r.notes.insert(r.notes.end(), r.replay_before.notes.begin(), r.replay_before.notes.end());
+  r.identified = st.machine;
+  for (Axis a : st.run.axes) r.error_before[index(a)] = axis_errors(st.run, r.replay_before, a, r.n_fit);
+  st.current = r.replay_before;
+  st.cur_err = r.error_before;
+}
+
+// The candidates of every identified axis that pass their signal figures, up
+// to replays_per_round per axis: distinct effects first, then further
+// variants. False when no axis has one.
+bool gather_candidates(EffectSearch& st, AxisCandidates& cands) {
+  bool any = false;
+  for (Axis a : st.run.axes) {
+    const std::size_t i = index(a);
+    if (!st.r.identified_axis[i]) continue;
+    auto all = diagnose_axis(st.sig[i], st.T_cur[i], st.machine.axes[i].drive, st.present[i],
+                             tracking_residual(st.run, st.current, a));
+    const auto slots = static_cast<std::size_t>(st.opt.replays_per_round);
+    std::vector<EffectCandidate> variants;
+    for (auto& c : all) {
+      st.r.considered.push_back(c);
+      st.r.considered.back().T_after_Nm.clear();
+      if (c.signal_gain < st.opt.min_signal_gain || c.t_stat < c.min_t) continue;
+      const bool seen = std::any_of(cands[i].begin(), cands[i].end(),
+                                    [&](const EffectCandidate& o) { return o.kind == c.kind; });
+      if (seen)
+        variants.push_back(std::move(c));
+      else if (cands[i].size() < slots)
+        cands[i].push_back(std::move(c));
+    }
+    for (auto& c : variants)
+      if (cands[i].size() < slots) cands[i].push_back(std::move(c));
+    any = any || !cands[i].empty();
+  }
+  return any;
+}
+
+// Each candidate's parameter set chosen on the fitting part; a candidate no
+// set of which improves it is rejected there.
+void choose_parameter_sets(EffectSearch& st, AxisCandidates& cands) {
+  for (Axis a : st.run.axes) {
+    std::vector<EffectCandidate> kept;
+    for (auto& c : cands[index(a)]) {
+      if (!choose_on_fit_part(st.run, st.machine, st.current, c, st.r.n_fit, st.opt.max_hunt_ratio, st.r.replays)) {
+        c.evidence += "; no parameter set improves the fitting part: not tried on the held-out part";
+        st.r.rejected.push_back(std::move(c));
+        continue;
+      }
+      update_torque_after(st.sig[index(a)], st.T_cur[index(a)], c);
+      kept.push_back(std::move(c));
+    }
+    cands[index(a)] = std::move(kept);
+  }
+}
+
+// Judges candidate `c` of axis `a`, replayed in slot `k` with errors `e`, and
+// makes it the axis's best of the round where it is.
+void judge_slot(EffectSearch& st, Axis a, int k, EffectCandidate& c, const ReplayResult& rep, RoundBest& best) {
+  const std::size_t i = index(a);
+  const CalibrateOptions& opt = st.opt;
+  const AxisErrors& before = st.cur_err[i];
+  const AxisErrors e = axis_errors(st.run, rep, a, st.r.n_fit);
+  c.evidence += fmt::format("; replayed held-out error: tracking {:.4g} -> {:.4g}, u {:.4g} -> {:.4g}",
+                            before.err_mm, e.err_mm, before.u, e.u);
+  // Each error relative to its own value before: the tracking error of a
+  // quantised run sits on a floor of encoder noise that no model moves.
+  double ratio = before.relative(e);
+  // Once a hunt is modelled on the axis, no later effect may give it up.
+  const bool hunt_kept = !st.hunting_on[i] || e.hunt <= before.hunt * (1.0 + opt.min_improvement) + 0.02;
+  // Never above before, in any of the contract's errors.
+  const bool no_worse = e.err_mm <= before.err_mm && e.u <= before.u && hunt_kept;
+  const double needed = st.present[i].empty() ? opt.min_improvement : opt.min_improvement_second;
+  bool better = ratio < 1.0 - needed && no_worse;
+  if (c.judged_by_hunting) {
+    const double hr = before.hunt > 0.0 ? e.hunt / before.hunt : 1.0;
+    c.evidence += fmt::format("; hunting statistic {:.4f} -> {:.4f} ({:.2f} of before)", before.hunt, e.hunt, hr);
+    better = hr <= opt.max_hunt_ratio && no_worse;
+    ratio = hr;
+  }
+  // As a second effect on an axis only where the replay is the same
+  // (the exact reparametrisation of the levels fitted with the first
+  // effect): a variant that changes the replay must earn its place there.
+  const bool same_replay = e.err_mm == before.err_mm && e.u == before.u;
+  const bool tie_strong = (st.present[i].empty() || same_replay) && c.replay_blind &&
+                          c.signal_gain >= opt.strong_signal_gain && c.t_stat >= opt.strong_t &&
+                          before.err_mm < opt.tie_max_err_nrms && no_worse;
+  if (tie_strong && !better) c.evidence += "; the replayed errors are not above before and the signature decides";
+  const bool first_choice = best.k[i] < 0;
+  if ((better || tie_strong) && (first_choice || ratio < best.ratio[i])) {
+    best.k[i] = k;
+    best.ratio[i] = ratio;
+    best.err[i] = e;
+    best.replay[i] = rep;
+  }
+}
+
+// Replay slot k: the k-th candidate of every axis together (the axes are
+// independent), each judged on its own axis. False when no axis has a k-th.
+bool replay_slot(EffectSearch& st, AxisCandidates& cands, int k, RoundBest& best) {
+  const auto slot = static_cast<std::size_t>(k);
+  sim::MachineDefinition trial = st.machine;
+  bool used = false;
+  for (Axis a : st.run.axes)
+    if (cands[index(a)].size() > slot) {
+      apply_candidate(trial.axes[index(a)], cands[index(a)][slot]);
+      used = true;
+    }
+  if (!used) return false;
+  ReplayResult rep;
+  try {
+    trial.validate();
+    rep = replay_run(st.run, trial);
+    ++st.r.replays;
+  } catch (const Error& e) {
+    for (Axis a : st.run.axes)
+      if (cands[index(a)].size() > slot)
+        cands[index(a)][slot].evidence += fmt::format("; its model could not be replayed: {}", e.what());
+    return true;
+  }
+  for (Axis a : st.run.axes)
+    if (cands[index(a)].size() > slot) judge_slot(st, a, k, cands[index(a)][slot], rep, best);
+  return true;
+}
+
+// The round's best candidate of each axis goes into the machine; the others
+// are rejected. False when no axis took one.
+bool accept_best(EffectSearch& st, AxisCandidates& cands, const RoundBest& best) {
+  bool accepted = false;
+  for (Axis a : st.run.axes) {
+    const std::size_t i = index(a);
+    for (std::size_t k = 0; k < cands[i].size(); ++k) {
+      if (static_cast<int>(k) != best.k[i]) {
+        st.r.rejected.push_back(cands[i][k]);
+        continue;
+      }
+      AddedEffect ad;
+      ad.candidate = cands[i][k];
+      ad.before = st.cur_err[i];
+      ad.after = best.err[i];
+      apply_candidate(st.machine.axes[i], ad.candidate);
+      st.present[i].push_back(ad.candidate.kind);
+      st.hunting_on[i] = st.hunting_on[i] || ad.candidate.judged_by_hunting;
+      st.T_cur[i] = ad.candidate.T_after_Nm;
+      copy_axis(st.current, best.replay[i], a);
+      st.cur_err[i] = best.err[i];
+      st.r.added.push_back(std::move(ad));
+      accepted = true;
+    }
+  }
+  return accepted;
+}
+
+// One round of the search: candidates, their sets, the replays, the choice.
+// False when nothing was added.
+bool search_round(EffectSearch& st) {
+  AxisCandidates cands;
+  if (!gather_candidates(st, cands)) return false;
+  choose_parameter_sets(st, cands);
+  RoundBest best;
+  best.err = st.cur_err;
+  for (int k = 0; k < st.opt.replays_per_round; ++k)
+    if (!replay_slot(st, cands, k, best)) break;
+  return accept_best(st, cands, best);
+}
+
+}  // namespace
+
 CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition& start,
                             const CalibrateOptions& opt) {
   CalibrationResult r;
@@ -192,192 +471,15 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
   const auto& t = run.trace.at("t_s");
   r.t_split_s = t[std::min(r.n_fit, r.n - 1)];
   r.t_end_s = t.back();
-  sim::MachineDefinition machine = start;
   r.notes = run.notes;
-
-  AxisArray<AxisSignals> sig;
-  AxisArray<std::vector<double>> T_cur;
-  AxisArray<std::vector<std::string>> present;
-  AxisArray<bool> hunting_on{};
-  for (Axis a : run.axes) {
-    std::string note;
-    auto& ax = machine.axes[index(a)];
-    sig[index(a)] = prepare_axis_signals(run, a, ax.drive, machine.encoder_resolution_mm, machine.Ts_s,
-                                         opt.fit_fraction, &note);
-    if (!note.empty()) r.notes.push_back(note);
-    if (sig[index(a)].n == 0) continue;
-    r.loop[index(a)] = identify_loop_gains(sig[index(a)], ax.loop);
-    if (!r.loop[index(a)].note.empty()) r.notes.push_back(r.loop[index(a)].note);
-    if (r.loop[index(a)].differs) ax.loop = r.loop[index(a)].gains;
-    r.amplifier[index(a)] = check_amplifier(sig[index(a)], ax.drive.Ka_A_per_V);
-    const AmplifierCheck& amp = r.amplifier[index(a)];
-    if (!amp.note.empty()) r.notes.push_back(amp.note);
-    if (amp.gain_differs) ax.drive.Ka_A_per_V = amp.gain_A_per_V;
-    if (amp.sign_flipped) set_torque_source(sig[index(a)], true, ax.drive);
-    if (!sig[index(a)].has_u)
-      r.notes.push_back(fmt::format("axis {}: no {}_u_V: torque from the current (Tm = Kt i); the u error is measured "
-                                    "on the current",
-                                    axis_name(a), axis_name(a)));
-    const DriveIdentification id = identify_drive(sig[index(a)], sig[index(a)].T_Nm, ax.drive);
-    r.identification[index(a)] = id;
-    if (!id.note.empty()) r.notes.push_back(id.note);
-    T_cur[index(a)] = sig[index(a)].T_Nm;
-    if (!id.ok) continue;
-    r.identified_axis[index(a)] = true;
-    ax.drive.J_kg_m2 = id.J_kg_m2;
-    ax.drive.B_kg_m2_per_s = id.B_kg_m2_per_s;
-    ax.drive.Tc_pos_Nm = id.Tc_pos_Nm;
-    ax.drive.Tc_neg_Nm = id.Tc_neg_Nm;
-  }
-  try {
-    machine.validate();
-    r.replay_before = replay_run(run, machine);
-  } catch (const Error& e) {
-    r.notes.push_back(fmt::format("the identified model could not be replayed ({}): the nominal parameters are kept",
-                                  e.what()));
-    machine = start;
-    r.identified_axis = {};
-    r.replay_before = replay_run(run, machine);
-  }
-  ++r.replays;
-  r.notes.insert(r.notes.end(), r.replay_before.notes.begin(), r.replay_before.notes.end());
-  r.identified = machine;
-  for (Axis a : run.axes) r.error_before[index(a)] = axis_errors(run, r.replay_before, a, r.n_fit);
-  ReplayResult current = r.replay_before;
-  AxisArray<AxisErrors> cur_err = r.error_before;
-
-  for (int round = 0; round < opt.max_effects_per_axis; ++round) {
-    AxisArray<std::vector<EffectCandidate>> cands;
-    bool any = false;
-    for (Axis a : run.axes) {
-      const std::size_t i = index(a);
-      if (!r.identified_axis[i]) continue;
-      auto all = diagnose_axis(sig[i], T_cur[i], machine.axes[i].drive, present[i], tracking_residual(run, current, a));
-      // Replay slots go to distinct effects first, then to further variants.
-      std::vector<EffectCandidate> variants;
-      for (auto& c : all) {
-        r.considered.push_back(c);
-        r.considered.back().T_after_Nm.clear();
-        if (c.signal_gain < opt.min_signal_gain || c.t_stat < c.min_t) continue;
-        const bool seen = std::any_of(cands[i].begin(), cands[i].end(),
-                                      [&](const EffectCandidate& o) { return o.effect == c.effect; });
-        if (seen)
-          variants.push_back(std::move(c));
-        else if (cands[i].size() < static_cast<std::size_t>(opt.replays_per_round))
-          cands[i].push_back(std::move(c));
-      }
-      for (auto& c : variants)
-        if (cands[i].size() < static_cast<std::size_t>(opt.replays_per_round)) cands[i].push_back(std::move(c));
-      any = any || !cands[i].empty();
-    }
-    if (!any) break;
-    for (Axis a : run.axes) {
-      std::vector<EffectCandidate> kept;
-      for (auto& c : cands[index(a)]) {
-        if (!choose_on_fit_part(run, machine, current, c, r.n_fit, opt.max_hunt_ratio, r.replays)) {
-          c.evidence += "; no parameter set improves the fitting part: not tried on the held-out part";
-          r.rejected.push_back(std::move(c));
-          continue;
-        }
-        update_torque_after(sig[index(a)], T_cur[index(a)], c);
-        kept.push_back(std::move(c));
-      }
-      cands[index(a)] = std::move(kept);
-    }
-    AxisArray<int> best_k{-1, -1, -1};
-    AxisArray<AxisErrors> best_err = cur_err;
-    AxisArray<double> best_ratio{1.0, 1.0, 1.0};
-    AxisArray<ReplayResult> best_replay;
-    for (int k = 0; k < opt.replays_per_round; ++k) {
-      sim::MachineDefinition trial = machine;
-      bool used = false;
-      for (Axis a : run.axes)
-        if (cands[index(a)].size() > static_cast<std::size_t>(k)) {
-          apply_candidate(trial.axes[index(a)], cands[index(a)][static_cast<std::size_t>(k)]);
-          used = true;
-        }
-      if (!used) break;
-      ReplayResult rep;
-      try {
-        trial.validate();
-        rep = replay_run(run, trial);
-        ++r.replays;
-      } catch (const Error& e) {
-        for (Axis a : run.axes)
-          if (cands[index(a)].size() > static_cast<std::size_t>(k)) {
-            auto& c = cands[index(a)][static_cast<std::size_t>(k)];
-            c.evidence += fmt::format("; its model could not be replayed: {}", e.what());
-          }
-        continue;
-      }
-      for (Axis a : run.axes) {
-        const std::size_t i = index(a);
-        if (cands[i].size() <= static_cast<std::size_t>(k)) continue;
-        const AxisErrors e = axis_errors(run, rep, a, r.n_fit);
-        auto& c = cands[i][static_cast<std::size_t>(k)];
-        c.evidence += fmt::format("; replayed held-out error: tracking {:.4g} -> {:.4g}, u {:.4g} -> {:.4g}",
-                                  cur_err[i].err_mm, e.err_mm, cur_err[i].u, e.u);
-        // Each error relative to its own value before: the tracking error of a
-        // quantised run sits on a floor of encoder noise that no model moves.
-        double ratio = cur_err[i].relative(e);
-        // Once a hunt is modelled on the axis, no later effect may give it up.
-        const bool hunt_kept = !hunting_on[i] || e.hunt <= cur_err[i].hunt * (1.0 + opt.min_improvement) + 0.02;
-        // Never above before, in any of the contract's errors.
-        const bool no_worse = e.err_mm <= cur_err[i].err_mm && e.u <= cur_err[i].u && hunt_kept;
-        const double needed = present[i].empty() ? opt.min_improvement : opt.min_improvement_second;
-        bool better = ratio < 1.0 - needed && no_worse;
-        if (c.judged_by_hunting) {
-          const double hr = cur_err[i].hunt > 0.0 ? e.hunt / cur_err[i].hunt : 1.0;
-          c.evidence += fmt::format("; hunting statistic {:.4f} -> {:.4f} ({:.2f} of before)", cur_err[i].hunt,
-                                    e.hunt, hr);
-          better = hr <= opt.max_hunt_ratio && no_worse;
-          ratio = hr;
-        }
-        // As a second effect on an axis only where the replay is the same
-        // (the exact reparametrisation of the levels fitted with the first
-        // effect): a variant that changes the replay must earn its place there.
-        const bool same_replay = e.err_mm == cur_err[i].err_mm && e.u == cur_err[i].u;
-        const bool tie_strong = (present[i].empty() || same_replay) && c.replay_blind &&
-                                c.signal_gain >= opt.strong_signal_gain && c.t_stat >= opt.strong_t &&
-                                cur_err[i].err_mm < opt.tie_max_err_nrms && no_worse;
-        if (tie_strong && !better)
-          c.evidence += "; the replayed errors are not above before and the signature decides";
-        const bool first_choice = best_k[i] < 0;
-        if ((better || tie_strong) && (first_choice || ratio < best_ratio[i])) {
-          best_k[i] = k;
-          best_ratio[i] = ratio;
-          best_err[i] = e;
-          best_replay[i] = rep;
-        }
-      }
-    }
-    bool accepted = false;
-    for (Axis a : run.axes) {
-      const std::size_t i = index(a);
-      for (std::size_t k = 0; k < cands[i].size(); ++k) {
-        if (static_cast<int>(k) != best_k[i]) {
-          r.rejected.push_back(cands[i][k]);
-          continue;
-        }
-        AddedEffect ad;
-        ad.candidate = cands[i][k];
-        ad.before = cur_err[i];
-        ad.after = best_err[i];
-        apply_candidate(machine.axes[i], ad.candidate);
-        present[i].push_back(ad.candidate.effect);
-        hunting_on[i] = hunting_on[i] || ad.candidate.judged_by_hunting;
-        T_cur[i] = ad.candidate.T_after_Nm;
-        copy_axis(current, best_replay[i], a);
-        cur_err[i] = best_err[i];
-        r.added.push_back(std::move(ad));
-        accepted = true;
-      }
-    }
-    if (!accepted) break;
-  }
-  r.final_machine = machine;
-  r.replay_after = current;
-  r.error_after = cur_err;
+  EffectSearch st{run, opt, r, start};
+  for (Axis a : run.axes) r.identified_axis[index(a)] = identify_axis(st, a);
+  replay_identified(st, start);
+  for (int round = 0; round < opt.max_effects_per_axis; ++round)
+    if (!search_round(st)) break;
+  r.final_machine = st.machine;
+  r.replay_after = st.current;
+  r.error_after = st.cur_err;
   for (Axis a : run.axes)
     if (!r.identified_axis[index(a)])
       r.notes.push_back(fmt::format("axis {}: not identified; replayed with the machine's own parameters and no "
@@ -408,7 +510,7 @@ nlohmann::json calibration_report_json(const CalibrationResult& r) {
   j["effects_added"] = nlohmann::json::array();
   for (const auto& ad : r.added) {
     nlohmann::json p = nlohmann::json::object();
-    for (const auto& [k, v] : ad.candidate.params) p[k] = v;
+    for (const auto& [k, v] : ad.candidate.params) p[param_key(ad.candidate.kind, k)] = v;
     j["effects_added"].push_back({{"effect", ad.candidate.effect},
                                   {"axis", std::string(axis_name(ad.candidate.axis))},
                                   {"params", p},
@@ -461,7 +563,7 @@ std::string calibration_report_markdown(const CalibrationResult& r, const std::s
   if (r.added.empty()) s += "none: no candidate improved the held-out error by more than the threshold.\n";
   for (const auto& ad : r.added) {
     s += fmt::format("- **{}** on {}:", ad.candidate.effect, axis_name(ad.candidate.axis));
-    for (const auto& [k, v] : ad.candidate.params) s += fmt::format(" {} = {:.5g}", k, v);
+    for (const auto& [k, v] : ad.candidate.params) s += fmt::format(" {} = {:.5g}", param_key(ad.candidate.kind, k), v);
     s += fmt::format(". {}\n", ad.candidate.evidence);
   }
   s += "\n## Candidates replayed and rejected\n\n";

@@ -3,9 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <optional>
 
 #include <fmt/format.h>
 
+#include "feeddrive/effect_torques.hpp"
+#include "twin/calibrate/effect_detectors.hpp"
 #include "twin/calibrate/signal.hpp"
 #include "twin/core/error.hpp"
 
@@ -126,22 +129,33 @@ std::vector<std::pair<std::size_t, double>> reversals(const AxisSignals& s) {
   return r;
 }
 
-struct Ctx {
+}  // namespace
+
+/// A detector's view of one axis: the signals, the torque the base model
+/// explains, the drive, the replay's tracking residual, the effects already
+/// on the axis, and the fits every detector starts from.
+struct DiagnoseContext {
   const AxisSignals& s;
   const std::vector<double>& T;
   const feeddrive::DriveParams& d;
+  const std::vector<double>& e_residual;  ///< measured minus replayed tracking error (may be empty)
+  const std::vector<EffectKind>& present;
   BaseRegressors reg;
-  std::vector<std::size_t> fit_moving, held_moving, fit_slow, held_slow;
-  DriveIdentification base;
+  std::vector<std::size_t> fit_moving{}, held_moving{}, fit_slow{}, held_slow{};
+  DriveIdentification base{};
   double travel_mm{0.0};  ///< range of x over the fitting rows
   std::size_t current_lag{0};  ///< samples the logged current lags Ka u (measure_current_lag)
   std::vector<std::pair<std::size_t, double>> reversals{};  ///< reversals(s)
+  /// Whether the effect is still to be looked for (not on the axis yet).
+  bool wants(EffectKind k) const { return std::find(present.begin(), present.end(), k) == present.end(); }
 };
 
-void add(std::vector<EffectCandidate>& out, const Ctx& c, const std::string& effect, const Fit& f,
-         std::vector<std::pair<std::string, double>> params, std::string evidence) {
+namespace {
+
+void add(std::vector<EffectCandidate>& out, const DiagnoseContext& c, EffectKind kind, const Fit& f, ParamSet params,
+         std::string evidence) {
   EffectCandidate e;
-  e.effect = effect;
+  e.set_kind(kind);
   e.axis = c.s.axis;
   e.params = std::move(params);
   e.signal_gain = f.gain;
@@ -152,7 +166,9 @@ void add(std::vector<EffectCandidate>& out, const Ctx& c, const std::string& eff
   out.push_back(std::move(e));
 }
 
-void try_stribeck(const Ctx& c, std::vector<EffectCandidate>& out) {
+}  // namespace
+
+void detect_stribeck(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   // Scan the Stribeck speed; the torque residual alone places it only roughly
   // (few samples at the lowest speeds, the filter smears reversals), so the
   // best fit and two slower ones go to the replay.
@@ -165,7 +181,7 @@ void try_stribeck(const Ctx& c, std::vector<EffectCandidate>& out) {
   for (double ws = 0.3; ws < 40.0; ws *= 1.35) {
     for (std::size_t k = 0; k < c.s.n; ++k) {
       const double w = c.s.w_rad_per_s[k];
-      psi[k] = (w > 0.0 ? 1.0 : w < 0.0 ? -1.0 : 0.0) * std::exp(-(w / ws) * (w / ws));
+      psi[k] = (w > 0.0 ? 1.0 : w < 0.0 ? -1.0 : 0.0) * feeddrive::stribeck_shape(w, ws);
     }
     const auto held = filter_rows(c.held_slow, [&](std::size_t k) { return std::abs(c.s.w_rad_per_s[k]) < 2.0 * ws; });
     Fit f = fit_additive(c.s, c.T, c.reg, {&psi}, c.fit_slow, held);
@@ -180,7 +196,8 @@ void try_stribeck(const Ctx& c, std::vector<EffectCandidate>& out) {
   const Fit& f = fits[best].fit;
   const double excess = f.with.theta[4];
   const double Tc_mean = 0.5 * (std::max(0.0, f.with.theta[2]) + std::max(0.0, f.with.theta[3]));
-  add(out, c, "stribeck", f, {{"Ts_static", Tc_mean + excess}, {"ws", ws_best}},
+  add(out, c, EffectKind::kStribeck, f,
+      {{EffectParam::stribeck_Ts_static, Tc_mean + excess}, {EffectParam::stribeck_ws, ws_best}},
       fmt::format("friction excess {:.3f} N m (t = {:.1f}) below ws = {:.2g} rad/s cuts the held-out low-speed "
                   "torque residual by {:.0f} %",
                   excess, f.t_stat, ws_best, 100.0 * f.gain));
@@ -194,7 +211,7 @@ void try_stribeck(const Ctx& c, std::vector<EffectCandidate>& out) {
   auto refit = [&](double Ts, double ws) {
     for (std::size_t k = 0; k < c.s.n; ++k) {
       const double w = c.s.w_rad_per_s[k];
-      const double g = std::exp(-(w / ws) * (w / ws));
+      const double g = feeddrive::stribeck_shape(w, ws);
       pos[k] = c.reg.pos[k] * (1.0 - g);
       neg[k] = c.reg.neg[k] * (1.0 - g);
       y[k] = c.T[k] - Ts * (w > 0.0 ? 1.0 : w < 0.0 ? -1.0 : 0.0) * g;
@@ -209,12 +226,16 @@ void try_stribeck(const Ctx& c, std::vector<EffectCandidate>& out) {
     for (double m : {1.25, 1.75, 2.25}) {
       if (ws >= 0.75 && m > 2.0) continue;
       const double Ts = Tc_mean + m * excess;
-      cand.param_grid.push_back({{"Ts_static", Ts}, {"ws", ws * ws_best}});
+      cand.param_grid.push_back({{EffectParam::stribeck_Ts_static, Ts}, {EffectParam::stribeck_ws, ws * ws_best}});
       cand.grid_base.push_back(refit(Ts, ws * ws_best));
     }
 }
 
-void try_cogging(const Ctx& c, std::vector<EffectCandidate>& out) {
+namespace {
+
+}  // namespace
+
+void detect_cogging(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   const double fs = 1.0 / c.s.dt_s;
   double best_rms = 1e300;
   int best_n = 0;
@@ -223,7 +244,7 @@ void try_cogging(const Ctx& c, std::vector<EffectCandidate>& out) {
   for (int n = 1; n <= 48; ++n) {
     if (2.0 * kPi * c.s.rg_mm_per_rad / n > 0.5 * c.travel_mm) continue;  // two periods at least
     for (std::size_t k = 0; k < c.s.n; ++k) {
-      const double th = n * c.s.x_mm[k] / c.s.rg_mm_per_rad;
+      const double th = feeddrive::cogging_angle_rad(n, c.s.x_mm[k], c.s.rg_mm_per_rad);
       sn[k] = std::sin(th);
       cs[k] = std::cos(th);
     }
@@ -239,13 +260,20 @@ void try_cogging(const Ctx& c, std::vector<EffectCandidate>& out) {
   if (!best.ok) return;
   const double A = std::hypot(best.with.theta[4], best.with.theta[5]);
   const double phase = std::atan2(best.with.theta[5], best.with.theta[4]);
-  add(out, c, "cogging", best, {{"amplitude_Nm", A}, {"cycles_per_rev", best_n}, {"phase_rad", phase}},
+  add(out, c, EffectKind::kCogging, best,
+      {{EffectParam::cogging_amplitude_Nm, A},
+       {EffectParam::cogging_cycles_per_rev, best_n},
+       {EffectParam::cogging_phase_rad, phase}},
       fmt::format("torque ripple {:.3f} N m at {} cycles per motor revolution (period {:.3g} mm, t = {:.1f}) cuts the "
                   "held-out torque residual by {:.0f} %",
                   A, best_n, 2.0 * kPi * c.s.rg_mm_per_rad / best_n, best.t_stat, 100.0 * best.gain));
 }
 
-void try_screw(const Ctx& c, std::vector<EffectCandidate>& out) {
+namespace {
+
+}  // namespace
+
+void detect_screw_pitch_error(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   double best_rms = 1e300, best_P = 0.0;
   Fit best;
   std::vector<double> sn(c.s.n), cs(c.s.n);
@@ -253,7 +281,7 @@ void try_screw(const Ctx& c, std::vector<EffectCandidate>& out) {
   const double P_max = 0.5 * c.travel_mm;
   auto try_period = [&](double P) {
     for (std::size_t k = 0; k < c.s.n; ++k) {
-      const double th = 2.0 * kPi * c.s.x_mm[k] / P;
+      const double th = feeddrive::screw_pitch_angle_rad(c.s.x_mm[k], P);
       sn[k] = std::sin(th);
       cs[k] = std::cos(th);
     }
@@ -284,11 +312,16 @@ void try_screw(const Ctx& c, std::vector<EffectCandidate>& out) {
   // A lead error under half an encoder count is not resolved by the data;
   // replayed, it only moves the quantisation boundaries.
   if (c.s.encoder_resolution_mm > 0.0 && A < 0.5 * c.s.encoder_resolution_mm) return;
-  add(out, c, "screw_pitch_error", best, {{"amplitude_mm", A}, {"period_mm", best_P}, {"phase_rad", phase}},
+  add(out, c, EffectKind::kScrewPitchError, best,
+      {{EffectParam::screw_pitch_error_amplitude_mm, A},
+       {EffectParam::screw_pitch_error_period_mm, best_P},
+       {EffectParam::screw_pitch_error_phase_rad, phase}},
       fmt::format("lead error {:.4f} mm with period {:.3g} mm (t = {:.1f}): the torque to follow it cuts the held-out "
                   "torque residual by {:.0f} %",
                   A, best_P, best.t_stat, 100.0 * best.gain));
 }
+
+namespace {
 
 // Backlash seen at reversals: with the encoder on the table, the motor turns
 // back through the gap while the table stands, so the measured position lags
@@ -296,7 +329,7 @@ void try_screw(const Ctx& c, std::vector<EffectCandidate>& out) {
 // reference, in the new direction. The median over reversals of the peak of
 // that signed residual (measured minus model tracking error) in the 50 ms
 // after each reversal sizes the gap; a grid around it goes to the replay.
-void try_backlash_reversals(const Ctx& c, const std::vector<double>& e_res, std::vector<EffectCandidate>& out) {
+void try_backlash_reversals(const DiagnoseContext& c, const std::vector<double>& e_res, std::vector<EffectCandidate>& out) {
   if (e_res.size() != c.s.n) return;
   const double q = c.s.encoder_resolution_mm > 0.0 ? c.s.encoder_resolution_mm : 0.001;
   const auto span = static_cast<std::size_t>(std::lround(0.05 / c.s.dt_s));
@@ -314,10 +347,10 @@ void try_backlash_reversals(const Ctx& c, const std::vector<double>& e_res, std:
   if (p_fit < 2.5 * q || p_held < 2.0 * q) return;
   const double gap = 2.0 * p_fit;
   EffectCandidate e;
-  e.effect = "backlash";
+  e.set_kind(EffectKind::kBacklash);
   e.axis = c.s.axis;
-  e.params = {{"gap_mm", gap}};
-  for (double m : {0.6, 0.8, 1.2, 1.5, 2.0}) e.param_grid.push_back({{"gap_mm", m * gap}});
+  e.params = {{EffectParam::backlash_gap_mm, gap}};
+  for (double m : {0.6, 0.8, 1.2, 1.5, 2.0}) e.param_grid.push_back({{EffectParam::backlash_gap_mm, m * gap}});
   e.signal_gain = 1.0 - q / p_held;
   e.t_stat = p_held / (0.5 * q);
   e.evidence = fmt::format(
@@ -335,7 +368,7 @@ void try_backlash_reversals(const Ctx& c, const std::vector<double>& e_res, std:
 // chatters by an encoder count, the tracking error then spreads over several
 // counts. The spread at standstill sizes the gap; the candidates are judged by
 // the hunting statistic, since a replay hunts out of phase with the run.
-bool try_backlash_hunting(const Ctx& c, std::vector<EffectCandidate>& out) {
+bool try_backlash_hunting(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   const double q = c.s.encoder_resolution_mm;
   if (!(q > 0.0)) return false;
   const auto window = std::max<std::size_t>(8, static_cast<std::size_t>(std::lround(0.02 / c.s.dt_s)));
@@ -376,13 +409,14 @@ bool try_backlash_hunting(const Ctx& c, std::vector<EffectCandidate>& out) {
   if (s_fit < 2.0 * q || s_held < 2.0 * q) return false;
   const double q_spread = q / std::sqrt(12.0);
   EffectCandidate e_c;
-  e_c.effect = "backlash";
+  e_c.set_kind(EffectKind::kBacklash);
   e_c.axis = c.s.axis;
-  e_c.params = {{"gap_mm", s_fit}};
+  e_c.params = {{EffectParam::backlash_gap_mm, s_fit}};
   // Gaps from 0.6 to 1.6 times the spread. (A finer grid finds sets closer
   // on the fitting part whose hunt is no more in phase on the held-out part:
   // the phase of a limit cycle is not a smooth function of the gap.)
-  for (double m : {0.6, 0.7, 0.8, 0.9, 1.1, 1.25, 1.4, 1.6}) e_c.param_grid.push_back({{"gap_mm", m * s_fit}});
+  for (double m : {0.6, 0.7, 0.8, 0.9, 1.1, 1.25, 1.4, 1.6})
+    e_c.param_grid.push_back({{EffectParam::backlash_gap_mm, m * s_fit}});
   e_c.signal_gain = 1.0 - q_spread / s_held;
   e_c.t_stat = s_held / q_spread;
   e_c.judged_by_hunting = true;
@@ -398,12 +432,18 @@ bool try_backlash_hunting(const Ctx& c, std::vector<EffectCandidate>& out) {
   return true;
 }
 
-void try_backlash(const Ctx& c, const std::vector<double>& e_res, std::vector<EffectCandidate>& out) {
+}  // namespace
+
+void detect_backlash(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   try_backlash_hunting(c, out);
-  try_backlash_reversals(c, e_res, out);
+  try_backlash_reversals(c, c.e_residual, out);
 }
 
-void try_position_friction(const Ctx& c, std::vector<EffectCandidate>& out) {
+namespace {
+
+}  // namespace
+
+void detect_position_dependent_friction(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   const auto& rows = c.fit_moving;
   if (rows.size() < 500) return;
   // Residual of the base fit, signed by the direction of motion, binned over x.
@@ -442,16 +482,21 @@ void try_position_friction(const Ctx& c, std::vector<EffectCandidate>& out) {
   const double x0 = lo + w * static_cast<double>(bi), x1 = lo + w * static_cast<double>(bj + 1);
   std::vector<double> psi(c.s.n, 0.0);
   for (std::size_t k = 0; k < c.s.n; ++k)
-    if (c.s.x_mm[k] >= x0 && c.s.x_mm[k] <= x1)
+    if (feeddrive::in_friction_band(c.s.x_mm[k], x0, x1))
       psi[k] = c.s.w_rad_per_s[k] > 0.0 ? 1.0 : c.s.w_rad_per_s[k] < 0.0 ? -1.0 : 0.0;
   const auto held = filter_rows(c.held_moving, [&](std::size_t k) { return psi[k] != 0.0; });
   Fit f = fit_additive(c.s, c.T, c.reg, {&psi}, c.fit_moving, held);
   if (!f.ok || f.with.theta[4] <= 0.0) return;
-  add(out, c, "position_dependent_friction", f, {{"dTc_Nm", f.with.theta[4]}, {"x_start_mm", x0}, {"x_end_mm", x1}},
+  add(out, c, EffectKind::kPositionDependentFriction, f,
+      {{EffectParam::position_dependent_friction_dTc_Nm, f.with.theta[4]},
+       {EffectParam::position_dependent_friction_x_start_mm, x0},
+       {EffectParam::position_dependent_friction_x_end_mm, x1}},
       fmt::format("friction {:+.3f} N m (t = {:.1f}) between x = {:.1f} and {:.1f} mm cuts the held-out torque "
                   "residual there by {:.0f} % ({} held-out samples in the band)",
                   f.with.theta[4], f.t_stat, x0, x1, 100.0 * f.gain, held.size()));
 }
+
+namespace {
 
 std::vector<double> shift_by(const std::vector<double>& T, double d_samples) {
   std::vector<double> r(T.size());
@@ -471,7 +516,7 @@ std::vector<double> shift_by(const std::vector<double>& T, double d_samples) {
 // samples: where the current is logged, a delay in the command path shows
 // as the lag that lines the current up with the command (the derivative
 // term's encoder-count chatter makes the match sharp).
-std::vector<double> current_lag_mse(const Ctx& c, std::size_t from, std::size_t to, std::size_t max_lag) {
+std::vector<double> current_lag_mse(const DiagnoseContext& c, std::size_t from, std::size_t to, std::size_t max_lag) {
   std::vector<double> mse(max_lag + 1, 0.0);
   const double Ka = c.d.Ka_A_per_V;
   to = std::min(to, c.s.n);
@@ -487,13 +532,13 @@ std::vector<double> current_lag_mse(const Ctx& c, std::size_t from, std::size_t 
   return mse;
 }
 
-std::size_t max_delay_samples(const Ctx& c) {
+std::size_t max_delay_samples(const DiagnoseContext& c) {
   return static_cast<std::size_t>(std::floor(0.01 / c.s.dt_s));  // 10 ms
 }
 
 // Lag (samples) of the current behind the command on the fitting rows; 0 when
 // no lag fits the current better than half the mismatch at lag 0.
-std::size_t measure_current_lag(const Ctx& c) {
+std::size_t measure_current_lag(const DiagnoseContext& c) {
   if (!c.s.has_u || !c.s.has_current) return 0;
   const auto mse = current_lag_mse(c, 0, c.s.n_fit, max_delay_samples(c));
   if (mse.empty()) return 0;
@@ -501,16 +546,16 @@ std::size_t measure_current_lag(const Ctx& c) {
   return mse[best] < 0.5 * mse[0] ? best : 0;
 }
 
-void try_delay_from_current(const Ctx& c, std::vector<EffectCandidate>& out) {
+void try_delay_from_current(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   const std::size_t lag = c.current_lag;
   const auto held = current_lag_mse(c, c.s.n_fit, c.s.n, max_delay_samples(c));
   if (held.empty() || !(held[0] > 0.0)) return;
   const double gain = 1.0 - std::sqrt(held[lag] / held[0]);
   const double delay_s = static_cast<double>(lag) * c.s.dt_s;
   EffectCandidate e;
-  e.effect = "delay";
+  e.set_kind(EffectKind::kDelay);
   e.axis = c.s.axis;
-  e.params = {{"delay_s", delay_s}};
+  e.params = {{EffectParam::delay_delay_s, delay_s}};
   e.signal_gain = gain;
   e.t_stat = 100.0 * gain;
   e.evidence = fmt::format("the current follows Ka u {:.2f} ms late ({} samples): lined up, the held-out mismatch of "
@@ -521,7 +566,9 @@ void try_delay_from_current(const Ctx& c, std::vector<EffectCandidate>& out) {
   out.push_back(std::move(e));
 }
 
-void try_delay(const Ctx& c, std::vector<EffectCandidate>& out) {
+}  // namespace
+
+void detect_delay(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   if (!c.s.has_u) return;  // a command delay needs the command
   // Where the current is logged and lags the command, that lag is the delay.
   // Otherwise (no current, or a delay after the current's sensor) the motion
@@ -563,9 +610,9 @@ void try_delay(const Ctx& c, std::vector<EffectCandidate>& out) {
   g.t_stat = r0.residual_rms > 0.0 ? 100.0 * (1.0 - rs.residual_rms / r0.residual_rms) : 0.0;
   const double delay_s = best_ticks * c.s.controller_period_s;
   EffectCandidate e;
-  e.effect = "delay";
+  e.set_kind(EffectKind::kDelay);
   e.axis = c.s.axis;
-  e.params = {{"delay_s", delay_s}};
+  e.params = {{EffectParam::delay_delay_s, delay_s}};
   e.signal_gain = g.gain;
   e.t_stat = g.t_stat;
   e.evidence = fmt::format("torque lags the command by {:.2f} ms beyond the hold: shifting it cuts the held-out torque "
@@ -576,15 +623,17 @@ void try_delay(const Ctx& c, std::vector<EffectCandidate>& out) {
   out.push_back(std::move(e));
 }
 
+namespace {
+
 // A current limit read from the logged current at i_max in `samples` rows.
 // The torque is the measured current: the base model fitted on it already
 // holds the limit's consequences; the limit itself goes to the replay.
-void add_limit(std::vector<EffectCandidate>& out, const Ctx& c, double i_max, std::size_t samples, double t_stat,
+void add_limit(std::vector<EffectCandidate>& out, const DiagnoseContext& c, double i_max, std::size_t samples, double t_stat,
                std::string evidence) {
   EffectCandidate e;
-  e.effect = "current_saturation";
+  e.set_kind(EffectKind::kCurrentSaturation);
   e.axis = c.s.axis;
-  e.params = {{"i_max_A", i_max}};
+  e.params = {{EffectParam::current_saturation_i_max_A, i_max}};
   e.signal_gain =
       std::max(0.1, std::min(1.0, static_cast<double>(samples) / std::max(1.0, 0.01 * static_cast<double>(c.s.n))));
   e.t_stat = t_stat;
@@ -600,7 +649,7 @@ void add_limit(std::vector<EffectCandidate>& out, const Ctx& c, double i_max, st
 // smooth one). A pile is at least 20 samples, each direction holding a fifth
 // of them, within 0.5 % (+ 0.02 A) of the largest magnitude, and 5 times as
 // dense as the band of three such widths just below it.
-void try_saturation_from_current(const Ctx& c, std::vector<EffectCandidate>& out) {
+void try_saturation_from_current(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   double hi = 0.0;
   for (double i : c.s.i_raw_A) hi = std::max(hi, std::abs(i));
   if (!(hi > 0.0)) return;
@@ -626,7 +675,9 @@ void try_saturation_from_current(const Ctx& c, std::vector<EffectCandidate>& out
                         i_max, top.size(), n_pos, n_neg, tol, density_ratio));
 }
 
-void try_saturation(const Ctx& c, std::vector<EffectCandidate>& out) {
+}  // namespace
+
+void detect_current_saturation(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   if (!c.s.has_u) {
     if (c.s.has_current) try_saturation_from_current(c, out);
     return;
@@ -671,7 +722,7 @@ void try_saturation(const Ctx& c, std::vector<EffectCandidate>& out) {
     const double i_max = a[static_cast<std::size_t>(q * static_cast<double>(a.size() - 1))];
     if (!(i_max > 0.0)) continue;
     std::vector<double> Ti(c.s.n);
-    for (std::size_t k = 0; k < c.s.n; ++k) Ti[k] = Kt * std::clamp(iu[k], -i_max, i_max);
+    for (std::size_t k = 0; k < c.s.n; ++k) Ti[k] = Kt * feeddrive::saturated_current_A(iu[k], i_max);
     Ti = lowpass(Ti, c.s.fc_Hz, fs);
     const auto r = least_squares(base_cols, Ti, c.fit_moving, corr_len(c.s));
     if (r.ok && r.residual_rms < best_rms) {
@@ -691,9 +742,9 @@ void try_saturation(const Ctx& c, std::vector<EffectCandidate>& out) {
   g.gain = h0 > 0.0 ? 1.0 - h1 / h0 : 0.0;
   g.t_stat = 100.0 * (1.0 - best_rms / r0.residual_rms);
   EffectCandidate e;
-  e.effect = "current_saturation";
+  e.set_kind(EffectKind::kCurrentSaturation);
   e.axis = c.s.axis;
-  e.params = {{"i_max_A", best_i}};
+  e.params = {{EffectParam::current_saturation_i_max_A, best_i}};
   e.signal_gain = g.gain;
   e.t_stat = g.t_stat;
   e.evidence = fmt::format("clipping Ka u at {:.2f} A cuts the held-out torque residual by {:.0f} %", best_i,
@@ -703,7 +754,11 @@ void try_saturation(const Ctx& c, std::vector<EffectCandidate>& out) {
   out.push_back(std::move(e));
 }
 
-void try_constant_load(const Ctx& c, std::vector<EffectCandidate>& out) {
+namespace {
+
+}  // namespace
+
+void detect_constant_load(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   // Moving, a load shifts both Coulomb levels the same way: the base fit reads
   // it as an asymmetry, and friction alone explains an asymmetry only up to a
   // point (a level below half the other, or below zero, is more than ballscrew
@@ -754,7 +809,7 @@ void try_constant_load(const Ctx& c, std::vector<EffectCandidate>& out) {
   const std::string stop_note =
       stops.empty() ? std::string("no stops to check it against")
                     : fmt::format("the {} stops hold {:+.3f} N m on average", stops.size(), mean);
-  add(out, c, "constant_load", g, {{"torque_Nm", load}},
+  add(out, c, EffectKind::kConstantLoad, g, {{EffectParam::constant_load_torque_Nm, load}},
       fmt::format("moving, friction reads {:.3f} N m in + and {:.3f} N m in -, more asymmetric than friction alone "
                   "(one level under half the other): a load of {:+.3f} N m (t = {:.1f}) with symmetric friction {:.3f} "
                   "N m; {}",
@@ -769,7 +824,7 @@ void try_constant_load(const Ctx& c, std::vector<EffectCandidate>& out) {
   const double L_eq = 0.5 * (c.d.Tc_pos_Nm - c.d.Tc_neg_Nm);
   if (L_eq * load <= 0.0) return;
   EffectCandidate eq = out.back();
-  eq.params = {{"torque_Nm", L_eq}};
+  eq.params = {{EffectParam::constant_load_torque_Nm, L_eq}};
   eq.base.J_kg_m2 = c.d.J_kg_m2;
   eq.base.B_kg_m2_per_s = c.d.B_kg_m2_per_s;
   eq.base.Tc_pos_Nm = eq.base.Tc_neg_Nm = 0.5 * (c.d.Tc_pos_Nm + c.d.Tc_neg_Nm);
@@ -782,19 +837,32 @@ void try_constant_load(const Ctx& c, std::vector<EffectCandidate>& out) {
   out.push_back(std::move(eq));
 }
 
-void try_compliance(const Ctx& c, const std::vector<double>& e_res, bool with_coupling_gap,
-                    std::vector<EffectCandidate>& out) {
-  if (e_res.size() != c.s.n) return;
+namespace {
+
+// The replay decides: a peak 2.5 times the median level is enough to try
+// the two-mass model (a run without one shows about 1.6; the S-curves of a
+// real program excite a 170 Hz resonance to only 3 to 4 times the median).
+constexpr double kMinProminence = 2.5;
+
+// The strongest band of the tracking-error residual's spectrum between
+// 20 Hz and 1 kHz on the fitting part, and its prominence over the median level.
+struct ResidualPeak {
+  double f_Hz{0.0};
+  double prominence{0.0};
+};
+std::optional<ResidualPeak> residual_peak(const DiagnoseContext& c) {
+  const std::vector<double>& e_res = c.e_residual;
+  if (e_res.size() != c.s.n) return std::nullopt;
   const double fs = 1.0 / c.s.dt_s;
   double df = 0.0;
   // The fitting part only: the held-out part judges the replay.
   const auto spec = amplitude_spectrum(std::span<const double>(e_res).subspan(0, c.s.n_fit), fs, &df);
-  if (spec.size() < 64 || !(df > 0.0)) return;
+  if (spec.size() < 64 || !(df > 0.0)) return std::nullopt;
   const auto k_lo = static_cast<std::size_t>(std::ceil(20.0 / df));
   // Up to 1 kHz: the ballscrew and coupling resonances of such drives lie in
   // the tens to hundreds of Hz; above, the residual holds the encoder-count chatter.
   const auto k_hi = std::min(spec.size() - 1, static_cast<std::size_t>(std::min(0.4 * fs, 1000.0) / df));
-  if (k_hi <= k_lo + 8) return;
+  if (k_hi <= k_lo + 8) return std::nullopt;
   const double median = median_of(
       std::vector<double>(spec.begin() + static_cast<std::ptrdiff_t>(k_lo), spec.begin() + static_cast<std::ptrdiff_t>(k_hi)));
   // Smooth over a few bins so a peak is a band, not one bin of noise.
@@ -811,12 +879,52 @@ void try_compliance(const Ctx& c, const std::vector<double>& e_res, bool with_co
   }
   const double peak = std::sqrt(best / static_cast<double>(2 * hw + 1));
   const double prominence = median > 0.0 ? peak / median : 0.0;
-  // The replay decides: a peak 2.5 times the median level is enough to try
-  // the two-mass model (a run without one shows about 1.6; the S-curves of a
-  // real program excite a 170 Hz resonance to only 3 to 4 times the median).
-  constexpr double kMinProminence = 2.5;
-  if (prominence < kMinProminence) return;
-  const double f_Hz = static_cast<double>(kb) * df;
+  if (prominence < kMinProminence) return std::nullopt;
+  return ResidualPeak{static_cast<double>(kb) * df, prominence};
+}
+
+void add_coupling_gap(const DiagnoseContext& c, const ResidualPeak& pk, double mu, double frac,
+                      std::vector<EffectCandidate>& out) {
+  const double f_Hz = pk.f_Hz, prominence = pk.prominence;
+  // The same peak from a gap in the coupling: with the encoder on the motor
+  // the gap never shows as lost motion in the position; the motor crosses it
+  // free of the table's inertia and friction at each reversal and strikes the
+  // table's flank, and at standstill it rests in the gap. Tried where the run
+  // reverses often enough to judge it (4 reversals fitted, 2 held out): gaps
+  // of 3 to 24 um against contact stiffnesses of 5000 and 20000 N m/rad
+  // (damping ratio 0.1), then gap, stiffness and damping refined.
+  std::size_t rev_fit = 0, rev_held = 0;
+  for (const auto& [k, sg] : c.reversals) ++(k < c.s.n_fit ? rev_fit : rev_held);
+  if (rev_fit < 4 || rev_held < 2) return;
+  auto gap_set = [&](double gap_mm, double K) {
+    return ParamSet{{EffectParam::backlash_gap_mm, gap_mm},
+                    {EffectParam::compliance_K_Nm_per_rad, K},
+                    {EffectParam::compliance_C_Nm_s_per_rad, 2.0 * 0.1 * std::sqrt(K * mu)},
+                    {EffectParam::compliance_load_fraction, frac}};
+  };
+  EffectCandidate gap = out.back();
+  gap.set_kind(EffectKind::kBacklash);
+  gap.params = gap_set(0.006, 20000.0);
+  gap.param_grid.clear();
+  for (double K : {20000.0, 5000.0})
+    for (double g_mm : {0.003, 0.006, 0.012, 0.024})
+      if (!(K == 20000.0 && g_mm == 0.006)) gap.param_grid.push_back(gap_set(g_mm, K));
+  gap.refine = {{EffectParam::backlash_gap_mm, 1.4},
+                {EffectParam::compliance_K_Nm_per_rad, 2.0},
+                {EffectParam::compliance_C_Nm_s_per_rad, 2.5}};
+  gap.evidence = fmt::format(
+      "the tracking-error residual of the fitting part has a peak at {:.0f} Hz, {:.1f} times the median level of its "
+      "spectrum, and the run reverses {} times ({} held out): a gap in the coupling, the encoder on the motor",
+      f_Hz, prominence, rev_fit + rev_held, rev_held);
+  out.push_back(std::move(gap));
+}
+
+}  // namespace
+
+void detect_compliance(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
+  const auto pk = residual_peak(c);
+  if (!pk) return;
+  const double f_Hz = pk->f_Hz, prominence = pk->prominence;
   Fit g;
   g.ok = true;
   g.with = least_squares({&c.reg.acc, &c.reg.vel, &c.reg.pos, &c.reg.neg}, c.T, c.fit_moving, corr_len(c.s));
@@ -835,11 +943,12 @@ void try_compliance(const Ctx& c, const std::vector<double>& e_res, bool with_co
   const double zeta = 0.05;
   auto set_for = [&](double K) {
     const double C = 2.0 * zeta * std::sqrt(K * mu);
-    return std::vector<std::pair<std::string, double>>{
-        {"K_Nm_per_rad", K}, {"C_Nm_s_per_rad", C}, {"load_fraction", frac}};
+    return ParamSet{{EffectParam::compliance_K_Nm_per_rad, K},
+                    {EffectParam::compliance_C_Nm_s_per_rad, C},
+                    {EffectParam::compliance_load_fraction, frac}};
   };
   const double w_peak = 2.0 * kPi * f_Hz;
-  add(out, c, "compliance", g, set_for(w_peak * w_peak * mu),
+  add(out, c, EffectKind::kCompliance, g, set_for(w_peak * w_peak * mu),
       fmt::format("the tracking-error residual of the fitting part has a peak at {:.0f} Hz, {:.1f} times the median level of its "
                   "spectrum: a two-mass resonance tried at and above it",
                   f_Hz, prominence));
@@ -847,49 +956,22 @@ void try_compliance(const Ctx& c, const std::vector<double>& e_res, bool with_co
   for (double ratio : {1.8, 2.6}) out.back().param_grid.push_back(set_for(std::pow(ratio * w_peak, 2) * mu));
   for (double K : {1200.0, 2500.0, 5000.0}) out.back().param_grid.push_back(set_for(K));
   // Then the stiffness and the damping of the best set, finer, on the same rows.
-  out.back().refine = {{"K_Nm_per_rad", 1.3}, {"C_Nm_s_per_rad", 2.5}};
+  out.back().refine = {{EffectParam::compliance_K_Nm_per_rad, 1.3}, {EffectParam::compliance_C_Nm_s_per_rad, 2.5}};
 
-  // The same peak from a gap in the coupling: with the encoder on the motor
-  // the gap never shows as lost motion in the position; the motor crosses it
-  // free of the table's inertia and friction at each reversal and strikes the
-  // table's flank, and at standstill it rests in the gap. Tried where the run
-  // reverses often enough to judge it (4 reversals fitted, 2 held out): gaps
-  // of 3 to 24 um against contact stiffnesses of 5000 and 20000 N m/rad
-  // (damping ratio 0.1), then gap, stiffness and damping refined.
-  if (!with_coupling_gap) return;
-  std::size_t rev_fit = 0, rev_held = 0;
-  for (const auto& [k, sg] : c.reversals) ++(k < c.s.n_fit ? rev_fit : rev_held);
-  if (rev_fit < 4 || rev_held < 2) return;
-  auto gap_set = [&](double gap_mm, double K) {
-    return std::vector<std::pair<std::string, double>>{{"gap_mm", gap_mm},
-                                                       {"compliance.K_Nm_per_rad", K},
-                                                       {"compliance.C_Nm_s_per_rad", 2.0 * 0.1 * std::sqrt(K * mu)},
-                                                       {"compliance.load_fraction", frac}};
-  };
-  EffectCandidate gap = out.back();
-  gap.effect = "backlash";
-  gap.params = gap_set(0.006, 20000.0);
-  gap.param_grid.clear();
-  for (double K : {20000.0, 5000.0})
-    for (double g_mm : {0.003, 0.006, 0.012, 0.024})
-      if (!(K == 20000.0 && g_mm == 0.006)) gap.param_grid.push_back(gap_set(g_mm, K));
-  gap.refine = {{"gap_mm", 1.4}, {"compliance.K_Nm_per_rad", 2.0}, {"compliance.C_Nm_s_per_rad", 2.5}};
-  gap.evidence = fmt::format(
-      "the tracking-error residual of the fitting part has a peak at {:.0f} Hz, {:.1f} times the median level of its "
-      "spectrum, and the run reverses {} times ({} held out): a gap in the coupling, the encoder on the motor",
-      f_Hz, prominence, rev_fit + rev_held, rev_held);
-  out.push_back(std::move(gap));
+  // The same peak from a gap in the coupling, while backlash is still to be looked for.
+  if (c.wants(EffectKind::kBacklash)) add_coupling_gap(c, *pk, mu, frac, out);
 }
+
+namespace {
 
 }  // namespace
 
 std::vector<EffectCandidate> diagnose_axis(const AxisSignals& s, const std::vector<double>& T_Nm,
-                                           const feeddrive::DriveParams& drive,
-                                           const std::vector<std::string>& present,
+                                           const feeddrive::DriveParams& drive, const std::vector<EffectKind>& present,
                                            const std::vector<double>& e_residual_mm) {
   std::vector<EffectCandidate> out;
   if (s.n == 0) return out;
-  Ctx c{s, T_Nm, drive, base_regressors(s), {}, {}, {}, {}, {}, 0.0};
+  DiagnoseContext c{s, T_Nm, drive, e_residual_mm, present, base_regressors(s)};
   c.fit_moving = moving_rows(s, 0, s.n_fit, s.w_moving_rad_per_s);
   c.held_moving = moving_rows(s, s.n_fit, s.n, s.w_moving_rad_per_s);
   const double w_slow = 0.15 * s.w_moving_rad_per_s;
@@ -907,16 +989,8 @@ std::vector<EffectCandidate> diagnose_axis(const AxisSignals& s, const std::vect
   if (!c.base.ok) return out;
   c.current_lag = measure_current_lag(c);
   c.reversals = reversals(s);
-  auto wanted = [&](const char* e) { return std::find(present.begin(), present.end(), e) == present.end(); };
-  if (wanted("stribeck")) try_stribeck(c, out);
-  if (wanted("cogging")) try_cogging(c, out);
-  if (wanted("screw_pitch_error")) try_screw(c, out);
-  if (wanted("backlash")) try_backlash(c, e_residual_mm, out);
-  if (wanted("constant_load")) try_constant_load(c, out);
-  if (wanted("position_dependent_friction")) try_position_friction(c, out);
-  if (wanted("delay")) try_delay(c, out);
-  if (wanted("compliance")) try_compliance(c, e_residual_mm, wanted("backlash"), out);
-  if (wanted("current_saturation")) try_saturation(c, out);
+  for (const EffectEntry& e : effect_registry())
+    if (e.diagnose != nullptr && c.wants(e.kind)) e.diagnose(c, out);
   std::sort(out.begin(), out.end(),
             [](const EffectCandidate& a, const EffectCandidate& b) { return a.signal_gain > b.signal_gain; });
   return out;
@@ -938,19 +1012,20 @@ std::vector<double> window_spread(const std::vector<double>& e, std::size_t from
 }
 
 void update_torque_after(const AxisSignals& s, const std::vector<double>& T_Nm, EffectCandidate& c) {
-  if (c.effect != "stribeck" || T_Nm.size() != s.n) return;
-  double Ts = 0.0, ws = 0.0;
-  for (const auto& [k, v] : c.params) {
-    if (k == "Ts_static") Ts = v;
-    if (k == "ws") ws = v;
-  }
+  if (const auto recompute = registry_entry(c.kind).torque_after) recompute(s, T_Nm, c);
+}
+
+void stribeck_torque_after(const AxisSignals& s, const std::vector<double>& T_Nm, EffectCandidate& c) {
+  if (T_Nm.size() != s.n) return;
+  const double Ts = param_value(c.params, EffectParam::stribeck_Ts_static);
+  const double ws = param_value(c.params, EffectParam::stribeck_ws);
   if (!(ws > 0.0)) return;
   c.T_after_Nm.resize(s.n);
   for (std::size_t k = 0; k < s.n; ++k) {
     const double w = s.w_rad_per_s[k];
     const double sg = w > 0.0 ? 1.0 : w < 0.0 ? -1.0 : 0.0;
     const double Tc = w > 0.0 ? c.base.Tc_pos_Nm : c.base.Tc_neg_Nm;
-    c.T_after_Nm[k] = T_Nm[k] - sg * (Ts - Tc) * std::exp(-(w / ws) * (w / ws));
+    c.T_after_Nm[k] = T_Nm[k] - sg * feeddrive::stribeck_excess_Nm(Ts, Tc, w, ws);
   }
 }
 
@@ -959,10 +1034,10 @@ void apply_candidate(sim::AxisDefinition& axis, const EffectCandidate& c) {
   axis.drive.B_kg_m2_per_s = c.base.B_kg_m2_per_s;
   axis.drive.Tc_pos_Nm = c.base.Tc_pos_Nm;
   axis.drive.Tc_neg_Nm = c.base.Tc_neg_Nm;
-  for (const auto& [name, value] : c.params) {
-    // A name with a dot belongs to another effect the candidate carries
-    // (a gap in the coupling carries the coupling's stiffness).
-    const std::string full = name.find('.') == std::string::npos ? c.effect + "." + name : name;
+  for (const auto& [param, value] : c.params) {
+    // A parameter may belong to another effect the candidate carries (a gap
+    // in the coupling carries the coupling's stiffness).
+    const std::string_view full = feeddrive::effect_param_def(param).qualified;
     const sim::AxisParamSpec* spec = sim::find_axis_param(full);
     if (!spec) throw InternalError(fmt::format("calibrate: no machine parameter {}", full));
     sim::set_axis_param(axis, *spec, value);

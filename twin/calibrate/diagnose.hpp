@@ -8,18 +8,19 @@
 #include <utility>
 #include <vector>
 
+#include "twin/calibrate/effect_registry.hpp"
 #include "twin/calibrate/identify.hpp"
 #include "twin/sim/machine.hpp"
 
 namespace twin::analysis {
 
 struct EffectCandidate {
-  std::string effect;  ///< catalogue name
+  EffectKind kind{EffectKind::kStribeck};
+  std::string effect;  ///< catalogue name of `kind`, as reports give it
   Axis axis{Axis::kX};
-  /// Parameter names of the table, without "<effect>."; a name with a dot
-  /// belongs to another effect the candidate carries (a gap in the coupling
-  /// carries the coupling's "compliance.K_Nm_per_rad").
-  std::vector<std::pair<std::string, double>> params;
+  /// The effect's parameters; one of another effect is carried with it (a
+  /// gap in the coupling carries the coupling's stiffness).
+  ParamSet params;
   double signal_gain{0.0};  ///< 1 - rms(residual with effect) / rms(residual without), held out, where it acts
   double t_stat{0.0};       ///< fitted size over its standard error (for a spectral peak: its prominence)
   double min_t{3.0};        ///< what t_stat must reach for the candidate to be replayed
@@ -34,14 +35,19 @@ struct EffectCandidate {
   /// Alternative parameter sets the torque residual cannot tell apart (a
   /// Stribeck speed below what the low-pass resolves): calibrate replays
   /// each and keeps the one with the lowest error on the fitting part.
-  std::vector<std::vector<std::pair<std::string, double>>> param_grid;
+  std::vector<ParamSet> param_grid;
   /// Parameters calibrate refines on the fitting part after the grid, by a
-  /// coordinate search: name and multiplicative step.
-  std::vector<std::pair<std::string, double>> refine;
+  /// coordinate search: parameter and multiplicative step.
+  std::vector<std::pair<EffectParam, double>> refine;
   /// J, B, Tc refitted with each grid set (empty: `base` serves every set).
   std::vector<DriveIdentification> grid_base;
   DriveIdentification base; ///< J, B, Tc fitted together with the effect
   std::vector<double> T_after_Nm;  ///< torque with the effect's part taken out (for a second effect)
+
+  void set_kind(EffectKind k) {
+    kind = k;
+    effect = std::string(feeddrive::effect_name(k));
+  }
 };
 
 /// Candidates for one axis, best signal gain first; effects already on the
@@ -50,7 +56,7 @@ struct EffectCandidate {
 /// used for the resonance of compliance.
 std::vector<EffectCandidate> diagnose_axis(const AxisSignals& s, const std::vector<double>& T_Nm,
                                            const feeddrive::DriveParams& drive,
-                                           const std::vector<std::string>& present,
+                                           const std::vector<EffectKind>& present,
                                            const std::vector<double>& e_residual_mm);
 
 /// Spread (standard deviation about the window mean) of `e` in consecutive
@@ -59,7 +65,7 @@ std::vector<double> window_spread(const std::vector<double>& e, std::size_t from
 
 /// After a parameter set was chosen from the grid: the torque with the
 /// effect's part taken out (EffectCandidate::T_after_Nm), recomputed for the
-/// chosen set where the effect's torque is known in closed form (stribeck).
+/// chosen set where the registry knows the effect's torque in closed form.
 void update_torque_after(const AxisSignals& s, const std::vector<double>& T_Nm, EffectCandidate& c);
 
 /// Switches the candidate's effect on in `axis` with its parameters and sets

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <numeric>
 
@@ -139,6 +140,124 @@ BaseRegressors base_regressors(const AxisSignals& s) {
   return r;
 }
 
+namespace {
+
+// Where the data pins a parameter down less tightly than the machine
+// definition does (a coarse log, a short run), the estimate is the
+// inverse-variance weighted mean of both (each treated as Gaussian, the
+// cross-correlations of the fit left aside). At the controller's rate the
+// standard errors are hundreds of times smaller than the prior's and the
+// fit stands alone.
+void lean_on_nominal(DriveIdentification& id, const feeddrive::DriveParams& nominal, std::vector<std::string>& notes) {
+  struct Param {
+    double* value;
+    double* stderr_value;
+    double nominal;
+    const char* name;
+  };
+  const Param params[] = {{&id.J_kg_m2, &id.J_stderr, nominal.J_kg_m2, "J"},
+                          {&id.B_kg_m2_per_s, &id.B_stderr, nominal.B_kg_m2_per_s, "B"},
+                          {&id.Tc_pos_Nm, &id.Tc_pos_stderr, nominal.Tc_pos_Nm, "Tc_pos"},
+                          {&id.Tc_neg_Nm, &id.Tc_neg_stderr, nominal.Tc_neg_Nm, "Tc_neg"}};
+  std::vector<std::string> leaned;
+  for (const Param& p : params) {
+    const double sp = kNominalRelativeSpread * std::abs(p.nominal);
+    const double se = *p.stderr_value;
+    if (!(sp > 0.0) || !(se > 0.0) || !std::isfinite(se)) continue;
+    const double w_fit = 1.0 / (se * se), w_nom = 1.0 / (sp * sp);
+    const double share = w_nom / (w_fit + w_nom);
+    if (share < 0.01) continue;
+    const double fitted = *p.value;
+    *p.value = (w_fit * fitted + w_nom * p.nominal) / (w_fit + w_nom);
+    *p.stderr_value = 1.0 / std::sqrt(w_fit + w_nom);
+    leaned.push_back(fmt::format("{} {:.4g} (+-{:.2g}) -> {:.4g}", p.name, fitted, se, *p.value));
+  }
+  if (!leaned.empty())
+    notes.push_back(fmt::format("the data pins down some parameters less tightly than the machine definition "
+                                "(+-{:.0f} %): weighted with its values: {}",
+                                100.0 * kNominalRelativeSpread, fmt::join(leaned, ", ")));
+}
+
+// J above a twentieth of the machine's, B and the Coulomb levels not below zero, each clamp said.
+void clamp_identified(DriveIdentification& id, const feeddrive::DriveParams& nominal, std::vector<std::string>& notes) {
+  auto clamp_min = [&](double& v, double lo, const char* name) {
+    if (v < lo) {
+      notes.push_back(fmt::format("{} = {:.4g} came out below {:.3g} and was clamped to {:.3g}", name, v, lo, lo));
+      v = lo;
+    }
+  };
+  clamp_min(id.J_kg_m2, 0.05 * nominal.J_kg_m2, "J");
+  clamp_min(id.B_kg_m2_per_s, 0.0, "B");
+  clamp_min(id.Tc_pos_Nm, 0.0, "Tc_pos");
+  clamp_min(id.Tc_neg_Nm, 0.0, "Tc_neg");
+}
+
+// The columns of the FADAL law (spec/measured-data.md) at the controller's
+// rate: e, its integral, its backward difference, the reference's
+// acceleration and speed, and a constant.
+struct LawColumns {
+  std::vector<double> e, I, D, acc, vel, one;
+};
+LawColumns law_columns(const AxisSignals& s, double Ts) {
+  const std::size_t n = s.n;
+  LawColumns c{std::vector<double>(n), std::vector<double>(n), std::vector<double>(n, 0.0),
+               std::vector<double>(n, 0.0), std::vector<double>(n, 0.0), std::vector<double>(n, 1.0)};
+  double integral = 0.0;
+  for (std::size_t k = 0; k < n; ++k) {
+    c.e[k] = s.x_ref_mm[k] - s.x_mm[k];
+    integral += Ts * c.e[k];
+    c.I[k] = integral;
+    if (k >= 1) {
+      c.D[k] = (c.e[k] - c.e[k - 1]) / Ts;
+      c.vel[k] = (s.x_ref_mm[k] - s.x_ref_mm[k - 1]) / Ts;
+    }
+    if (k >= 2) c.acc[k] = (c.vel[k] - c.vel[k - 1]) / Ts;
+  }
+  return c;
+}
+
+using GainField = double controller::PositionLoopParams::*;
+struct LawTerm {
+  const std::vector<double>* column;
+  GainField field;  ///< nullptr for the constant
+  const char* name;
+};
+
+// The fitted gains against the machine's: a term that moves u by more than
+// 0.5 % of its RMS differs; where any gain differs the fit's are all taken
+// (it is exact to the log's rounding). A constant is said, not taken.
+void compare_gains(const std::vector<const LawTerm*>& terms, const LsqResult& fit, double u_rms,
+                   const std::function<double(const std::vector<double>&)>& rms_on_rows,
+                   const controller::PositionLoopParams& machine_gains, const std::string& a, LoopIdentification& out) {
+  std::vector<std::string> moved;
+  std::string start;
+  for (std::size_t j = 0; j < terms.size(); ++j) {
+    const LawTerm& t = *terms[j];
+    const double fitted = fit.theta[j];
+    const double machine = t.field ? machine_gains.*t.field : 0.0;
+    if (std::abs(fitted - machine) * rms_on_rows(*t.column) / u_rms <= 0.005) continue;
+    if (!t.field) {
+      start = fmt::format("; u holds a constant {:.3g} V (an integrator that did not start at zero; the replay "
+                          "starts it at zero)",
+                          fitted);
+      continue;
+    }
+    out.differs = true;
+    moved.push_back(fmt::format("{} {:.4g} (machine {:.4g})", t.name, fitted, machine));
+  }
+  if (out.differs)
+    for (std::size_t j = 0; j < terms.size(); ++j)
+      if (terms[j]->field) out.gains.*(terms[j]->field) = fit.theta[j];
+  if (out.differs)
+    out.note = fmt::format("axis {}: {}_u_V follows the FADAL loop law (to {:.2g} % of its RMS) with gains other than "
+                           "the machine's: {}; the replay uses them{}",
+                           a, a, 100.0 * out.residual_rel, fmt::join(moved, ", "), start);
+  else if (!start.empty())
+    out.note = fmt::format("axis {}: {}_u_V follows the FADAL loop law with the machine's gains{}", a, a, start);
+}
+
+}  // namespace
+
 DriveIdentification identify_drive(const AxisSignals& s, const std::vector<double>& T_Nm,
                                    const feeddrive::DriveParams& nominal) {
   DriveIdentification id;
@@ -180,49 +299,8 @@ DriveIdentification identify_drive(const AxisSignals& s, const std::vector<doubl
   id.B_stderr = r.stderr_theta[1];
   id.Tc_pos_stderr = r.stderr_theta[2];
   id.Tc_neg_stderr = r.stderr_theta[3];
-  // Where the data pins a parameter down less tightly than the machine
-  // definition does (a coarse log, a short run), the estimate is the
-  // inverse-variance weighted mean of both (each treated as Gaussian, the
-  // cross-correlations of the fit left aside). At the controller's rate the
-  // standard errors are hundreds of times smaller than the prior's and the
-  // fit stands alone.
-  struct Param {
-    double* value;
-    double* stderr_value;
-    double nominal;
-    const char* name;
-  };
-  const Param params[] = {{&id.J_kg_m2, &id.J_stderr, nominal.J_kg_m2, "J"},
-                          {&id.B_kg_m2_per_s, &id.B_stderr, nominal.B_kg_m2_per_s, "B"},
-                          {&id.Tc_pos_Nm, &id.Tc_pos_stderr, nominal.Tc_pos_Nm, "Tc_pos"},
-                          {&id.Tc_neg_Nm, &id.Tc_neg_stderr, nominal.Tc_neg_Nm, "Tc_neg"}};
-  std::vector<std::string> leaned;
-  for (const Param& p : params) {
-    const double sp = kNominalRelativeSpread * std::abs(p.nominal);
-    const double se = *p.stderr_value;
-    if (!(sp > 0.0) || !(se > 0.0) || !std::isfinite(se)) continue;
-    const double w_fit = 1.0 / (se * se), w_nom = 1.0 / (sp * sp);
-    const double share = w_nom / (w_fit + w_nom);
-    if (share < 0.01) continue;
-    const double fitted = *p.value;
-    *p.value = (w_fit * fitted + w_nom * p.nominal) / (w_fit + w_nom);
-    *p.stderr_value = 1.0 / std::sqrt(w_fit + w_nom);
-    leaned.push_back(fmt::format("{} {:.4g} (+-{:.2g}) -> {:.4g}", p.name, fitted, se, *p.value));
-  }
-  if (!leaned.empty())
-    notes.push_back(fmt::format("the data pins down some parameters less tightly than the machine definition "
-                                "(+-{:.0f} %): weighted with its values: {}",
-                                100.0 * kNominalRelativeSpread, fmt::join(leaned, ", ")));
-  auto clamp_min = [&](double& v, double lo, const char* name) {
-    if (v < lo) {
-      notes.push_back(fmt::format("{} = {:.4g} came out below {:.3g} and was clamped to {:.3g}", name, v, lo, lo));
-      v = lo;
-    }
-  };
-  clamp_min(id.J_kg_m2, 0.05 * nominal.J_kg_m2, "J");
-  clamp_min(id.B_kg_m2_per_s, 0.0, "B");
-  clamp_min(id.Tc_pos_Nm, 0.0, "Tc_pos");
-  clamp_min(id.Tc_neg_Nm, 0.0, "Tc_neg");
+  lean_on_nominal(id, nominal, notes);
+  clamp_identified(id, nominal, notes);
   for (const auto& n : notes) id.note += (id.note.empty() ? "" : "; ") + fmt::format("axis {}: {}", axis_name(s.axis), n);
   return id;
 }
@@ -233,45 +311,27 @@ LoopIdentification identify_loop_gains(const AxisSignals& s, const controller::P
   const double Ts = s.controller_period_s;
   const std::string a(axis_name(s.axis));
   if (s.u_raw_V.size() != s.n || s.n < 1000 || !(Ts > 0.0) || std::abs(s.dt_s - Ts) > 1e-6 * Ts) return out;
-  const std::size_t n = s.n;
-  std::vector<double> e(n), I(n), D(n, 0.0), acc(n, 0.0), vel(n, 0.0), one(n, 1.0);
-  double integral = 0.0;
-  for (std::size_t k = 0; k < n; ++k) {
-    e[k] = s.x_ref_mm[k] - s.x_mm[k];
-    integral += Ts * e[k];
-    I[k] = integral;
-    if (k >= 1) {
-      D[k] = (e[k] - e[k - 1]) / Ts;
-      vel[k] = (s.x_ref_mm[k] - s.x_ref_mm[k - 1]) / Ts;
-    }
-    if (k >= 2) acc[k] = (vel[k] - vel[k - 1]) / Ts;
-  }
+  const LawColumns c = law_columns(s, Ts);
   std::vector<std::size_t> rows;
   const double u_lim = 0.999 * machine_gains.u_max_V;
-  for (std::size_t k = 2; k < n; ++k)
+  for (std::size_t k = 2; k < s.n; ++k)
     if (std::abs(s.u_raw_V[k]) < u_lim) rows.push_back(k);
-  using Field = double controller::PositionLoopParams::*;
-  struct Term {
-    const std::vector<double>* column;
-    Field field;  ///< nullptr for the constant
-    const char* name;
-  };
-  const Term all[] = {{&e, &controller::PositionLoopParams::Kp_V_per_mm, "Kp"},
-                      {&I, &controller::PositionLoopParams::Ki_V_per_s_mm, "Ki"},
-                      {&D, &controller::PositionLoopParams::Kd_V_s_per_mm, "Kd"},
-                      {&acc, &controller::PositionLoopParams::K1_V_s2_per_mm, "K1"},
-                      {&vel, &controller::PositionLoopParams::K2_V_s_per_mm, "K2"},
-                      {&one, nullptr, "constant"}};
-  auto rms_on_rows = [&](const std::vector<double>& c) {
+  const LawTerm all[] = {{&c.e, &controller::PositionLoopParams::Kp_V_per_mm, "Kp"},
+                         {&c.I, &controller::PositionLoopParams::Ki_V_per_s_mm, "Ki"},
+                         {&c.D, &controller::PositionLoopParams::Kd_V_s_per_mm, "Kd"},
+                         {&c.acc, &controller::PositionLoopParams::K1_V_s2_per_mm, "K1"},
+                         {&c.vel, &controller::PositionLoopParams::K2_V_s_per_mm, "K2"},
+                         {&c.one, nullptr, "constant"}};
+  auto rms_on_rows = [&](const std::vector<double>& col) {
     double ss = 0.0;
-    for (std::size_t k : rows) ss += c[k] * c[k];
+    for (std::size_t k : rows) ss += col[k] * col[k];
     return rows.empty() ? 0.0 : std::sqrt(ss / static_cast<double>(rows.size()));
   };
   // A column the run never excites (no motion: no speed, no acceleration) is
   // left out; its gain stays the machine's.
-  std::vector<const Term*> terms;
+  std::vector<const LawTerm*> terms;
   std::vector<const std::vector<double>*> columns;
-  for (const Term& t : all)
+  for (const LawTerm& t : all)
     if (rms_on_rows(*t.column) > 0.0) {
       terms.push_back(&t);
       columns.push_back(t.column);
@@ -288,32 +348,7 @@ LoopIdentification identify_loop_gains(const AxisSignals& s, const controller::P
     return out;
   }
   out.law_holds = true;
-  std::vector<std::string> moved;
-  std::string start;
-  for (std::size_t j = 0; j < terms.size(); ++j) {
-    const Term& t = *terms[j];
-    const double fitted = fit.theta[j];
-    const double machine = t.field ? machine_gains.*t.field : 0.0;
-    if (std::abs(fitted - machine) * rms_on_rows(*t.column) / u_rms <= 0.005) continue;
-    if (!t.field) {
-      start = fmt::format("; u holds a constant {:.3g} V (an integrator that did not start at zero; the replay "
-                          "starts it at zero)",
-                          fitted);
-      continue;
-    }
-    out.differs = true;
-    moved.push_back(fmt::format("{} {:.4g} (machine {:.4g})", t.name, fitted, machine));
-  }
-  // Where any gain moves, the fit's are all taken: it is exact to the log's rounding.
-  if (out.differs)
-    for (std::size_t j = 0; j < terms.size(); ++j)
-      if (terms[j]->field) out.gains.*(terms[j]->field) = fit.theta[j];
-  if (out.differs)
-    out.note = fmt::format("axis {}: {}_u_V follows the FADAL loop law (to {:.2g} % of its RMS) with gains other than "
-                           "the machine's: {}; the replay uses them{}",
-                           a, a, 100.0 * out.residual_rel, fmt::join(moved, ", "), start);
-  else if (!start.empty())
-    out.note = fmt::format("axis {}: {}_u_V follows the FADAL loop law with the machine's gains{}", a, a, start);
+  compare_gains(terms, fit, u_rms, rms_on_rows, machine_gains, a, out);
   return out;
 }
 

@@ -10,6 +10,8 @@
 
 #include <fmt/format.h>
 
+#include "feeddrive/effect_torques.hpp"
+#include "twin/calibrate/effect_detectors.hpp"
 #include "twin/calibrate/signal.hpp"
 #include "twin/core/error.hpp"
 
@@ -685,17 +687,15 @@ DriveRefit drive_moved(const feeddrive::DriveParams& cur, const LsqResult& joint
 /// A candidate: the effect, one or more parameter sets (the fitting rows'
 /// replay chooses among them), the drive refitted with each, the loop
 /// gains it carries, and the torque it adds at the detector's rows (taken
-/// out of the torque the later detectors fit, where kept).
+/// out of the torque the later detectors fit, where kept). The channels it
+/// is judged on are the registry's.
 struct Trial {
-  std::string effect;
-  std::vector<std::map<std::string, double>> sets;
+  EffectKind kind{EffectKind::kStribeck};
+  std::vector<ParamSet> sets;
   std::vector<DriveRefit> drives;  ///< one per set, or empty: the drive stays
   std::optional<controller::CascadeGains> gains;
   std::string evidence;
-  /// The channels (suffixes of the axis's keys: "torque", "_err_mm") where
-  /// the catalogue says the effect shows: their held-out NRMS must fall.
-  std::vector<std::string> judge;
-  std::function<double(std::size_t row, const std::map<std::string, double>& p, const DriveRefit* d)> torque;
+  std::function<double(std::size_t row, const ParamSet& p, const DriveRefit* d)> torque;
 };
 
 sim::MachineDefinition with_trial(const sim::MachineDefinition& base, Axis a, const Trial& t, std::size_t set) {
@@ -711,11 +711,13 @@ sim::MachineDefinition with_trial(const sim::MachineDefinition& base, Axis a, co
     def.drive.effects.constant_load.torque_Nm = d.c;
   }
   if (t.gains) def.loop.cascade = *t.gains;
-  // Both describe the friction at low speed: the drive holds one.
-  if (t.effect == "stribeck") def.drive.effects.smooth_friction.enabled = false;
-  for (const auto& [name, value] : t.sets[set]) {
-    const sim::AxisParamSpec* spec = sim::find_axis_param(t.effect + "." + name);
-    if (spec == nullptr) throw InternalError(fmt::format("calibrate: no machine parameter {}.{}", t.effect, name));
+  // Two effects that describe the same thing: the drive holds one.
+  if (const auto replaced = registry_entry(t.kind).replaces)
+    feeddrive::effect_def(*replaced).enabled(def.drive.effects) = false;
+  for (const auto& [param, value] : t.sets[set]) {
+    const std::string_view name = feeddrive::effect_param_def(param).qualified;
+    const sim::AxisParamSpec* spec = sim::find_axis_param(name);
+    if (spec == nullptr) throw InternalError(fmt::format("calibrate: no machine parameter {}", name));
     sim::set_axis_param(def, *spec, value);
   }
   return m;
@@ -736,9 +738,10 @@ double t_pair(const LsqResult& ls, std::size_t j) {
 /// or speeds does not pass on noise alone.
 constexpr double kMinT = 8.0;
 
-void search_catalogue_effects(DataCalibration& out, const std::vector<RunData>& runs) {
-  const double dt = runs.front().run->sample_period_s;
-  // The measured positions' own step (the reference may be logged finer).
+/// The step of the logged positions: the coarsest power of ten all measured
+/// positions are multiples of (the reference may be logged finer), at least
+/// the rounding's quantum.
+double measured_position_step(const DataCalibration& out, const std::vector<RunData>& runs) {
   double q = 0.0;
   for (int d = 0; d <= 6 && q == 0.0; ++d) {
     const double step = std::pow(10.0, -d);
@@ -750,515 +753,622 @@ void search_catalogue_effects(DataCalibration& out, const std::vector<RunData>& 
     if (all) q = step;
   }
   if (q == 0.0) q = out.identified.encoder_resolution_mm;
-  q = std::max(q, out.rounding.kind == PositionRounding::Kind::kSignificant ? out.rounding.quantum_mm : 0.0);
-  const bool fast = dt <= 2e-3 + 1e-12, fine = q <= 0.005;
-  const double corr = std::max(1.0, 0.01 / dt);
-  FitRunErrors current = errors_on_fit_runs(runs, out.final_machine, out.axes, out.rounding, out.replays);
-  if (!current.ok) return;
-  for (const AxisFromData& ax : out.axis) {
-    if (!ax.identified) continue;
-    const Axis a = ax.axis;
-    const std::size_t ai = index(a);
-    AxisRows rows = axis_rows(runs, ax);
-    if (rows.moving.size() < 200) continue;
-    const auto keys = axis_keys(ax);
-    const std::vector<const std::vector<double>*> base_cols{&rows.acc, &rows.vel, &rows.pos, &rows.neg, &rows.one};
-    auto with_base = [&](std::vector<const std::vector<double>*> extra) {
-      std::vector<const std::vector<double>*> c = base_cols;
-      c.insert(c.end(), extra.begin(), extra.end());
-      return c;
-    };
+  return std::max(q, out.rounding.kind == PositionRounding::Kind::kSignificant ? out.rounding.quantum_mm : 0.0);
+}
 
-    auto attempt = [&](const Trial& t) {
-      DataEffect eff;
-      eff.effect = t.effect;
-      eff.axis = a;
-      eff.evidence = t.evidence;
-      std::size_t best = 0;
-      FitRunErrors best_e;
-      double best_fit = 1e300;
-      for (std::size_t s = 0; s < t.sets.size(); ++s) {
-        FitRunErrors e;
-        try {
-          e = errors_on_fit_runs(runs, with_trial(out.final_machine, a, t, s), out.axes, out.rounding, out.replays);
-        } catch (const Error&) {
-          continue;
-        }
-        if (!e.ok || !e.fit.nrms.count(ax.channel.column)) continue;
-        const double f = keys_sum(e.fit, keys);
-        if (f < best_fit) {
-          best_fit = f;
-          best = s;
-          best_e = std::move(e);
-        }
-      }
-      for (const auto& [k, v] : t.sets[best]) eff.params[k] = v;
-      for (const auto& k : keys)
-        if (const auto it = current.held.nrms.find(k); it != current.held.nrms.end()) eff.before_channels[k] = it->second;
-      eff.before = eff.before_channels.count(ax.channel.column) ? eff.before_channels.at(ax.channel.column) : 0.0;
-      eff.after = eff.before;
-      if (best_e.ok) {
-        bool no_rise = true;
-        for (const auto& [k, b] : eff.before_channels) {
-          const auto it = best_e.held.nrms.find(k);
-          if (it == best_e.held.nrms.end()) {
-            no_rise = false;
-            continue;
-          }
-          eff.after_channels[k] = it->second;
-          no_rise = no_rise && it->second <= b * (1.0 + kRiseAllowed);
-        }
-        eff.after = eff.after_channels.count(ax.channel.column) ? eff.after_channels.at(ax.channel.column) : eff.before;
-        std::vector<std::string> jk;
-        for (const auto& j : t.judge) jk.push_back(j == "torque" ? ax.channel.column : col(a, j.c_str()));
-        const double sb = keys_sum(current.held, jk), sa = keys_sum(best_e.held, jk);
-        eff.kept = no_rise && sa < (1.0 - kKeepMargin) * sb;
-        eff.evidence += fmt::format("; held-out NRMS of {} {:.4g} -> {:.4g}{}", fmt::join(jk, " + "), sb, sa,
-                                    eff.kept ? "" : " (not kept)");
-      } else {
-        eff.evidence += "; the replay with it failed (not kept)";
-      }
-      if (eff.kept) {
-        if (t.effect == "stribeck" && out.final_machine.axes[ai].drive.effects.smooth_friction.enabled)
-          for (DataEffect& other : out.effects)
-            if (other.effect == "smooth_friction" && other.axis == a && other.kept) {
-              other.kept = false;
-              other.evidence += "; replaced by stribeck, which lowers the held-out error further";
-            }
-        out.final_machine = with_trial(out.final_machine, a, t, best);
-        if (t.torque) {
-          const DriveRefit* d = t.drives.empty() ? nullptr : &t.drives[best];
-          for (std::size_t k : rows.all) rows.T[k] -= t.torque(k, t.sets[best], d);
-        }
-        current = std::move(best_e);
-      }
-      out.effects.push_back(std::move(eff));
-    };
-
-    // The channel the replay gives at the detector's rows.
-    auto model_at = [&](std::size_t k) {
-      const auto [run, row] = rows.at[k];
-      const auto* m = model_channel(current.replays[run], a, ax.channel, true);
-      return m ? (*m)[row] : 0.0;
-    };
-
-    // delay: a torque that follows the loop's command late.
-    if (fast) {
-      std::size_t lag = 0;
-      std::optional<controller::CascadeGains> gains;
-      std::string why;
-      if (ax.velocity_loop_from_data) {
-        lag = ax.torque_lag_samples;
-        gains = ax.gains_at_lag;
-        why = fmt::format("the logged torque follows the PI law on the logged speed error best {} samples late "
-                          "(the law refitted at that lag: Kvp {:.4g}, Tn {:.4g} s)",
-                          lag, ax.gains_at_lag.Kvp_torque_s_per_rad, ax.gains_at_lag.Tn_s);
-      } else {
-        const auto max_lag = static_cast<std::size_t>(std::clamp(std::lround(0.01 / dt), 1L, 10L));
-        std::vector<double> mse(max_lag + 1, 0.0);
-        for (std::size_t L = 0; L <= max_lag; ++L)
-          for (std::size_t k : rows.all) {
-            const auto [run, row] = rows.at[k];
-            if (row < L) continue;
-            const auto* m = model_channel(current.replays[run], a, ax.channel, true);
-            const double d = rows.T[k] - (m ? (*m)[row - L] : 0.0);
-            mse[L] += d * d;
-          }
-        const auto it = std::min_element(mse.begin(), mse.end());
-        lag = static_cast<std::size_t>(it - mse.begin());
-        if (lag > 0 && *it < 0.8 * mse[0])
-          why = fmt::format("the logged torque matches the replay's {} samples later (mean square {:.3g} of {:.3g} "
-                            "at no lag)",
-                            lag, *it / static_cast<double>(rows.all.size()), mse[0] / static_cast<double>(rows.all.size()));
-        else
-          lag = 0;
-      }
-      if (lag > 0) {
-        Trial t;
-        t.effect = "delay";
-        t.sets = {{{"delay_s", static_cast<double>(lag) * dt}}};
-        t.gains = gains;
-        t.evidence = why;
-        t.judge = {"torque", "_err_mm"};
-        attempt(t);
-      }
+/// A scan of a period over [P_min, P_max] (steps of 1.5 %, then refined
+/// to 0.1 % and 0.01 % about the best): the period whose fit leaves the
+/// smallest residual.
+std::pair<double, LsqResult> scan_period(double P_min, double P_max, const std::function<LsqResult(double)>& fit) {
+  std::pair<double, LsqResult> best{0.0, LsqResult{}};
+  double best_res = 1e300;
+  auto one = [&](double P) {
+    LsqResult ls = fit(P);
+    if (ls.ok && ls.residual_rms < best_res) {
+      best_res = ls.residual_rms;
+      best = {P, std::move(ls)};
     }
+  };
+  for (double P = P_min; P <= P_max; P *= 1.015) one(P);
+  for (const auto& [span, step] : {std::pair{1.015, 1.001}, std::pair{1.001, 1.0001}}) {
+    if (best.first <= 0.0) break;
+    const double P0 = best.first;
+    for (double P = P0 / span; P <= std::min(P_max, P0 * span); P *= step) one(P);
+  }
+  return best;
+}
 
-    // current_saturation: the log's torque clips where the replay's goes beyond.
-    {
-      double log_max = 0.0, model_max = 0.0;
-      for (std::size_t k : rows.all) {
-        const auto [run, row] = rows.at[k];
-        log_max = std::max(log_max, std::abs(runs[run].run->trace.at(ax.channel.column)[row]));
-        model_max = std::max(model_max, std::abs(model_at(k)));
-      }
-      std::vector<double> top;
-      for (std::size_t k : rows.all) {
-        const auto [run, row] = rows.at[k];
-        const double v = std::abs(runs[run].run->trace.at(ax.channel.column)[row]);
-        if (v >= 0.98 * log_max) top.push_back(v);
-      }
-      if (log_max > 0.0 && model_max > 1.05 * log_max && top.size() >= 10) {
-        std::nth_element(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(top.size() / 2), top.end());
-        const double level = top[top.size() / 2];
-        Trial t;
-        t.effect = "current_saturation";
-        t.sets = {{{"i_max_A", level}}};
-        t.judge = {"torque", "_err_mm"};
-        t.evidence = fmt::format("the log's {} holds {} samples within 2 % of its largest value {:.4g} while the "
-                                 "replay asks for up to {:.4g}: a limit at {:.4g} (in the channel's unit)",
-                                 ax.channel.column, top.size(), log_max, model_max, level);
-        attempt(t);
-      }
-    }
+}  // namespace
 
-    // stribeck: friction above the Coulomb level at low speed, the drive
-    // refitted with the curve, T = J a + B v + Tc_dir [dir] (1 - g) + Ts sgn g + c, g = exp(-(v/ws)^2).
-    {
-      const LsqResult base = least_squares(base_cols, rows.T, rows.all, corr);
-      std::vector<double> p1(rows.all.size()), n1(rows.all.size()), sg(rows.all.size());
-      auto fit_at = [&](double ws) {
-        for (std::size_t k : rows.all) {
-          const double g = std::exp(-std::pow(rows.vel[k] / ws, 2));
-          p1[k] = rows.pos[k] * (1.0 - g);
-          n1[k] = rows.neg[k] * (1.0 - g);
-          sg[k] = rows.dir[k] * g;
-        }
-        return least_squares({&rows.acc, &rows.vel, &p1, &n1, &rows.one, &sg}, rows.T, rows.all, corr);
-      };
-      double best_ws = 0.0, best_res = base.ok ? base.residual_rms : 0.0;
-      LsqResult best;
-      auto try_ws = [&](double ws) {
-        const LsqResult ls = fit_at(ws);
-        if (ls.ok && ls.residual_rms < best_res) {
-          best_res = ls.residual_rms;
-          best_ws = ws;
-          best = ls;
-        }
-      };
-      // Steps of 1.35, then of 1.02 about the best (the levels are linear
-      // given ws, so the scan is the whole search).
-      for (double ws = rows.v_move; base.ok && ws < 0.5 * rows.v_high; ws *= 1.35) try_ws(ws);
-      if (best_ws > 0.0) {
-        const double w0 = best_ws;
-        for (double ws = w0 / 1.35; ws <= w0 * 1.35; ws *= 1.02) try_ws(ws);
-      }
-      if (best_ws > 0.0) {
-        const double Ts = best.theta[5], Tc_mean = 0.5 * (best.theta[2] + best.theta[3]);
-        const double t_ex = best.stderr_theta[5] > 0.0 ? (Ts - Tc_mean) / best.stderr_theta[5] : 0.0;
-        if (t_ex >= kMinT && best_res < 0.99 * base.residual_rms) {
-          Trial t;
-          t.effect = "stribeck";
-          t.judge = {"torque", "_err_mm"};
-          for (double f : {0.7, 1.0, 1.4}) {
-            const LsqResult ls = fit_at(f * best_ws);
-            if (!ls.ok) continue;
-            const DriveRefit d = drive_moved(out.final_machine.axes[ai].drive, ls, base);
-            // The breakaway level as fitted on the axis's own motion.
-            const double Ts_set = ls.theta[5];
-            if (!(Ts_set > std::max(d.Tc_pos, d.Tc_neg))) continue;
-            t.sets.push_back({{"Ts_static", Ts_set}, {"ws", f * best_ws}});
-            t.drives.push_back(d);
-          }
-          t.evidence = fmt::format("friction rising to {:.4g} (t = {:.1f} over the Coulomb mean {:.4g}) below "
-                                   "{:.3g} mm/s cuts the fitting rows' torque residual from {:.4g} to {:.4g}",
-                                   Ts, t_ex, Tc_mean, best_ws, base.residual_rms, best_res);
-          t.torque = [&rows](std::size_t k, const std::map<std::string, double>& p, const DriveRefit* d) {
-            const double g = std::exp(-std::pow(rows.vel[k] / p.at("ws"), 2));
-            const double Tc = rows.dir[k] > 0 ? d->Tc_pos : d->Tc_neg;
-            return rows.dir[k] * (p.at("Ts_static") - Tc) * g;
-          };
-          if (!t.sets.empty()) attempt(t);
-        }
-      }
-    }
+/// A detector's view of one identified axis: the runs, the axis's rows with
+/// the torque the machine so far leaves, the replays of that machine, and
+/// the rule every candidate is kept by (attempt).
+struct DataSearch {
+  DataCalibration& out;
+  const std::vector<RunData>& runs;
+  const AxisFromData& ax;
+  FitRunErrors& current;  ///< the machine so far on the fitting runs
+  AxisRows rows;
+  std::vector<std::string> keys;  ///< the axis's channels
+  std::vector<const std::vector<double>*> base_cols;
+  double dt{0.0};    ///< the log's sample period
+  double q{0.0};     ///< the logged positions' step
+  double corr{1.0};  ///< rows over which the residual is correlated
+  bool fast{false};  ///< samples every 2 ms or faster
+  bool fine{false};  ///< positions to 5 um or finer
 
-    // position_dependent_friction: the base fit's residual, signed by the
-    // direction of motion, averaged in 60 bins along the travel; the band of
-    // bins with the largest excess, fitted with the drive.
-    {
-      // On moving rows the constant is the mean of the two Coulomb columns.
-      const std::vector<const std::vector<double>*> moving_cols{&rows.acc, &rows.vel, &rows.pos, &rows.neg};
-      const LsqResult b = least_squares(moving_cols, rows.T, rows.moving, corr);
-      if (b.ok && rows.x_hi > rows.x_lo) {
-        std::vector<double> rho(rows.all.size(), 0.0);
-        for (std::size_t k : rows.moving) {
-          double pred = 0.0;
-          for (std::size_t j = 0; j < moving_cols.size(); ++j) pred += (*moving_cols[j])[k] * b.theta[j];
-          rho[k] = (rows.T[k] - pred) * rows.dir[k];
-        }
-        constexpr std::size_t kBins = 60;
-        const Bins bins = bin_means(rows.x, rho, rows.moving, rows.x_lo, rows.x_hi, kBins);
-        const double min_rows = std::max(200.0, 0.02 * static_cast<double>(rows.moving.size()));
-        double best = 0.0;
-        std::size_t bi = 0, bj = 0;
-        for (std::size_t i = 0; i < kBins; ++i) {
-          double sum = 0.0, cnt = 0.0;
-          for (std::size_t j = i; j < kBins && j - i + 1 < (3 * kBins) / 4; ++j) {
-            sum += bins.mean[j] * static_cast<double>(bins.count[j]);
-            cnt += static_cast<double>(bins.count[j]);
-            if (cnt < min_rows || sum <= 0.0) continue;
-            if (sum * sum / cnt > best) {
-              best = sum * sum / cnt;
-              bi = i;
-              bj = j;
-            }
-          }
-        }
-        if (best > 0.0) {
-          const double w = (rows.x_hi - rows.x_lo) / static_cast<double>(kBins);
-          const double x0 = rows.x_lo + w * static_cast<double>(bi), x1 = rows.x_lo + w * static_cast<double>(bj + 1);
-          std::vector<double> psi(rows.all.size(), 0.0);
-          for (std::size_t k : rows.all)
-            if (rows.x[k] >= x0 && rows.x[k] <= x1) psi[k] = rows.dir[k];
-          const LsqResult f = least_squares(with_base({&psi}), rows.T, rows.all, corr);
-          const LsqResult f0 = least_squares(base_cols, rows.T, rows.all, corr);
-          if (f.ok && f0.ok && f.theta[5] > 0.0 && t_of(f, 5) >= kMinT) {
-            Trial t;
-            t.effect = "position_dependent_friction";
-            t.sets = {{{"dTc_Nm", f.theta[5]}, {"x_start_mm", x0}, {"x_end_mm", x1}}};
-            t.drives = {drive_moved(out.final_machine.axes[ai].drive, f, f0)};
-            t.judge = {"torque"};
-            t.evidence = fmt::format("friction {:+.4g} (t = {:.1f}) between x = {:.4g} and {:.4g} mm, in the "
-                                     "channel's unit",
-                                     f.theta[5], t_of(f, 5), x0, x1);
-            t.torque = [&rows](std::size_t k, const std::map<std::string, double>& p, const DriveRefit*) {
-              return rows.x[k] >= p.at("x_start_mm") && rows.x[k] <= p.at("x_end_mm") ? p.at("dTc_Nm") * rows.dir[k]
-                                                                                        : 0.0;
-            };
-            attempt(t);
-          }
-        }
-      }
-    }
-
-    // A scan of a period over [P_min, P_max] (steps of 1.5 %, then refined
-    // to 0.1 % and 0.01 % about the best): the period whose fit leaves the
-    // smallest residual.
-    auto scan_period = [](double P_min, double P_max, const std::function<LsqResult(double)>& fit) {
-      std::pair<double, LsqResult> best{0.0, LsqResult{}};
-      double best_res = 1e300;
-      auto one = [&](double P) {
-        LsqResult ls = fit(P);
-        if (ls.ok && ls.residual_rms < best_res) {
-          best_res = ls.residual_rms;
-          best = {P, std::move(ls)};
-        }
-      };
-      for (double P = P_min; P <= P_max; P *= 1.015) one(P);
-      for (const auto& [span, step] : {std::pair{1.015, 1.001}, std::pair{1.001, 1.0001}}) {
-        if (best.first <= 0.0) break;
-        const double P0 = best.first;
-        for (double P = P0 / span; P <= std::min(P_max, P0 * span); P *= step) one(P);
-      }
-      return best;
-    };
-
-    // cogging: a torque ripple periodic in the motor angle (x / rg, rg = 1
-    // mm/rad here), fitted with the drive on the axis's own motion (its
-    // logged speed, where there is one: a ripple the loop does not follow
-    // shows in the speed, not in the commanded motion).
-    if (fast) {
-      const double P_min = std::max(0.1, 8.0 * dt * rows.v_high), P_max = std::min(40.0, (rows.x_hi - rows.x_lo) / 3.0);
-      std::vector<double> sn(rows.all.size()), cs(rows.all.size());
-      const std::vector<const std::vector<double>*> cols{&rows.acc, &rows.vel, &rows.pos, &rows.neg, &sn, &cs};
-      auto fit = [&](double P) {
-        for (std::size_t k : rows.all) {
-          sn[k] = std::sin(2.0 * M_PI * rows.x[k] / P);
-          cs[k] = std::cos(2.0 * M_PI * rows.x[k] / P);
-        }
-        return least_squares(cols, rows.T, rows.moving, corr);
-      };
-      const LsqResult base = least_squares({&rows.acc, &rows.vel, &rows.pos, &rows.neg}, rows.T, rows.moving, corr);
-      if (base.ok && P_max > P_min) {
-        const auto [P, ls] = scan_period(P_min, P_max, fit);
-        if (P > 0.0 && t_pair(ls, 4) >= kMinT && ls.residual_rms < 0.98 * base.residual_rms) {
-          const double A = std::hypot(ls.theta[4], ls.theta[5]), phase = std::atan2(ls.theta[5], ls.theta[4]);
-          Trial t;
-          t.effect = "cogging";
-          t.judge = {"torque"};
-          t.sets = {{{"amplitude_Nm", A}, {"cycles_per_rev", 2.0 * M_PI / P}, {"phase_rad", phase}}};
-          t.evidence = fmt::format("a ripple of {:.4g} (in the channel's unit) with a period of {:.4g} mm of travel "
-                                   "(t = {:.1f}) cuts the moving rows' torque residual from {:.4g} to {:.4g}",
-                                   A, P, t_pair(ls, 4), base.residual_rms, ls.residual_rms);
-          t.torque = [&rows](std::size_t k, const std::map<std::string, double>& p, const DriveRefit*) {
-            return p.at("amplitude_Nm") * std::sin(p.at("cycles_per_rev") * rows.x[k] + p.at("phase_rad"));
-          };
-          attempt(t);
-        }
-      }
-    }
-
-    // screw_pitch_error: the encoder reads x + A sin(2 pi x / P + phase)
-    // while the motor moves x; the logged motor speed then differs from the
-    // speed of the logged position by A (2 pi / P) v cos(2 pi x / P + phase).
-    // Regressed on that with the speed, the acceleration and a constant as
-    // nuisances (a logged speed filtered or late).
+  Axis axis() const { return ax.axis; }
+  std::size_t ai() const { return index(ax.axis); }
+  /// The drive's columns and `extra`.
+  std::vector<const std::vector<double>*> with_base(std::vector<const std::vector<double>*> extra) const {
+    std::vector<const std::vector<double>*> c = base_cols;
+    c.insert(c.end(), extra.begin(), extra.end());
+    return c;
+  }
+  /// The channel the replay gives at the detector's row k.
+  double model_at(std::size_t k) const {
+    const auto [run, row] = rows.at[k];
+    const auto* m = model_channel(current.replays[run], ax.axis, ax.channel, true);
+    return m ? (*m)[row] : 0.0;
+  }
+  /// Whether every fitting run logs the axis's measured position.
+  bool logs_position() const {
     bool logs_x = true;
-    for (const RunData& rd : runs) logs_x = logs_x && rd.run->trace.find(col(a, "_mm")) != nullptr;
-    if (fast && fine && rows.measured_speed && logs_x) {
-      std::vector<double> r(rows.all.size()), vd(rows.all.size()), ad(rows.all.size(), 0.0);
+    for (const RunData& rd : runs) logs_x = logs_x && rd.run->trace.find(col(ax.axis, "_mm")) != nullptr;
+    return logs_x;
+  }
+  /// The channels `kind` is judged on (the registry's), as keys.
+  std::vector<std::string> judged_keys(EffectKind kind) const {
+    const std::uint8_t on = registry_entry(kind).judged_on;
+    std::vector<std::string> jk;
+    if (on & kJudgeTorque) jk.push_back(ax.channel.column);
+    if (on & kJudgeTracking) jk.push_back(col(ax.axis, "_err_mm"));
+    return jk;
+  }
+  void attempt(const Trial& t);
+
+ private:
+  struct BestSet {
+    std::size_t set{0};
+    FitRunErrors errors;
+  };
+  BestSet best_set_on_fit_rows(const Trial& t);
+  void judge_held_out(const Trial& t, const FitRunErrors& best_e, DataEffect& eff) const;
+  void keep(const Trial& t, std::size_t best, FitRunErrors&& best_e);
+};
+
+/// The set whose replay has the lowest error on the fitting rows.
+DataSearch::BestSet DataSearch::best_set_on_fit_rows(const Trial& t) {
+  BestSet b;
+  double best_fit = 1e300;
+  for (std::size_t s = 0; s < t.sets.size(); ++s) {
+    FitRunErrors e;
+    try {
+      e = errors_on_fit_runs(runs, with_trial(out.final_machine, ax.axis, t, s), out.axes, out.rounding, out.replays);
+    } catch (const Error&) {
+      continue;
+    }
+    if (!e.ok || !e.fit.nrms.count(ax.channel.column)) continue;
+    const double f = keys_sum(e.fit, keys);
+    if (f < best_fit) {
+      best_fit = f;
+      b.set = s;
+      b.errors = std::move(e);
+    }
+  }
+  return b;
+}
+
+/// Kept where no channel of the axis rises by more than kRiseAllowed and the
+/// channels the effect is judged on fall by more than kKeepMargin.
+void DataSearch::judge_held_out(const Trial& t, const FitRunErrors& best_e, DataEffect& eff) const {
+  bool no_rise = true;
+  for (const auto& [k, b] : eff.before_channels) {
+    const auto it = best_e.held.nrms.find(k);
+    if (it == best_e.held.nrms.end()) {
+      no_rise = false;
+      continue;
+    }
+    eff.after_channels[k] = it->second;
+    no_rise = no_rise && it->second <= b * (1.0 + kRiseAllowed);
+  }
+  eff.after = eff.after_channels.count(ax.channel.column) ? eff.after_channels.at(ax.channel.column) : eff.before;
+  const std::vector<std::string> jk = judged_keys(t.kind);
+  const double sb = keys_sum(current.held, jk), sa = keys_sum(best_e.held, jk);
+  eff.kept = no_rise && sa < (1.0 - kKeepMargin) * sb;
+  eff.evidence += fmt::format("; held-out NRMS of {} {:.4g} -> {:.4g}{}", fmt::join(jk, " + "), sb, sa,
+                              eff.kept ? "" : " (not kept)");
+}
+
+/// The kept effect goes into the machine (an effect it replaces on the axis
+/// is dropped), its torque out of the rows the later detectors fit.
+void DataSearch::keep(const Trial& t, std::size_t best, FitRunErrors&& best_e) {
+  const Axis a = ax.axis;
+  if (const auto replaced = registry_entry(t.kind).replaces;
+      replaced && feeddrive::effect_def(*replaced).enabled(out.final_machine.axes[ai()].drive.effects))
+    for (DataEffect& other : out.effects)
+      if (other.kind == *replaced && other.axis == a && other.kept) {
+        other.kept = false;
+        other.evidence += fmt::format("; replaced by {}, which lowers the held-out error further",
+                                      feeddrive::effect_name(t.kind));
+      }
+  out.final_machine = with_trial(out.final_machine, a, t, best);
+  if (t.torque) {
+    const DriveRefit* d = t.drives.empty() ? nullptr : &t.drives[best];
+    for (std::size_t k : rows.all) rows.T[k] -= t.torque(k, t.sets[best], d);
+  }
+  current = std::move(best_e);
+}
+
+/// Replays each of the trial's sets on the fitting rows, the best on the
+/// held-out rows, and keeps the effect where the held-out error falls.
+void DataSearch::attempt(const Trial& t) {
+  DataEffect eff;
+  eff.set_kind(t.kind);
+  eff.axis = ax.axis;
+  eff.evidence = t.evidence;
+  BestSet b = best_set_on_fit_rows(t);
+  for (const auto& [k, v] : t.sets[b.set]) eff.params[param_key(t.kind, k)] = v;
+  for (const auto& k : keys)
+    if (const auto it = current.held.nrms.find(k); it != current.held.nrms.end()) eff.before_channels[k] = it->second;
+  eff.before = eff.before_channels.count(ax.channel.column) ? eff.before_channels.at(ax.channel.column) : 0.0;
+  eff.after = eff.before;
+  if (b.errors.ok)
+    judge_held_out(t, b.errors, eff);
+  else
+    eff.evidence += "; the replay with it failed (not kept)";
+  if (eff.kept) keep(t, b.set, std::move(b.errors));
+  out.effects.push_back(std::move(eff));
+}
+
+// delay: a torque that follows the loop's command late.
+void detect_delay_in_data(DataSearch& s) {
+  if (!s.fast) return;
+  const AxisFromData& ax = s.ax;
+  const AxisRows& rows = s.rows;
+  const double dt = s.dt;
+  std::size_t lag = 0;
+  std::optional<controller::CascadeGains> gains;
+  std::string why;
+  if (ax.velocity_loop_from_data) {
+    lag = ax.torque_lag_samples;
+    gains = ax.gains_at_lag;
+    why = fmt::format("the logged torque follows the PI law on the logged speed error best {} samples late "
+                      "(the law refitted at that lag: Kvp {:.4g}, Tn {:.4g} s)",
+                      lag, ax.gains_at_lag.Kvp_torque_s_per_rad, ax.gains_at_lag.Tn_s);
+  } else {
+    const auto max_lag = static_cast<std::size_t>(std::clamp(std::lround(0.01 / dt), 1L, 10L));
+    std::vector<double> mse(max_lag + 1, 0.0);
+    for (std::size_t L = 0; L <= max_lag; ++L)
       for (std::size_t k : rows.all) {
         const auto [run, row] = rows.at[k];
-        const auto& xm = runs[run].run->trace.at(col(a, "_mm"));
-        vd[k] = (xm[row + 1] - xm[row - 1]) / (2.0 * dt);
-        r[k] = rows.vel_m[k] - vd[k];
-        ad[k] = rows.acc[k];
+        if (row < L) continue;
+        const auto* m = model_channel(s.current.replays[run], ax.axis, ax.channel, true);
+        const double d = rows.T[k] - (m ? (*m)[row - L] : 0.0);
+        mse[L] += d * d;
       }
-      std::vector<double> c1(rows.all.size()), c2(rows.all.size());
-      auto fit = [&](double P) {
-        const double w = 2.0 * M_PI / P;
-        for (std::size_t k : rows.all) {
-          c1[k] = -w * vd[k] * std::cos(w * rows.x[k]);
-          c2[k] = w * vd[k] * std::sin(w * rows.x[k]);
-        }
-        return least_squares({&rows.one, &vd, &ad, &c1, &c2}, r, rows.moving, corr);
-      };
-      const double P_min = std::max(0.5, 8.0 * dt * rows.v_high), P_max = (rows.x_hi - rows.x_lo) / 2.0;
-      if (P_max > P_min) {
-        const auto [P, ls] = scan_period(P_min, P_max, fit);
-        const double A = P > 0.0 ? std::hypot(ls.theta[3], ls.theta[4]) : 0.0;
-        if (P > 0.0 && t_pair(ls, 3) >= kMinT && A >= 0.5 * q) {
-          Trial t;
-          t.effect = "screw_pitch_error";
-          t.judge = {"_err_mm"};
-          t.sets = {{{"amplitude_mm", A}, {"period_mm", P}, {"phase_rad", std::atan2(ls.theta[4], ls.theta[3])}}};
-          t.evidence = fmt::format("the logged speed differs from the speed of the logged position as a lead error "
-                                   "of {:.4g} mm with a period of {:.4g} mm would make it (t = {:.1f})",
-                                   A, P, t_pair(ls, 3));
-          attempt(t);
-        }
-      }
-    }
+    const auto it = std::min_element(mse.begin(), mse.end());
+    lag = static_cast<std::size_t>(it - mse.begin());
+    if (lag > 0 && *it < 0.8 * mse[0])
+      why = fmt::format("the logged torque matches the replay's {} samples later (mean square {:.3g} of {:.3g} "
+                        "at no lag)",
+                        lag, *it / static_cast<double>(rows.all.size()), mse[0] / static_cast<double>(rows.all.size()));
+    else
+      lag = 0;
+  }
+  if (lag == 0) return;
+  Trial t;
+  t.kind = EffectKind::kDelay;
+  t.sets = {{{EffectParam::delay_delay_s, static_cast<double>(lag) * dt}}};
+  t.gains = gains;
+  t.evidence = why;
+  s.attempt(t);
+}
 
-    // backlash, where a fast log has the motor's speed beside the encoder's
-    // position (a linear scale on the table, the loop closed across the
-    // gap): the motor's travel (the logged speed integrated) runs ahead of
-    // the table by half the gap while it pushes one way and behind by half
-    // while it pushes the other, so across each reversal of the command
-    // their difference steps by the gap, signed by the new direction. Read
-    // over the 50 ms of motion before the stop and 30 to 80 ms into the new
-    // move (the gap crossed at any acceleration over 100 mm/s^2), where the
-    // motor's speed has the direction of each; the median over the fitting
-    // part's reversals is the gap. A run without a gap steps by the
-    // encoder's rounding and the integration's drift, well under 3 counts
-    // (and so does a log whose speed is the encoder's own, derived from the
-    // position: then the lost motion in the position below is looked for).
-    bool gap_from_speed = false;
-    if (fast && fine && rows.measured_speed && logs_x) {
-      const auto w = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.05 / dt)));
-      const auto skip = static_cast<std::size_t>(std::lround(0.03 / dt));
-      std::vector<double> steps;
-      for (const RunData& rd : runs) {
-        const auto& xm = rd.run->trace.at(col(a, "_mm"));
-        const auto& vm = rd.run->trace.at(col(a, "_v_mm_s"));
-        std::vector<double> d(rd.n_fit, 0.0);
-        std::vector<std::size_t> seg(rd.n_fit, 0);
-        double travel = 0.0;
-        for (std::size_t s = 0; s < rd.segments.size(); ++s)
-          for (std::size_t k = rd.segments[s].begin; k < std::min(rd.segments[s].end, rd.n_fit); ++k) {
-            travel = k == rd.segments[s].begin ? xm[k] : travel + 0.5 * (vm[k] + vm[k - 1]) * dt;
-            d[k] = travel - xm[k];
-            seg[k] = s;
-          }
-        // Mean of d over rows [b, e) whose logged speed has direction `dir`.
-        auto mean_d = [&](std::size_t b, std::size_t e, int dir, std::size_t s) {
-          double sum = 0.0;
-          std::size_t n = 0;
-          for (std::size_t k = b; k < e; ++k)
-            if (seg[k] == s && rd.interior[k] && direction(vm[k], rd.v_move[ai]) == dir) {
-              sum += d[k];
-              ++n;
-            }
-          return n >= w / 2 ? std::optional<double>(sum / static_cast<double>(n)) : std::nullopt;
-        };
-        int last = 0;
-        std::size_t last_end = 0;
-        for (std::size_t k = 0; k < rd.n_fit; ++k) {
-          const int dr = direction(rd.kin[ai].v_mm_per_s[k], rd.v_move[ai]);
-          if (dr == 0) continue;
-          if (last != 0 && dr != last && last_end + 1 >= w && k + skip + w <= rd.n_fit && seg[last_end] == seg[k]) {
-            const auto before = mean_d(last_end + 1 - w, last_end + 1, last, seg[k]);
-            const auto after = mean_d(k + skip, k + skip + w, dr, seg[k]);
-            if (before && after) steps.push_back(dr * (*after - *before));
-          }
-          last = dr;
-          last_end = k;
-        }
-      }
-      if (steps.size() >= 4) {
-        std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
-        const double g = steps[steps.size() / 2];
-        // A step beyond 1 mm is no feed drive's gap but a run whose motor
-        // and encoder have parted (a diverging loop, a slipping coupling).
-        if (g >= 3.0 * q && g <= 1.0) {
-          gap_from_speed = true;
-          Trial t;
-          t.effect = "backlash";
-          t.judge = {"_err_mm"};
-          for (double m : {0.85, 1.0, 1.15}) t.sets.push_back({{"gap_mm", m * g}});
-          t.evidence = fmt::format("across {} reversals of the command the motor's travel (the logged speed "
-                                   "integrated) and the logged position part by a median {:.4g} mm ({:.1f} "
-                                   "position quanta), signed by the new direction: a gap of that size (0.85 to "
-                                   "1.15 times it replayed)",
-                                   steps.size(), g, g / q);
-          attempt(t);
-        }
-      }
-    }
+// current_saturation: the log's torque clips where the replay's goes beyond.
+void detect_current_saturation_in_data(DataSearch& s) {
+  const AxisFromData& ax = s.ax;
+  const AxisRows& rows = s.rows;
+  double log_max = 0.0, model_max = 0.0;
+  for (std::size_t k : rows.all) {
+    const auto [run, row] = rows.at[k];
+    log_max = std::max(log_max, std::abs(s.runs[run].run->trace.at(ax.channel.column)[row]));
+    model_max = std::max(model_max, std::abs(s.model_at(k)));
+  }
+  std::vector<double> top;
+  for (std::size_t k : rows.all) {
+    const auto [run, row] = rows.at[k];
+    const double v = std::abs(s.runs[run].run->trace.at(ax.channel.column)[row]);
+    if (v >= 0.98 * log_max) top.push_back(v);
+  }
+  if (!(log_max > 0.0 && model_max > 1.05 * log_max && top.size() >= 10)) return;
+  std::nth_element(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(top.size() / 2), top.end());
+  const double level = top[top.size() / 2];
+  Trial t;
+  t.kind = EffectKind::kCurrentSaturation;
+  t.sets = {{{EffectParam::current_saturation_i_max_A, level}}};
+  t.evidence = fmt::format("the log's {} holds {} samples within 2 % of its largest value {:.4g} while the "
+                           "replay asks for up to {:.4g}: a limit at {:.4g} (in the channel's unit)",
+                           ax.channel.column, top.size(), log_max, model_max, level);
+  s.attempt(t);
+}
 
-    // backlash, from the position: after a reversal of the command the measured position lags
-    // the replay's in the new direction while the motor crosses the gap: the
-    // median over the fitting part's reversals of the peak of that lag in the
-    // 50 ms after each sizes the gap; gaps of 0.5 to 2 times it are replayed.
-    if (fine && !gap_from_speed) {
-      const auto span = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.05 / dt)));
-      std::vector<double> peaks;
-      for (std::size_t run = 0; run < runs.size(); ++run) {
-        const RunData& rd = runs[run];
-        const auto* xm = rd.run->trace.find(col(a, "_mm"));
-        if (xm == nullptr || current.replays[run].x_mm[ai].empty()) continue;
-        const auto& xr = current.replays[run].x_mm[ai];
-        int last = 0;
-        for (std::size_t k = 0; k < rd.n_fit; ++k) {
-          const int d = direction(rd.kin[ai].v_mm_per_s[k], rd.v_move[ai]);
-          if (d == 0) continue;
-          if (last != 0 && d != last && k + span <= rd.n_fit) {
-            double peak = -1e300;
-            for (std::size_t j = k; j < k + span; ++j)
-              if (rd.interior[j]) peak = std::max(peak, d * (xr[j] - (*xm)[j]));
-            if (peak > -1e300) peaks.push_back(peak);
-          }
-          last = d;
-        }
-      }
-      if (peaks.size() >= 4) {
-        std::nth_element(peaks.begin(), peaks.begin() + static_cast<std::ptrdiff_t>(peaks.size() / 2), peaks.end());
-        const double p = peaks[peaks.size() / 2];
-        if (p >= 3.0 * q) {
-          Trial t;
-          t.effect = "backlash";
-          t.judge = {"_err_mm"};
-          for (double m : {0.5, 1.0, 1.5, 2.0, 3.0}) t.sets.push_back({{"gap_mm", m * 2.0 * p}});
-          t.evidence = fmt::format("after a reversal the position lags the replay's by a median peak of {:.4g} mm "
-                                   "({} reversals, {:.1f} position quanta): lost motion of a gap of about {:.4g} mm (0.5 to 3 times it replayed)",
-                                   p, peaks.size(), p / q, 2.0 * p);
-          attempt(t);
-        }
+// stribeck: friction above the Coulomb level at low speed, the drive
+// refitted with the curve, T = J a + B v + Tc_dir [dir] (1 - g) + Ts sgn g + c, g = exp(-(v/ws)^2).
+void detect_stribeck_in_data(DataSearch& s) {
+  const AxisRows& rows = s.rows;
+  const LsqResult base = least_squares(s.base_cols, rows.T, rows.all, s.corr);
+  std::vector<double> p1(rows.all.size()), n1(rows.all.size()), sg(rows.all.size());
+  auto fit_at = [&](double ws) {
+    for (std::size_t k : rows.all) {
+      const double g = feeddrive::stribeck_shape(rows.vel[k], ws);
+      p1[k] = rows.pos[k] * (1.0 - g);
+      n1[k] = rows.neg[k] * (1.0 - g);
+      sg[k] = rows.dir[k] * g;
+    }
+    return least_squares({&rows.acc, &rows.vel, &p1, &n1, &rows.one, &sg}, rows.T, rows.all, s.corr);
+  };
+  double best_ws = 0.0, best_res = base.ok ? base.residual_rms : 0.0;
+  LsqResult best;
+  auto try_ws = [&](double ws) {
+    const LsqResult ls = fit_at(ws);
+    if (ls.ok && ls.residual_rms < best_res) {
+      best_res = ls.residual_rms;
+      best_ws = ws;
+      best = ls;
+    }
+  };
+  // Steps of 1.35, then of 1.02 about the best (the levels are linear
+  // given ws, so the scan is the whole search).
+  for (double ws = rows.v_move; base.ok && ws < 0.5 * rows.v_high; ws *= 1.35) try_ws(ws);
+  if (best_ws > 0.0) {
+    const double w0 = best_ws;
+    for (double ws = w0 / 1.35; ws <= w0 * 1.35; ws *= 1.02) try_ws(ws);
+  }
+  if (!(best_ws > 0.0)) return;
+  const double Ts = best.theta[5], Tc_mean = 0.5 * (best.theta[2] + best.theta[3]);
+  const double t_ex = best.stderr_theta[5] > 0.0 ? (Ts - Tc_mean) / best.stderr_theta[5] : 0.0;
+  if (!(t_ex >= kMinT && best_res < 0.99 * base.residual_rms)) return;
+  Trial t;
+  t.kind = EffectKind::kStribeck;
+  for (double f : {0.7, 1.0, 1.4}) {
+    const LsqResult ls = fit_at(f * best_ws);
+    if (!ls.ok) continue;
+    const DriveRefit d = drive_moved(s.out.final_machine.axes[s.ai()].drive, ls, base);
+    // The breakaway level as fitted on the axis's own motion.
+    const double Ts_set = ls.theta[5];
+    if (!(Ts_set > std::max(d.Tc_pos, d.Tc_neg))) continue;
+    t.sets.push_back({{EffectParam::stribeck_Ts_static, Ts_set}, {EffectParam::stribeck_ws, f * best_ws}});
+    t.drives.push_back(d);
+  }
+  t.evidence = fmt::format("friction rising to {:.4g} (t = {:.1f} over the Coulomb mean {:.4g}) below "
+                           "{:.3g} mm/s cuts the fitting rows' torque residual from {:.4g} to {:.4g}",
+                           Ts, t_ex, Tc_mean, best_ws, base.residual_rms, best_res);
+  t.torque = [&rows](std::size_t k, const ParamSet& p, const DriveRefit* d) {
+    const double Tc = rows.dir[k] > 0 ? d->Tc_pos : d->Tc_neg;
+    return rows.dir[k] * feeddrive::stribeck_excess_Nm(param_value(p, EffectParam::stribeck_Ts_static), Tc,
+                                                       rows.vel[k], param_value(p, EffectParam::stribeck_ws));
+  };
+  if (!t.sets.empty()) s.attempt(t);
+}
+
+namespace {
+
+/// The band of bins along the travel with the largest excess of the signed
+/// residual (sum squared over count), at least `min_rows` rows and under
+/// three quarters of the travel: its first and last bin, or nullopt.
+std::optional<std::pair<std::size_t, std::size_t>> friction_band(const Bins& bins, std::size_t n_bins,
+                                                                 double min_rows) {
+  double best = 0.0;
+  std::size_t bi = 0, bj = 0;
+  for (std::size_t i = 0; i < n_bins; ++i) {
+    double sum = 0.0, cnt = 0.0;
+    for (std::size_t j = i; j < n_bins && j - i + 1 < (3 * n_bins) / 4; ++j) {
+      sum += bins.mean[j] * static_cast<double>(bins.count[j]);
+      cnt += static_cast<double>(bins.count[j]);
+      if (cnt < min_rows || sum <= 0.0) continue;
+      if (sum * sum / cnt > best) {
+        best = sum * sum / cnt;
+        bi = i;
+        bj = j;
       }
     }
   }
+  if (!(best > 0.0)) return std::nullopt;
+  return std::pair{bi, bj};
 }
+
 }  // namespace
 
-// ---------------------------------------------------------------------------
-// Calibration
+// position_dependent_friction: the base fit's residual, signed by the
+// direction of motion, averaged in 60 bins along the travel; the band of
+// bins with the largest excess, fitted with the drive.
+void detect_position_dependent_friction_in_data(DataSearch& s) {
+  const AxisRows& rows = s.rows;
+  // On moving rows the constant is the mean of the two Coulomb columns.
+  const std::vector<const std::vector<double>*> moving_cols{&rows.acc, &rows.vel, &rows.pos, &rows.neg};
+  const LsqResult b = least_squares(moving_cols, rows.T, rows.moving, s.corr);
+  if (!(b.ok && rows.x_hi > rows.x_lo)) return;
+  std::vector<double> rho(rows.all.size(), 0.0);
+  for (std::size_t k : rows.moving) {
+    double pred = 0.0;
+    for (std::size_t j = 0; j < moving_cols.size(); ++j) pred += (*moving_cols[j])[k] * b.theta[j];
+    rho[k] = (rows.T[k] - pred) * rows.dir[k];
+  }
+  constexpr std::size_t kBins = 60;
+  const Bins bins = bin_means(rows.x, rho, rows.moving, rows.x_lo, rows.x_hi, kBins);
+  const double min_rows = std::max(200.0, 0.02 * static_cast<double>(rows.moving.size()));
+  const auto band = friction_band(bins, kBins, min_rows);
+  if (!band) return;
+  const double w = (rows.x_hi - rows.x_lo) / static_cast<double>(kBins);
+  const double x0 = rows.x_lo + w * static_cast<double>(band->first);
+  const double x1 = rows.x_lo + w * static_cast<double>(band->second + 1);
+  std::vector<double> psi(rows.all.size(), 0.0);
+  for (std::size_t k : rows.all)
+    if (feeddrive::in_friction_band(rows.x[k], x0, x1)) psi[k] = rows.dir[k];
+  const LsqResult f = least_squares(s.with_base({&psi}), rows.T, rows.all, s.corr);
+  const LsqResult f0 = least_squares(s.base_cols, rows.T, rows.all, s.corr);
+  if (!(f.ok && f0.ok && f.theta[5] > 0.0 && t_of(f, 5) >= kMinT)) return;
+  Trial t;
+  t.kind = EffectKind::kPositionDependentFriction;
+  t.sets = {{{EffectParam::position_dependent_friction_dTc_Nm, f.theta[5]},
+             {EffectParam::position_dependent_friction_x_start_mm, x0},
+             {EffectParam::position_dependent_friction_x_end_mm, x1}}};
+  t.drives = {drive_moved(s.out.final_machine.axes[s.ai()].drive, f, f0)};
+  t.evidence = fmt::format("friction {:+.4g} (t = {:.1f}) between x = {:.4g} and {:.4g} mm, in the "
+                           "channel's unit",
+                           f.theta[5], t_of(f, 5), x0, x1);
+  t.torque = [&rows](std::size_t k, const ParamSet& p, const DriveRefit*) {
+    return feeddrive::in_friction_band(rows.x[k], param_value(p, EffectParam::position_dependent_friction_x_start_mm),
+                                       param_value(p, EffectParam::position_dependent_friction_x_end_mm))
+               ? param_value(p, EffectParam::position_dependent_friction_dTc_Nm) * rows.dir[k]
+               : 0.0;
+  };
+  s.attempt(t);
+}
 
-DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const std::vector<MeasuredRun>& validate,
-                                    const sim::MachineDefinition& nominal, const DataCalibrationOptions& options) {
-  if (fit.empty()) throw ConfigError("calibrate: no run to fit");
-  DataCalibration out;
-  out.fit_fraction = options.fit_fraction;
+// cogging: a torque ripple periodic in the motor angle (x / rg, rg = 1
+// mm/rad here), fitted with the drive on the axis's own motion (its
+// logged speed, where there is one: a ripple the loop does not follow
+// shows in the speed, not in the commanded motion).
+void detect_cogging_in_data(DataSearch& s) {
+  if (!s.fast) return;
+  const AxisRows& rows = s.rows;
+  const double P_min = std::max(0.1, 8.0 * s.dt * rows.v_high), P_max = std::min(40.0, (rows.x_hi - rows.x_lo) / 3.0);
+  std::vector<double> sn(rows.all.size()), cs(rows.all.size());
+  const std::vector<const std::vector<double>*> cols{&rows.acc, &rows.vel, &rows.pos, &rows.neg, &sn, &cs};
+  auto fit = [&](double P) {
+    for (std::size_t k : rows.all) {
+      sn[k] = std::sin(2.0 * M_PI * rows.x[k] / P);
+      cs[k] = std::cos(2.0 * M_PI * rows.x[k] / P);
+    }
+    return least_squares(cols, rows.T, rows.moving, s.corr);
+  };
+  const LsqResult base = least_squares({&rows.acc, &rows.vel, &rows.pos, &rows.neg}, rows.T, rows.moving, s.corr);
+  if (!(base.ok && P_max > P_min)) return;
+  const auto [P, ls] = scan_period(P_min, P_max, fit);
+  if (!(P > 0.0 && t_pair(ls, 4) >= kMinT && ls.residual_rms < 0.98 * base.residual_rms)) return;
+  const double A = std::hypot(ls.theta[4], ls.theta[5]), phase = std::atan2(ls.theta[5], ls.theta[4]);
+  Trial t;
+  t.kind = EffectKind::kCogging;
+  t.sets = {{{EffectParam::cogging_amplitude_Nm, A},
+             {EffectParam::cogging_cycles_per_rev, 2.0 * M_PI / P},
+             {EffectParam::cogging_phase_rad, phase}}};
+  t.evidence = fmt::format("a ripple of {:.4g} (in the channel's unit) with a period of {:.4g} mm of travel "
+                           "(t = {:.1f}) cuts the moving rows' torque residual from {:.4g} to {:.4g}",
+                           A, P, t_pair(ls, 4), base.residual_rms, ls.residual_rms);
+  t.torque = [&rows](std::size_t k, const ParamSet& p, const DriveRefit*) {
+    // rg = 1 mm/rad in a machine identified from data.
+    return feeddrive::cogging_torque_Nm(param_value(p, EffectParam::cogging_amplitude_Nm),
+                                        param_value(p, EffectParam::cogging_cycles_per_rev),
+                                        param_value(p, EffectParam::cogging_phase_rad), rows.x[k], 1.0);
+  };
+  s.attempt(t);
+}
+
+// screw_pitch_error: the encoder reads x + A sin(2 pi x / P + phase)
+// while the motor moves x; the logged motor speed then differs from the
+// speed of the logged position by A (2 pi / P) v cos(2 pi x / P + phase).
+// Regressed on that with the speed, the acceleration and a constant as
+// nuisances (a logged speed filtered or late).
+void detect_screw_pitch_error_in_data(DataSearch& s) {
+  if (!(s.fast && s.fine && s.rows.measured_speed && s.logs_position())) return;
+  const AxisRows& rows = s.rows;
+  std::vector<double> r(rows.all.size()), vd(rows.all.size()), ad(rows.all.size(), 0.0);
+  for (std::size_t k : rows.all) {
+    const auto [run, row] = rows.at[k];
+    const auto& xm = s.runs[run].run->trace.at(col(s.axis(), "_mm"));
+    vd[k] = (xm[row + 1] - xm[row - 1]) / (2.0 * s.dt);
+    r[k] = rows.vel_m[k] - vd[k];
+    ad[k] = rows.acc[k];
+  }
+  std::vector<double> c1(rows.all.size()), c2(rows.all.size());
+  auto fit = [&](double P) {
+    const double w = 2.0 * M_PI / P;
+    for (std::size_t k : rows.all) {
+      c1[k] = -w * vd[k] * std::cos(w * rows.x[k]);
+      c2[k] = w * vd[k] * std::sin(w * rows.x[k]);
+    }
+    return least_squares({&rows.one, &vd, &ad, &c1, &c2}, r, rows.moving, s.corr);
+  };
+  const double P_min = std::max(0.5, 8.0 * s.dt * rows.v_high), P_max = (rows.x_hi - rows.x_lo) / 2.0;
+  if (!(P_max > P_min)) return;
+  const auto [P, ls] = scan_period(P_min, P_max, fit);
+  const double A = P > 0.0 ? std::hypot(ls.theta[3], ls.theta[4]) : 0.0;
+  if (!(P > 0.0 && t_pair(ls, 3) >= kMinT && A >= 0.5 * s.q)) return;
+  Trial t;
+  t.kind = EffectKind::kScrewPitchError;
+  t.sets = {{{EffectParam::screw_pitch_error_amplitude_mm, A},
+             {EffectParam::screw_pitch_error_period_mm, P},
+             {EffectParam::screw_pitch_error_phase_rad, std::atan2(ls.theta[4], ls.theta[3])}}};
+  t.evidence = fmt::format("the logged speed differs from the speed of the logged position as a lead error "
+                           "of {:.4g} mm with a period of {:.4g} mm would make it (t = {:.1f})",
+                           A, P, t_pair(ls, 3));
+  s.attempt(t);
+}
+
+namespace {
+
+// The steps, signed by the new direction, of the motor's travel (the logged
+// speed integrated) less the logged position across the fitting part's
+// reversals of one run: the mean over the 50 ms of motion before the stop
+// against the mean 30 to 80 ms into the new move, each over rows whose
+// logged speed has the direction of its side.
+void travel_steps_at_reversals(const RunData& rd, Axis a, double dt, std::vector<double>& steps) {
+  const std::size_t ai = index(a);
+  const auto w = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.05 / dt)));
+  const auto skip = static_cast<std::size_t>(std::lround(0.03 / dt));
+  const auto& xm = rd.run->trace.at(col(a, "_mm"));
+  const auto& vm = rd.run->trace.at(col(a, "_v_mm_s"));
+  std::vector<double> d(rd.n_fit, 0.0);
+  std::vector<std::size_t> seg(rd.n_fit, 0);
+  double travel = 0.0;
+  for (std::size_t s = 0; s < rd.segments.size(); ++s)
+    for (std::size_t k = rd.segments[s].begin; k < std::min(rd.segments[s].end, rd.n_fit); ++k) {
+      travel = k == rd.segments[s].begin ? xm[k] : travel + 0.5 * (vm[k] + vm[k - 1]) * dt;
+      d[k] = travel - xm[k];
+      seg[k] = s;
+    }
+  // Mean of d over rows [b, e) whose logged speed has direction `dir`.
+  auto mean_d = [&](std::size_t b, std::size_t e, int dir, std::size_t s) {
+    double sum = 0.0;
+    std::size_t n = 0;
+    for (std::size_t k = b; k < e; ++k)
+      if (seg[k] == s && rd.interior[k] && direction(vm[k], rd.v_move[ai]) == dir) {
+        sum += d[k];
+        ++n;
+      }
+    return n >= w / 2 ? std::optional<double>(sum / static_cast<double>(n)) : std::nullopt;
+  };
+  int last = 0;
+  std::size_t last_end = 0;
+  for (std::size_t k = 0; k < rd.n_fit; ++k) {
+    const int dr = direction(rd.kin[ai].v_mm_per_s[k], rd.v_move[ai]);
+    if (dr == 0) continue;
+    if (last != 0 && dr != last && last_end + 1 >= w && k + skip + w <= rd.n_fit && seg[last_end] == seg[k]) {
+      const auto before = mean_d(last_end + 1 - w, last_end + 1, last, seg[k]);
+      const auto after = mean_d(k + skip, k + skip + w, dr, seg[k]);
+      if (before && after) steps.push_back(dr * (*after - *before));
+    }
+    last = dr;
+    last_end = k;
+  }
+}
+
+// backlash, where a fast log has the motor's speed beside the encoder's
+// position (a linear scale on the table, the loop closed across the
+// gap): the motor's travel (the logged speed integrated) runs ahead of
+// the table by half the gap while it pushes one way and behind by half
+// while it pushes the other, so across each reversal of the command
+// their difference steps by the gap, signed by the new direction. Read
+// over the 50 ms of motion before the stop and 30 to 80 ms into the new
+// move (the gap crossed at any acceleration over 100 mm/s^2), where the
+// motor's speed has the direction of each; the median over the fitting
+// part's reversals is the gap. A run without a gap steps by the
+// encoder's rounding and the integration's drift, well under 3 counts
+// (and so does a log whose speed is the encoder's own, derived from the
+// position: then the lost motion in the position is looked for).
+// Returns whether a gap was found this way.
+bool backlash_from_speed(DataSearch& s) {
+  if (!(s.fast && s.fine && s.rows.measured_speed && s.logs_position())) return false;
+  std::vector<double> steps;
+  for (const RunData& rd : s.runs) travel_steps_at_reversals(rd, s.axis(), s.dt, steps);
+  if (steps.size() < 4) return false;
+  std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
+  const double g = steps[steps.size() / 2];
+  // A step beyond 1 mm is no feed drive's gap but a run whose motor
+  // and encoder have parted (a diverging loop, a slipping coupling).
+  if (!(g >= 3.0 * s.q && g <= 1.0)) return false;
+  Trial t;
+  t.kind = EffectKind::kBacklash;
+  for (double m : {0.85, 1.0, 1.15}) t.sets.push_back({{EffectParam::backlash_gap_mm, m * g}});
+  t.evidence = fmt::format("across {} reversals of the command the motor's travel (the logged speed "
+                           "integrated) and the logged position part by a median {:.4g} mm ({:.1f} "
+                           "position quanta), signed by the new direction: a gap of that size (0.85 to "
+                           "1.15 times it replayed)",
+                           steps.size(), g, g / s.q);
+  s.attempt(t);
+  return true;
+}
+
+// backlash, from the position: after a reversal of the command the measured position lags
+// the replay's in the new direction while the motor crosses the gap: the
+// median over the fitting part's reversals of the peak of that lag in the
+// 50 ms after each sizes the gap; gaps of 0.5 to 2 times it are replayed.
+void backlash_from_position(DataSearch& s) {
+  if (!s.fine) return;
+  const std::size_t ai = s.ai();
+  const auto span = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.05 / s.dt)));
+  std::vector<double> peaks;
+  for (std::size_t run = 0; run < s.runs.size(); ++run) {
+    const RunData& rd = s.runs[run];
+    const auto* xm = rd.run->trace.find(col(s.axis(), "_mm"));
+    if (xm == nullptr || s.current.replays[run].x_mm[ai].empty()) continue;
+    const auto& xr = s.current.replays[run].x_mm[ai];
+    int last = 0;
+    for (std::size_t k = 0; k < rd.n_fit; ++k) {
+      const int d = direction(rd.kin[ai].v_mm_per_s[k], rd.v_move[ai]);
+      if (d == 0) continue;
+      if (last != 0 && d != last && k + span <= rd.n_fit) {
+        double peak = -1e300;
+        for (std::size_t j = k; j < k + span; ++j)
+          if (rd.interior[j]) peak = std::max(peak, d * (xr[j] - (*xm)[j]));
+        if (peak > -1e300) peaks.push_back(peak);
+      }
+      last = d;
+    }
+  }
+  if (peaks.size() < 4) return;
+  std::nth_element(peaks.begin(), peaks.begin() + static_cast<std::ptrdiff_t>(peaks.size() / 2), peaks.end());
+  const double p = peaks[peaks.size() / 2];
+  if (!(p >= 3.0 * s.q)) return;
+  Trial t;
+  t.kind = EffectKind::kBacklash;
+  for (double m : {0.5, 1.0, 1.5, 2.0, 3.0}) t.sets.push_back({{EffectParam::backlash_gap_mm, m * 2.0 * p}});
+  t.evidence = fmt::format("after a reversal the position lags the replay's by a median peak of {:.4g} mm "
+                           "({} reversals, {:.1f} position quanta): lost motion of a gap of about {:.4g} mm (0.5 to 3 times it replayed)",
+                           p, peaks.size(), p / s.q, 2.0 * p);
+  s.attempt(t);
+}
+
+}  // namespace
+
+void detect_backlash_in_data(DataSearch& s) {
+  if (!backlash_from_speed(s)) backlash_from_position(s);
+}
+
+namespace {
+
+/// The catalogue effects the log's rate and resolution can show, each
+/// detected on the residual of the machine so far (the registry's from-data
+/// detectors, in its order), replayed, and kept only where the held-out
+/// error falls.
+void search_catalogue_effects(DataCalibration& out, const std::vector<RunData>& runs) {
+  const double dt = runs.front().run->sample_period_s;
+  const double q = measured_position_step(out, runs);
+  FitRunErrors current = errors_on_fit_runs(runs, out.final_machine, out.axes, out.rounding, out.replays);
+  if (!current.ok) return;
+  const auto detectors = from_data_search_order();
+  for (const AxisFromData& ax : out.axis) {
+    if (!ax.identified) continue;
+    DataSearch s{out, runs, ax, current, axis_rows(runs, ax), axis_keys(ax), {}};
+    if (s.rows.moving.size() < 200) continue;
+    s.base_cols = {&s.rows.acc, &s.rows.vel, &s.rows.pos, &s.rows.neg, &s.rows.one};
+    s.dt = dt;
+    s.q = q;
+    s.corr = std::max(1.0, 0.01 / dt);
+    s.fast = dt <= 2e-3 + 1e-12;
+    s.fine = q <= 0.005;
+    for (const EffectEntry* e : detectors) e->from_data(s);
+  }
+}
+
+}  // namespace
+
+namespace {
+
+/// The fitting runs' axes (all the same) and notes.
+void check_fit_runs(const std::vector<MeasuredRun>& fit, DataCalibration& out) {
   out.axes = fit.front().axes;
   for (const auto& r : fit)
     if (r.axes != out.axes)
@@ -1266,8 +1376,10 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
                                     fit.front().dir.string(), r.dir.string()));
   for (const auto& r : fit)
     for (const auto& n : r.notes) out.notes.push_back(n);
+}
 
-  // Rounding: the coarsest all fitting runs agree with.
+/// Rounding: the coarsest all fitting runs agree with.
+void choose_rounding(const std::vector<MeasuredRun>& fit, DataCalibration& out) {
   out.rounding = detect_rounding(fit.front());
   for (std::size_t i = 1; i < fit.size(); ++i) {
     const PositionRounding ri = detect_rounding(fit[i]);
@@ -1278,9 +1390,10 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
                                                        "loop closes on a 1 um encoder and its logged positions are "
                                                        "rounded as the log's"
                                                      : ": used as the replay's encoder"));
+}
 
-  // Controller period.
-  const MeasuredRun& r0 = fit.front();
+/// The loop period the twin replays at, said in a note.
+double controller_period(const MeasuredRun& r0, const DataCalibrationOptions& options, DataCalibration& out) {
   double Ts = options.default_controller_period_s;
   if (r0.meta.controller_period_s) {
     Ts = *r0.meta.controller_period_s;
@@ -1293,499 +1406,565 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
                                     "Ts = {} s, the reference between samples rebuilt by a monotone cubic",
                                     r0.sample_period_s, Ts));
   }
+  return Ts;
+}
 
-  std::vector<RunData> runs;
-  for (const auto& r : fit) runs.push_back(prepare_run(r, out.axes, out.rounding, options.fit_fraction, out.notes));
-  const Fitter fitter{runs};
+/// What the identification of the machine's axes works on.
+struct AxisFit {
+  const std::vector<RunData>& runs;
+  const Fitter fitter;
+  const MeasuredRun& r0;
+  double Ts{0.0};
+};
 
-  // The machine: cascade, drives in the channel's unit.
+bool all_runs_log(const std::vector<RunData>& runs, const std::string& column) {
+  bool all = true;
+  for (const auto& rd : runs) all = all && rd.run->trace.find(column) != nullptr;
+  return all;
+}
+
+/// Kv and kff from a logged velocity command against the following error and
+/// the command's speed.
+void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
+  const Axis a = ax.axis;
+  std::vector<double> e, vr, vc;
+  std::vector<std::size_t> rows;
+  f.fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
+    const auto& t = f.runs[r].run->trace;
+    const auto& ref = t.at(col(a, "_ref_mm"));
+    e.push_back(ref[k] - t.at(col(a, "_mm"))[k]);
+    // The law's own speed: the backward difference of the reference.
+    vr.push_back((ref[k] - ref[k - 1]) / f.runs[r].run->sample_period_s);
+    vc.push_back(t.at(col(a, "_vcmd_mm_s"))[k]);
+    rows.push_back(rows.size());
+  });
+  const LsqResult ls = least_squares({&e, &vr}, vc, rows);
+  if (!(ls.ok && ls.theta[0] > 0.0)) return;
+  ax.gains.Kv_per_s = ls.theta[0];
+  ax.gains.kff = std::clamp(ls.theta[1], 0.0, 1.5);
+  ax.lag_s = (1.0 - ax.gains.kff) / ax.gains.Kv_per_s;
+  double vrms = 0.0;
+  for (double x : vc) vrms += x * x;
+  vrms = std::sqrt(vrms / static_cast<double>(std::max<std::size_t>(1, vc.size())));
+  ax.loop_source = fmt::format("the logged velocity command against the following error and the command's speed "
+                               "(residual {:.3g} mm/s against an RMS of {:.3g} mm/s)",
+                               ls.residual_rms, vrms);
+}
+
+/// Kv from the lag of the position behind the command (a P loop without feedforward).
+void loop_from_lag(const AxisFit& f, AxisFromData& ax) {
+  const Axis a = ax.axis;
+  const std::size_t i = index(a);
+  double num = 0.0, den = 0.0;
+  f.fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
+    const double v = f.runs[r].kin[i].v_mm_per_s[k];
+    if (direction(v, f.runs[r].v_move[i]) == 0) return;
+    const auto& t = f.runs[r].run->trace;
+    num += (v > 0 ? 1.0 : -1.0) * (t.at(col(a, "_ref_mm"))[k] - t.at(col(a, "_mm"))[k]);
+    den += std::abs(v);
+  });
+  ax.lag_s = den > 0.0 ? num / den : 0.0;
+  if (ax.lag_s > 1e-4) {
+    ax.gains.Kv_per_s = 1.0 / ax.lag_s;
+    ax.gains.kff = 0.0;
+    ax.loop_source = fmt::format("the lag of the position behind the command ({:.4g} ms, the mean of the rounded "
+                                 "following error over the speed); a P loop without feedforward assumed",
+                                 1e3 * ax.lag_s);
+  }
+}
+
+/// The position loop: the vcmd regression where logged, else the lag of the position.
+void identify_position_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd, bool have_x) {
+  if (have_vcmd && have_x) loop_from_vcmd(f, ax);
+  if (ax.loop_source.empty() && have_x) loop_from_lag(f, ax);
+  if (ax.loop_source.empty()) {
+    ax.gains.Kv_per_s = 1.0 / std::max(10.0 * f.Ts, 0.01);
+    ax.loop_source = fmt::format("not seen in the data ({}); Kv = {:.4g} 1/s assumed",
+                                 have_x ? "the position does not lag the command measurably" : "no position logged",
+                                 ax.gains.Kv_per_s);
+  }
+}
+
+/// The drive's regressors on the fitting rows: a, v, [v > 0], -[v < 0], 1,
+/// and the channel's torque.
+struct DriveRows {
+  std::vector<double> acc, vel, pos, neg, one, T;
+  std::vector<std::size_t> rows;
+  double a2{0.0}, T2{0.0};
+};
+
+/// The axis's own motion where a fast log has its speed (the torque
+/// accelerates the axis, not the command: under a loop whose torque
+/// overshoots at every change of acceleration, J fitted on the commanded
+/// acceleration comes out 17 % low on the truth runs of the tests), else
+/// the commanded kinematics (the logged positions are often too coarse to
+/// differentiate).
+DriveRows drive_rows(const AxisFit& f, const AxisFromData& ax) {
+  const Axis a = ax.axis;
+  const std::size_t i = index(a);
+  const bool own_speed = f.r0.sample_period_s <= 2e-3 + 1e-12 && all_runs_log(f.runs, col(a, "_v_mm_s"));
+  DriveRows d;
+  f.fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
+    const auto* ch = f.runs[r].run->trace.find(ax.channel.column);
+    if (ch == nullptr) return;
+    const auto* vm = own_speed ? f.runs[r].run->trace.find(col(a, "_v_mm_s")) : nullptr;
+    if (vm != nullptr && (k == 0 || k + 1 >= vm->size())) return;
+    const double v = vm ? (*vm)[k] : f.runs[r].kin[i].v_mm_per_s[k];
+    const int dir = direction(v, f.runs[r].v_move[i]);
+    d.acc.push_back(vm ? ((*vm)[k + 1] - (*vm)[k - 1]) / (2.0 * f.runs[r].run->sample_period_s)
+                       : f.runs[r].kin[i].a_mm_per_s2[k]);
+    d.vel.push_back(v);
+    d.pos.push_back(dir > 0 ? 1.0 : 0.0);
+    d.neg.push_back(dir < 0 ? -1.0 : 0.0);
+    d.one.push_back(1.0);
+    d.T.push_back((*ch)[k]);
+    d.a2 += d.acc.back() * d.acc.back();
+    d.T2 += d.T.back() * d.T.back();
+    d.rows.push_back(d.rows.size());
+  });
+  return d;
+}
+
+/// J, B, Tc_pos, Tc_neg, c from the fitted coefficients (a direction the
+/// axis never moves in takes the other's level).
+void take_drive_fit(const LsqResult& ls, bool moves_pos, bool moves_neg, AxisFromData& ax) {
+  std::size_t j = 0;
+  ax.J = ls.theta[j];
+  ax.J_se = ls.stderr_theta[j++];
+  ax.B = ls.theta[j];
+  ax.B_se = ls.stderr_theta[j++];
+  if (moves_pos) {
+    ax.Tc_pos = ls.theta[j];
+    ax.Tc_pos_se = ls.stderr_theta[j++];
+  }
+  if (moves_neg) {
+    ax.Tc_neg = ls.theta[j];
+    ax.Tc_neg_se = ls.stderr_theta[j++];
+  }
+  ax.c = ls.theta[j];
+  ax.c_se = ls.stderr_theta[j];
+  if (!moves_pos) ax.Tc_pos = ax.Tc_neg;
+  if (!moves_neg) ax.Tc_neg = ax.Tc_pos;
+}
+
+/// Physical floors, each said: an inertia the fixed-step drive integrates
+/// (B Ts / J <= 0.5) and that 1 % of the torque RMS accelerates at most at
+/// the run's RMS acceleration; B and the Coulomb levels not below zero.
+std::vector<std::string> clamp_drive(const DriveRows& d, double Ts, AxisFromData& ax) {
+  std::vector<std::string> clamped;
+  const double a_rms = std::sqrt(d.a2 / static_cast<double>(d.rows.size()));
+  const double T_rms = std::sqrt(d.T2 / static_cast<double>(d.rows.size()));
+  const double J_floor = std::max({2.0 * std::max(ax.B, 0.0) * Ts, a_rms > 0.0 ? 0.01 * T_rms / a_rms : 0.0, 1e-9});
+  if (ax.J < J_floor) {
+    clamped.push_back(fmt::format("J {:.4g} raised to {:.4g} (the log's accelerations do not resolve it)", ax.J, J_floor));
+    ax.J = J_floor;
+  }
+  if (ax.B < 0.0) {
+    clamped.push_back(fmt::format("B {:.4g} set to 0", ax.B));
+    ax.B = 0.0;
+  }
+  for (double* tc : {&ax.Tc_pos, &ax.Tc_neg})
+    if (*tc < 0.0) {
+      clamped.push_back(fmt::format("a Coulomb level {:.4g} set to 0", *tc));
+      *tc = 0.0;
+    }
+  return clamped;
+}
+
+/// The drive in the channel's unit; false (said in the axis's note) where it
+/// cannot be identified.
+bool identify_drive_in_channel(const AxisFit& f, AxisFromData& ax, DataCalibration& out) {
+  const Axis a = ax.axis;
+  if (!ax.channel.present()) {
+    ax.note = fmt::format("axis {}: no torque, current or command channel: the drive is not identified and the axis is "
+                          "not replayed",
+                          axis_name(a));
+    out.notes.push_back(ax.note);
+    return false;
+  }
+  DriveRows d = drive_rows(f, ax);
+  const bool moves_pos = std::any_of(d.pos.begin(), d.pos.end(), [](double x) { return x != 0.0; });
+  const bool moves_neg = std::any_of(d.neg.begin(), d.neg.end(), [](double x) { return x != 0.0; });
+  std::vector<const std::vector<double>*> X{&d.acc, &d.vel};
+  if (moves_pos) X.push_back(&d.pos);
+  if (moves_neg) X.push_back(&d.neg);
+  X.push_back(&d.one);
+  const LsqResult ls = least_squares(X, d.T, d.rows);
+  ax.fit_rows = d.rows.size();
+  if (!ls.ok || !(moves_pos || moves_neg)) {
+    ax.note = fmt::format("axis {}: the drive could not be identified ({} rows, {}); the axis is not replayed",
+                          axis_name(a), d.rows.size(), moves_pos || moves_neg ? "rank deficient" : "the axis does not move");
+    out.notes.push_back(ax.note);
+    return false;
+  }
+  take_drive_fit(ls, moves_pos, moves_neg, ax);
+  const std::vector<std::string> clamped = clamp_drive(d, f.Ts, ax);
+  ax.identified = true;
+  ax.note = clamped.empty() ? "" : fmt::format("axis {}: {}", axis_name(a), fmt::join(clamped, "; "));
+  if (!ax.note.empty()) out.notes.push_back(ax.note);
+  return true;
+}
+
+/// The same law a few samples later: a torque that follows its command late
+/// (a delay beyond the loop) fits best at that lag. A lag that lowers the
+/// residual by less than a fifth is the law's own noise.
+void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, AxisFromData& ax) {
+  ax.gains_at_lag = ax.gains;
+  double best = vl.ls.residual_rms;
+  const auto max_lag = static_cast<std::size_t>(std::clamp(std::lround(0.01 / f.r0.sample_period_s), 1L, 10L));
+  for (std::size_t lag = 1; lag <= max_lag; ++lag) {
+    const VelocityLoopFit vlag = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, lag);
+    if (!(vlag.ls.ok && vlag.ls.theta[0] > 0.0 && vlag.ls.theta[1] >= 0.0 && vlag.ls.residual_rms < best)) continue;
+    best = vlag.ls.residual_rms;
+    ax.torque_lag_samples = lag;
+    ax.gains_at_lag.Kvp_torque_s_per_rad = vlag.ls.theta[0];
+    ax.gains_at_lag.Tn_s = vlag.ls.theta[1] > 0.0 ? vlag.ls.theta[0] / vlag.ls.theta[1] : 0.0;
+  }
+  if (ax.torque_lag_samples > 0 && best > 0.8 * vl.ls.residual_rms) {
+    ax.torque_lag_samples = 0;
+    ax.gains_at_lag = ax.gains;
+  }
+}
+
+/// The velocity loop: from the logged torque against the speed error where
+/// both speeds are logged at the loop's rate, else well above the position loop.
+void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) {
+  const double wv = std::min(std::max(5.0 * ax.gains.Kv_per_s, 2.0 * M_PI * 20.0), 0.3 / f.Ts);
+  ax.gains.Kvp_torque_s_per_rad = ax.J * wv;
+  ax.gains.Tn_s = 4.0 / wv;
+  ax.gains.tau_i_s = 0.0;
+  ax.gains.T_max = 1e9;
+  if (have_vcmd && f.r0.sample_period_s <= 2e-3 + 1e-12 && all_runs_log(f.runs, col(ax.axis, "_v_mm_s"))) {
+    const VelocityLoopFit vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, 0);
+    if (vl.ls.ok && vl.ls.theta[0] > 0.0 && vl.ls.theta[1] >= 0.0 && vl.ls.residual_rms < 0.3 * vl.T_rms) {
+      ax.gains.Kvp_torque_s_per_rad = vl.ls.theta[0];
+      ax.gains.Tn_s = vl.ls.theta[1] > 0.0 ? vl.ls.theta[0] / vl.ls.theta[1] : 0.0;
+      ax.velocity_loop_from_data = true;
+      ax.loop_source += fmt::format("; velocity loop from the logged torque against the speed error (residual "
+                                    "{:.3g} of an RMS {:.3g})",
+                                    vl.ls.residual_rms, vl.T_rms);
+      velocity_loop_lag(f, vl, ax);
+    }
+  }
+  if (!ax.velocity_loop_from_data)
+    ax.loop_source += fmt::format("; the velocity loop is not seen directly in this log: its bandwidth starts at "
+                                  "{:.3g} rad/s ({:.3g} times Kv) with Tn = 4 / that",
+                                  wv, wv / ax.gains.Kv_per_s);
+}
+
+/// The axis of the machine: the cascade loop and the drive in the channel's
+/// unit (Kt = Ka = 1, rg = 1 mm/rad).
+void set_identified_axis(sim::AxisDefinition& def, const AxisFromData& ax, double Ts) {
+  def.present = true;
+  def.drive = feeddrive::DriveParams{};
+  def.drive.Ka_A_per_V = 1.0;
+  def.drive.Kt_Nm_per_A = 1.0;
+  def.drive.rg_mm_per_rad = 1.0;
+  def.drive.J_kg_m2 = ax.J;
+  def.drive.B_kg_m2_per_s = ax.B;
+  def.drive.Tc_pos_Nm = ax.Tc_pos;
+  def.drive.Tc_neg_Nm = ax.Tc_neg;
+  def.drive.effects.constant_load.enabled = ax.c != 0.0;
+  def.drive.effects.constant_load.torque_Nm = ax.c;
+  def.loop.law = controller::LoopLaw::kCascade;
+  def.loop.cascade = ax.gains;
+  def.loop.Ts_s = Ts;
+  def.following_error_limit_mm = 1e3;
+}
+
+/// Loop and drive of one axis, found in the fitting runs.
+AxisFromData identify_axis_from_data(const AxisFit& f, Axis a, sim::MachineDefinition& m, DataCalibration& out) {
+  AxisFromData ax;
+  ax.axis = a;
+  ax.channel = torque_channel(f.r0, a);
+  const bool have_vcmd = all_runs_log(f.runs, col(a, "_vcmd_mm_s"));
+  const bool have_x = all_runs_log(f.runs, col(a, "_mm"));
+  identify_position_loop(f, ax, have_vcmd, have_x);
+  if (!identify_drive_in_channel(f, ax, out)) return ax;
+  identify_velocity_loop(f, ax, have_vcmd);
+  set_identified_axis(m.axes[index(a)], ax, f.Ts);
+  return ax;
+}
+
+/// The cascade machine found in the fitting runs, no effects.
+sim::MachineDefinition identify_machine(const AxisFit& f, DataCalibration& out) {
   sim::MachineDefinition m;
   m.name = "identified";
   m.source = "twin calibrate (from data)";
-  m.Ts_s = Ts;
+  m.Ts_s = f.Ts;
   m.encoder_resolution_mm = out.rounding.quantum_mm > 0.0 && out.rounding.quantum_mm <= 0.01 &&
                                     out.rounding.kind == PositionRounding::Kind::kDecimals
                                 ? out.rounding.quantum_mm
                                 : 0.001;
   sim::set_machine_loop_law(m, controller::LoopLaw::kCascade);
-
-  for (Axis a : out.axes) {
-    AxisFromData ax;
-    ax.axis = a;
-    ax.channel = torque_channel(r0, a);
-    const std::size_t i = index(a);
-    // The loop: vcmd regression where logged, else the lag of the position.
-    double num = 0.0, den = 0.0;
-    std::vector<double> e_col, v_col, vc_col;
-    bool have_vcmd = true, have_x = true;
-    for (const auto& rd : runs) {
-      have_vcmd = have_vcmd && rd.run->trace.find(col(a, "_vcmd_mm_s")) != nullptr;
-      have_x = have_x && rd.run->trace.find(col(a, "_mm")) != nullptr;
-    }
-    if (have_vcmd && have_x) {
-      std::vector<double> e, vr, vc;
-      std::vector<std::size_t> rows;
-      fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
-        const auto& t = runs[r].run->trace;
-        const auto& ref = t.at(col(a, "_ref_mm"));
-        e.push_back(ref[k] - t.at(col(a, "_mm"))[k]);
-        // The law's own speed: the backward difference of the reference.
-        vr.push_back((ref[k] - ref[k - 1]) / runs[r].run->sample_period_s);
-        vc.push_back(t.at(col(a, "_vcmd_mm_s"))[k]);
-        rows.push_back(rows.size());
-      });
-      const LsqResult ls = least_squares({&e, &vr}, vc, rows);
-      if (ls.ok && ls.theta[0] > 0.0) {
-        ax.gains.Kv_per_s = ls.theta[0];
-        ax.gains.kff = std::clamp(ls.theta[1], 0.0, 1.5);
-        ax.lag_s = (1.0 - ax.gains.kff) / ax.gains.Kv_per_s;
-        double vrms = 0.0;
-        for (double x : vc) vrms += x * x;
-        vrms = std::sqrt(vrms / static_cast<double>(std::max<std::size_t>(1, vc.size())));
-        ax.loop_source = fmt::format("the logged velocity command against the following error and the command's speed "
-                                     "(residual {:.3g} mm/s against an RMS of {:.3g} mm/s)",
-                                     ls.residual_rms, vrms);
-      }
-    }
-    if (ax.loop_source.empty() && have_x) {
-      fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
-        const double v = runs[r].kin[i].v_mm_per_s[k];
-        if (direction(v, runs[r].v_move[i]) == 0) return;
-        const auto& t = runs[r].run->trace;
-        num += (v > 0 ? 1.0 : -1.0) * (t.at(col(a, "_ref_mm"))[k] - t.at(col(a, "_mm"))[k]);
-        den += std::abs(v);
-      });
-      ax.lag_s = den > 0.0 ? num / den : 0.0;
-      if (ax.lag_s > 1e-4) {
-        ax.gains.Kv_per_s = 1.0 / ax.lag_s;
-        ax.gains.kff = 0.0;
-        ax.loop_source = fmt::format("the lag of the position behind the command ({:.4g} ms, the mean of the rounded "
-                                     "following error over the speed); a P loop without feedforward assumed",
-                                     1e3 * ax.lag_s);
-      }
-    }
-    if (ax.loop_source.empty()) {
-      ax.gains.Kv_per_s = 1.0 / std::max(10.0 * Ts, 0.01);
-      ax.loop_source = fmt::format("not seen in the data ({}); Kv = {:.4g} 1/s assumed",
-                                   have_x ? "the position does not lag the command measurably" : "no position logged",
-                                   ax.gains.Kv_per_s);
-    }
-
-    // The drive, in the channel's unit.
-    if (!ax.channel.present()) {
-      ax.note = fmt::format("axis {}: no torque, current or command channel: the drive is not identified and the axis is "
-                            "not replayed",
-                            axis_name(a));
-      out.notes.push_back(ax.note);
-      out.axis.push_back(ax);
-      continue;
-    }
-    // The axis's own motion where a fast log has its speed (the torque
-    // accelerates the axis, not the command: under a loop whose torque
-    // overshoots at every change of acceleration, J fitted on the commanded
-    // acceleration comes out 17 % low on the truth runs of the tests), else
-    // the commanded kinematics (the logged positions are often too coarse to
-    // differentiate).
-    bool own_speed = r0.sample_period_s <= 2e-3 + 1e-12;
-    for (const auto& rd : runs) own_speed = own_speed && rd.run->trace.find(col(a, "_v_mm_s")) != nullptr;
-    std::vector<double> acc, vel, pos, neg, one, T;
-    std::vector<std::size_t> rows;
-    double a2 = 0.0, T2 = 0.0;
-    fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
-      const auto* ch = runs[r].run->trace.find(ax.channel.column);
-      if (ch == nullptr) return;
-      const auto* vm = own_speed ? runs[r].run->trace.find(col(a, "_v_mm_s")) : nullptr;
-      if (vm != nullptr && (k == 0 || k + 1 >= vm->size())) return;
-      const double v = vm ? (*vm)[k] : runs[r].kin[i].v_mm_per_s[k];
-      const int d = direction(v, runs[r].v_move[i]);
-      acc.push_back(vm ? ((*vm)[k + 1] - (*vm)[k - 1]) / (2.0 * runs[r].run->sample_period_s)
-                       : runs[r].kin[i].a_mm_per_s2[k]);
-      vel.push_back(v);
-      pos.push_back(d > 0 ? 1.0 : 0.0);
-      neg.push_back(d < 0 ? -1.0 : 0.0);
-      one.push_back(1.0);
-      T.push_back((*ch)[k]);
-      a2 += acc.back() * acc.back();
-      T2 += T.back() * T.back();
-      rows.push_back(rows.size());
-    });
-    const bool moves_pos = std::any_of(pos.begin(), pos.end(), [](double x) { return x != 0.0; });
-    const bool moves_neg = std::any_of(neg.begin(), neg.end(), [](double x) { return x != 0.0; });
-    std::vector<const std::vector<double>*> X{&acc, &vel};
-    if (moves_pos) X.push_back(&pos);
-    if (moves_neg) X.push_back(&neg);
-    X.push_back(&one);
-    const LsqResult ls = least_squares(X, T, rows);
-    ax.fit_rows = rows.size();
-    if (!ls.ok || !(moves_pos || moves_neg)) {
-      ax.note = fmt::format("axis {}: the drive could not be identified ({} rows, {}); the axis is not replayed",
-                            axis_name(a), rows.size(), moves_pos || moves_neg ? "rank deficient" : "the axis does not move");
-      out.notes.push_back(ax.note);
-      out.axis.push_back(ax);
-      continue;
-    }
-    std::size_t j = 0;
-    ax.J = ls.theta[j];
-    ax.J_se = ls.stderr_theta[j++];
-    ax.B = ls.theta[j];
-    ax.B_se = ls.stderr_theta[j++];
-    if (moves_pos) {
-      ax.Tc_pos = ls.theta[j];
-      ax.Tc_pos_se = ls.stderr_theta[j++];
-    }
-    if (moves_neg) {
-      ax.Tc_neg = ls.theta[j];
-      ax.Tc_neg_se = ls.stderr_theta[j++];
-    }
-    ax.c = ls.theta[j];
-    ax.c_se = ls.stderr_theta[j];
-    if (!moves_pos) ax.Tc_pos = ax.Tc_neg;
-    if (!moves_neg) ax.Tc_neg = ax.Tc_pos;
-    std::vector<std::string> clamped;
-    // Physical floors: an inertia the fixed-step drive integrates (B Ts / J <= 0.5)
-    // and that 1 % of the torque RMS accelerates at most at the run's RMS acceleration.
-    const double a_rms = std::sqrt(a2 / static_cast<double>(rows.size()));
-    const double T_rms = std::sqrt(T2 / static_cast<double>(rows.size()));
-    const double J_floor = std::max({2.0 * std::max(ax.B, 0.0) * Ts, a_rms > 0.0 ? 0.01 * T_rms / a_rms : 0.0, 1e-9});
-    if (ax.J < J_floor) {
-      clamped.push_back(fmt::format("J {:.4g} raised to {:.4g} (the log's accelerations do not resolve it)", ax.J, J_floor));
-      ax.J = J_floor;
-    }
-    if (ax.B < 0.0) {
-      clamped.push_back(fmt::format("B {:.4g} set to 0", ax.B));
-      ax.B = 0.0;
-    }
-    for (double* tc : {&ax.Tc_pos, &ax.Tc_neg})
-      if (*tc < 0.0) {
-        clamped.push_back(fmt::format("a Coulomb level {:.4g} set to 0", *tc));
-        *tc = 0.0;
-      }
-    ax.identified = true;
-    ax.note = clamped.empty() ? "" : fmt::format("axis {}: {}", axis_name(a), fmt::join(clamped, "; "));
-    if (!ax.note.empty()) out.notes.push_back(ax.note);
-
-    // The velocity loop: from the logged torque against the speed error where
-    // both speeds are logged at the loop's rate, else well above the position loop.
-    const double wv = std::min(std::max(5.0 * ax.gains.Kv_per_s, 2.0 * M_PI * 20.0), 0.3 / Ts);
-    ax.gains.Kvp_torque_s_per_rad = ax.J * wv;
-    ax.gains.Tn_s = 4.0 / wv;
-    ax.gains.tau_i_s = 0.0;
-    ax.gains.T_max = 1e9;
-    bool vel_from_data = false;
-    if (have_vcmd && r0.sample_period_s <= 2e-3 + 1e-12) {
-      bool have_v = true;
-      for (const auto& rd : runs) have_v = have_v && rd.run->trace.find(col(a, "_v_mm_s")) != nullptr;
-      if (have_v) {
-        const VelocityLoopFit vl = fit_velocity_loop(runs, a, ax.channel.column, 0);
-        if (vl.ls.ok && vl.ls.theta[0] > 0.0 && vl.ls.theta[1] >= 0.0 && vl.ls.residual_rms < 0.3 * vl.T_rms) {
-          ax.gains.Kvp_torque_s_per_rad = vl.ls.theta[0];
-          ax.gains.Tn_s = vl.ls.theta[1] > 0.0 ? vl.ls.theta[0] / vl.ls.theta[1] : 0.0;
-          vel_from_data = true;
-          ax.velocity_loop_from_data = true;
-          ax.loop_source += fmt::format("; velocity loop from the logged torque against the speed error (residual "
-                                        "{:.3g} of an RMS {:.3g})",
-                                        vl.ls.residual_rms, vl.T_rms);
-          // The same law a few samples later: a torque that follows its
-          // command late (a delay beyond the loop) fits best at that lag.
-          ax.gains_at_lag = ax.gains;
-          double best = vl.ls.residual_rms;
-          const auto max_lag = static_cast<std::size_t>(std::clamp(std::lround(0.01 / r0.sample_period_s), 1L, 10L));
-          for (std::size_t lag = 1; lag <= max_lag; ++lag) {
-            const VelocityLoopFit vlag = fit_velocity_loop(runs, a, ax.channel.column, lag);
-            if (!(vlag.ls.ok && vlag.ls.theta[0] > 0.0 && vlag.ls.theta[1] >= 0.0 && vlag.ls.residual_rms < best))
-              continue;
-            best = vlag.ls.residual_rms;
-            ax.torque_lag_samples = lag;
-            ax.gains_at_lag.Kvp_torque_s_per_rad = vlag.ls.theta[0];
-            ax.gains_at_lag.Tn_s = vlag.ls.theta[1] > 0.0 ? vlag.ls.theta[0] / vlag.ls.theta[1] : 0.0;
-          }
-          // A lag that lowers the residual by less than a fifth is the law's own noise.
-          if (ax.torque_lag_samples > 0 && best > 0.8 * vl.ls.residual_rms) {
-            ax.torque_lag_samples = 0;
-            ax.gains_at_lag = ax.gains;
-          }
-        }
-      }
-    }
-    if (!vel_from_data)
-      ax.loop_source += fmt::format("; the velocity loop is not seen directly in this log: its bandwidth starts at "
-                                    "{:.3g} rad/s ({:.3g} times Kv) with Tn = 4 / that",
-                                    wv, wv / ax.gains.Kv_per_s);
-
-    sim::AxisDefinition& def = m.axes[i];
-    def.present = true;
-    def.drive = feeddrive::DriveParams{};
-    def.drive.Ka_A_per_V = 1.0;
-    def.drive.Kt_Nm_per_A = 1.0;
-    def.drive.rg_mm_per_rad = 1.0;
-    def.drive.J_kg_m2 = ax.J;
-    def.drive.B_kg_m2_per_s = ax.B;
-    def.drive.Tc_pos_Nm = ax.Tc_pos;
-    def.drive.Tc_neg_Nm = ax.Tc_neg;
-    def.drive.effects.constant_load.enabled = ax.c != 0.0;
-    def.drive.effects.constant_load.torque_Nm = ax.c;
-    def.loop.law = controller::LoopLaw::kCascade;
-    def.loop.cascade = ax.gains;
-    def.loop.Ts_s = Ts;
-    def.following_error_limit_mm = 1e3;
-    out.axis.push_back(ax);
-  }
+  for (Axis a : out.axes) out.axis.push_back(identify_axis_from_data(f, a, m, out));
   sim::set_machine_loop_law(m, controller::LoopLaw::kCascade);
   for (Axis a : kAllAxes)
     if (!m.axes[index(a)].present) m.axes[index(a)] = sim::AxisDefinition{};
   if (m.present_axes().empty())
-    throw ConfigError(fmt::format("{}: no axis could be identified: {}", r0.dir.string(),
+    throw ConfigError(fmt::format("{}: no axis could be identified: {}", f.r0.dir.string(),
                                   out.axis.empty() ? std::string("no axis") : out.axis.front().note));
   sim::set_machine_loop_law(m, controller::LoopLaw::kCascade);
   m.validate();
-  out.identified = m;
-  out.final_machine = m;
+  return m;
+}
 
-  // What a log of this rate and resolution cannot show.
-  const double dt = r0.sample_period_s;
+/// What a log of this rate and resolution cannot show.
+void skip_unseen_effects(const std::vector<MeasuredRun>& fit, DataCalibration& out) {
+  const double dt = fit.front().sample_period_s;
   const double q = out.rounding.quantum_mm;
+  auto skip = [&](EffectKind k, std::string why) {
+    out.skipped.emplace_back(feeddrive::effect_name(k), std::move(why));
+  };
   if (dt > 2e-3) {
-    out.skipped.emplace_back("delay", fmt::format("a delay of a few loop periods is far below the {:g} s sample "
-                                                  "period: it cannot be told from the loop's lag",
-                                                  dt));
-    out.skipped.emplace_back("compliance", fmt::format("a resonance above the Nyquist frequency {:.3g} Hz of the log "
-                                                       "cannot be seen",
-                                                       0.5 / dt));
-    out.skipped.emplace_back("cogging", fmt::format("a ripple periodic in motor angle needs several samples per "
-                                                    "period; at {:g} s per sample it aliases",
-                                                    dt));
+    skip(EffectKind::kDelay, fmt::format("a delay of a few loop periods is far below the {:g} s sample "
+                                         "period: it cannot be told from the loop's lag",
+                                         dt));
+    skip(EffectKind::kCompliance, fmt::format("a resonance above the Nyquist frequency {:.3g} Hz of the log "
+                                              "cannot be seen",
+                                              0.5 / dt));
+    skip(EffectKind::kCogging, fmt::format("a ripple periodic in motor angle needs several samples per "
+                                           "period; at {:g} s per sample it aliases",
+                                           dt));
   }
   if (dt <= 2e-3 + 1e-12)
-    out.skipped.emplace_back("compliance", "not searched on a machine identified from data: its drive is one inertia "
-                                           "in the log's unit, and a two-mass resonance needs the split of that "
-                                           "inertia and a stiffness the replay of a cascade loop does not resolve");
+    skip(EffectKind::kCompliance, "not searched on a machine identified from data: its drive is one inertia "
+                                  "in the log's unit, and a two-mass resonance needs the split of that "
+                                  "inertia and a stiffness the replay of a cascade loop does not resolve");
   if (dt <= 2e-3 + 1e-12 && q <= 0.005) {
     bool speed = true;
     for (Axis a : out.axes)
       for (const MeasuredRun& r : fit) speed = speed && r.trace.find(col(a, "_v_mm_s")) != nullptr;
     if (!speed)
-      out.skipped.emplace_back("screw_pitch_error", "a lead error moves the encoder and not the motor: it is told "
-                                                    "from the logged motor speed against the speed of the logged "
-                                                    "position, and this log has no speed column");
+      skip(EffectKind::kScrewPitchError, "a lead error moves the encoder and not the motor: it is told "
+                                         "from the logged motor speed against the speed of the logged "
+                                         "position, and this log has no speed column");
   }
   if (q > 0.005) {
-    out.skipped.emplace_back("screw_pitch_error", fmt::format("a lead error of microns is below the log's position "
-                                                              "quantum {:g} mm",
-                                                              q));
-    out.skipped.emplace_back("backlash", fmt::format("lost motion at reversals below the log's position quantum "
-                                                     "{:g} mm is not seen in the position",
-                                                     q));
+    skip(EffectKind::kScrewPitchError, fmt::format("a lead error of microns is below the log's position "
+                                                   "quantum {:g} mm",
+                                                   q));
+    skip(EffectKind::kBacklash, fmt::format("lost motion at reversals below the log's position quantum "
+                                            "{:g} mm is not seen in the position",
+                                            q));
   }
+}
 
-  // Replays and errors.
-  auto errors_on = [&](const sim::MachineDefinition& machine, const RunData& rd, std::size_t from, std::size_t to,
-                       bool same_unit, ReplayResult* keep, ChannelErrors& dst, PoolSet* pooled) {
-    PoolSet pools;
-    std::vector<char> cmp;
-    try {
-      ReplayResult rr = replay_segments(*rd.smooth, machine, rd.segments, out.rounding, &cmp);
-      ++out.replays;
-      for (std::size_t k = 0; k < cmp.size(); ++k) cmp[k] = static_cast<char>(cmp[k] && rd.interior[k]);
-      std::map<std::string, std::string> nc;
-      add_errors(pools, *rd.run, rr, cmp, out.axes, from, to, same_unit,
-                 sim::machine_loop_law(machine) == controller::LoopLaw::kCascade, &nc);
-      dst = errors_from(pools);
-      for (auto& [k, why] : nc) dst.not_computed[k] = why;
-      if (keep) *keep = std::move(rr);
-      if (pooled)
-        for (const auto& [k, p] : pools) (*pooled)[k].add(p);
-    } catch (const Error& e) {
-      for (Axis a : out.axes) {
-        dst.not_computed[col(a, "_err_mm")] = fmt::format("the replay failed: {}", e.what());
-        const TorqueChannel ch = torque_channel(*rd.run, a);
-        if (ch.present()) dst.not_computed[ch.column] = fmt::format("the replay failed: {}", e.what());
-      }
+/// Replays `machine` on `rd` and puts its errors on rows [from, to) in `dst`
+/// (the replay kept in `keep`, the pools added to `pooled`, where given).
+void errors_on(DataCalibration& out, const sim::MachineDefinition& machine, const RunData& rd, std::size_t from,
+               std::size_t to, bool same_unit, ReplayResult* keep, ChannelErrors& dst, PoolSet* pooled) {
+  PoolSet pools;
+  std::vector<char> cmp;
+  try {
+    ReplayResult rr = replay_segments(*rd.smooth, machine, rd.segments, out.rounding, &cmp);
+    ++out.replays;
+    for (std::size_t k = 0; k < cmp.size(); ++k) cmp[k] = static_cast<char>(cmp[k] && rd.interior[k]);
+    std::map<std::string, std::string> nc;
+    add_errors(pools, *rd.run, rr, cmp, out.axes, from, to, same_unit,
+               sim::machine_loop_law(machine) == controller::LoopLaw::kCascade, &nc);
+    dst = errors_from(pools);
+    for (auto& [k, why] : nc) dst.not_computed[k] = why;
+    if (keep) *keep = std::move(rr);
+    if (pooled)
+      for (const auto& [k, p] : pools) (*pooled)[k].add(p);
+  } catch (const Error& e) {
+    for (Axis a : out.axes) {
+      dst.not_computed[col(a, "_err_mm")] = fmt::format("the replay failed: {}", e.what());
+      const TorqueChannel ch = torque_channel(*rd.run, a);
+      if (ch.present()) dst.not_computed[ch.column] = fmt::format("the replay failed: {}", e.what());
     }
+  }
+}
+
+/// The errors of `machine` pooled over the fitting runs: on their fitting
+/// rows, or on their held-out rows.
+ChannelErrors pooled_on_fit_runs(DataCalibration& out, const std::vector<RunData>& runs,
+                                 const sim::MachineDefinition& machine, bool held_out) {
+  PoolSet pools;
+  for (const RunData& rd : runs) {
+    ChannelErrors ignored;
+    errors_on(out, machine, rd, held_out ? rd.n_fit : 0, held_out ? rd.n : rd.n_fit, true, nullptr, ignored, &pools);
+  }
+  return errors_from(pools);
+}
+
+/// The velocity loop where the log cannot show it: its bandwidth and
+/// integral time still shape what the current does where the axis stops
+/// (the torque the integral holds against friction), which the fitting rows
+/// show. A small grid around the default, chosen per axis on the fitting
+/// rows of the fitting runs; the held-out rows judge it like everything else.
+void choose_velocity_loops(DataCalibration& out, const std::vector<RunData>& runs) {
+  struct Choice {
+    double score{1e300};
+    double Kvp{0.0}, Tn{0.0};
   };
-
-  // The velocity loop where the log cannot show it: its bandwidth and
-  // integral time still shape what the current does where the axis stops
-  // (the torque the integral holds against friction), which the fitting rows
-  // show. A small grid around the default, chosen per axis on the fitting
-  // rows of the fitting runs; the held-out rows judge it like everything else.
-  {
-    struct Choice {
-      double score{1e300};
-      double Kvp{0.0}, Tn{0.0};
-    };
-    AxisArray<Choice> best{};
-    bool any = false;
-    for (const AxisFromData& ax : out.axis) any = any || (ax.identified && !ax.velocity_loop_from_data);
-    const std::vector<double> wv_factors{0.25, 0.5, 1.0, 2.0};
-    const std::vector<double> tn_factors{0.0, 2.0, 4.0, 16.0};
-    for (double fw : any ? wv_factors : std::vector<double>{}) {
-      for (double ft : tn_factors) {
-        sim::MachineDefinition trial = out.identified;
-        for (const AxisFromData& ax : out.axis) {
-          if (!ax.identified || ax.velocity_loop_from_data) continue;
-          auto& g = trial.axes[index(ax.axis)].loop.cascade;
-          const double wv = fw * ax.gains.Kvp_torque_s_per_rad / ax.J;
-          g.Kvp_torque_s_per_rad = ax.J * wv;
-          g.Tn_s = ft > 0.0 ? ft / wv : 0.0;
-        }
-        PoolSet pools;
-        for (const RunData& rd : runs) {
-          ChannelErrors ignored;
-          errors_on(trial, rd, 0, rd.n_fit, true, nullptr, ignored, &pools);
-        }
-        const ChannelErrors e = errors_from(pools);
-        for (const AxisFromData& ax : out.axis) {
-          if (!ax.identified || ax.velocity_loop_from_data) continue;
-          const auto it = e.nrms.find(ax.channel.column);
-          if (it == e.nrms.end() || !(it->second < best[index(ax.axis)].score)) continue;
-          const auto& g = trial.axes[index(ax.axis)].loop.cascade;
-          best[index(ax.axis)] = {it->second, g.Kvp_torque_s_per_rad, g.Tn_s};
-        }
+  AxisArray<Choice> best{};
+  bool any = false;
+  for (const AxisFromData& ax : out.axis) any = any || (ax.identified && !ax.velocity_loop_from_data);
+  const std::vector<double> wv_factors{0.25, 0.5, 1.0, 2.0};
+  const std::vector<double> tn_factors{0.0, 2.0, 4.0, 16.0};
+  for (double fw : any ? wv_factors : std::vector<double>{}) {
+    for (double ft : tn_factors) {
+      sim::MachineDefinition trial = out.identified;
+      for (const AxisFromData& ax : out.axis) {
+        if (!ax.identified || ax.velocity_loop_from_data) continue;
+        auto& g = trial.axes[index(ax.axis)].loop.cascade;
+        const double wv = fw * ax.gains.Kvp_torque_s_per_rad / ax.J;
+        g.Kvp_torque_s_per_rad = ax.J * wv;
+        g.Tn_s = ft > 0.0 ? ft / wv : 0.0;
+      }
+      const ChannelErrors e = pooled_on_fit_runs(out, runs, trial, false);
+      for (const AxisFromData& ax : out.axis) {
+        if (!ax.identified || ax.velocity_loop_from_data) continue;
+        const auto it = e.nrms.find(ax.channel.column);
+        if (it == e.nrms.end() || !(it->second < best[index(ax.axis)].score)) continue;
+        const auto& g = trial.axes[index(ax.axis)].loop.cascade;
+        best[index(ax.axis)] = {it->second, g.Kvp_torque_s_per_rad, g.Tn_s};
       }
     }
-    for (AxisFromData& ax : out.axis) {
-      const Choice& c = best[index(ax.axis)];
-      if (!ax.identified || ax.velocity_loop_from_data || c.score >= 1e300) continue;
-      ax.gains.Kvp_torque_s_per_rad = c.Kvp;
-      ax.gains.Tn_s = c.Tn;
-      out.identified.axes[index(ax.axis)].loop.cascade = ax.gains;
-      ax.loop_source += fmt::format("; chosen on the fitting rows among 16 velocity loops: Kvp {:.4g}, Tn {:.4g} s "
-                                    "(fitting-row NRMS {:.4g})",
-                                    c.Kvp, c.Tn, c.score);
-    }
-    out.final_machine = out.identified;
   }
-
-  // Friction that relaxes at rest (smooth_friction). A stopped axis with
-  // stick/slip friction holds the Coulomb level of its last direction (the
-  // velocity loop winds up to the breakaway torque and the axis creeps until
-  // its error is within a count); real drives hold a torque spread about
-  // zero. The speed scale is chosen per axis on the fitting rows among three
-  // multiples of the axis's moving threshold; it is kept where it lowers the
-  // held-out error of the fitting runs (the rule every added effect follows).
-  {
-    auto fit_rows_nrms = [&](const sim::MachineDefinition& machine) {
-      PoolSet pools;
-      for (const RunData& rd : runs) {
-        ChannelErrors ignored;
-        errors_on(machine, rd, 0, rd.n_fit, true, nullptr, ignored, &pools);
-      }
-      return errors_from(pools);
-    };
-    auto held_out_nrms = [&](const sim::MachineDefinition& machine) {
-      PoolSet pools;
-      for (const RunData& rd : runs) {
-        ChannelErrors ignored;
-        errors_on(machine, rd, rd.n_fit, rd.n, true, nullptr, ignored, &pools);
-      }
-      return errors_from(pools);
-    };
-    auto with_smooth = [&](const sim::MachineDefinition& base, Axis a, double ws) {
-      sim::MachineDefinition trial = base;
-      auto& fx = trial.axes[index(a)].drive.effects.smooth_friction;
-      fx.enabled = true;
-      fx.ws_rad_per_s = ws;
-      return trial;
-    };
-    const ChannelErrors base_fit = fit_rows_nrms(out.identified);
-    const ChannelErrors base_held = held_out_nrms(out.identified);
-    sim::MachineDefinition final_machine = out.identified;
-    // The signature first: on the fitting rows where the command has stood
-    // still for 0.2 s, the torque the log holds off
-    // the constant load, against what the identified stick/slip model holds
-    // there. Stick/slip holds whatever it stopped at, up to the Coulomb
-    // level; friction that relaxes lets the loop bring it to the load.
-    const FitRunErrors id_replay = errors_on_fit_runs(runs, out.identified, out.axes, out.rounding, out.replays);
-    for (const AxisFromData& ax : out.axis) {
-      if (!ax.identified) continue;
-      const std::string key = ax.channel.column;
-      const auto bf = base_fit.nrms.find(key);
-      const auto bh = base_held.nrms.find(key);
-      if (bf == base_fit.nrms.end() || bh == base_held.nrms.end()) continue;
-      double held_log = 0.0, held_model = 0.0;
-      std::size_t rest_rows = 0;
-      for (std::size_t r = 0; id_replay.ok && r < runs.size(); ++r) {
-        const RunData& rd = runs[r];
-        const auto& T = rd.run->trace.at(key);
-        const auto* Tm = model_channel(id_replay.replays[r], ax.axis, ax.channel, true);
-        if (Tm == nullptr) continue;
-        const auto settle = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.2 / rd.run->sample_period_s)));
-        std::size_t still = 0;
-        for (std::size_t k = 0; k < rd.n_fit; ++k) {
-          still = direction(rd.kin[index(ax.axis)].v_mm_per_s[k], rd.v_move[index(ax.axis)]) == 0 ? still + 1 : 0;
-          if (still < settle || !rd.interior[k]) continue;
-          held_log += std::abs(T[k] - ax.c);
-          held_model += std::abs((*Tm)[k] - ax.c);
-          ++rest_rows;
-        }
-      }
-      if (rest_rows > 0) {
-        held_log /= static_cast<double>(rest_rows);
-        held_model /= static_cast<double>(rest_rows);
-      }
-      // Where the log samples slower than 2 ms, a rest period is a handful of
-      // samples of a loop that still settles: the signature is not read there,
-      // and the replay rule alone decides.
-      const bool resolves_rest = runs.front().run->sample_period_s <= 2e-3 + 1e-12;
-      if (resolves_rest && !(rest_rows >= 10 && held_log < 0.5 * held_model)) {
-        DataEffect eff;
-        eff.effect = "smooth_friction";
-        eff.axis = ax.axis;
-        eff.before = eff.after = bh->second;
-        eff.evidence = rest_rows < 10
-                           ? fmt::format("not tried: {} fitting rows at rest, too few to see what the axis holds there",
-                                         rest_rows)
-                           : fmt::format("not tried: at rest the log holds {:.4g} off the constant load on average, "
-                                         "the stick/slip model {:.4g}: the held torque does not relax",
-                                         held_log, held_model);
-        out.effects.push_back(eff);
-        continue;
-      }
-      // rg = 1 mm/rad in a machine identified from data: rad/s are mm/s.
-      double v_move = 0.0;
-      for (const RunData& rd : runs) v_move = std::max(v_move, rd.v_move[index(ax.axis)]);
-      double best_ws = 0.0, best_fit = bf->second;
-      for (double f : {0.1, 0.3, 1.0}) {
-        const ChannelErrors e = fit_rows_nrms(with_smooth(out.identified, ax.axis, f * v_move));
-        const auto it = e.nrms.find(key);
-        if (it != e.nrms.end() && it->second < best_fit) {
-          best_fit = it->second;
-          best_ws = f * v_move;
-        }
-      }
-      DataEffect eff;
-      eff.effect = "smooth_friction";
-      eff.axis = ax.axis;
-      eff.before = bh->second;
-      eff.after = bh->second;
-      if (best_ws <= 0.0) {
-        eff.evidence = fmt::format("no speed scale lowers the fitting rows' {} error ({:.4g})", key, bf->second);
-        out.effects.push_back(eff);
-        continue;
-      }
-      eff.params["ws"] = best_ws;
-      const ChannelErrors held = held_out_nrms(with_smooth(out.identified, ax.axis, best_ws));
-      const auto hh = held.nrms.find(key);
-      eff.after = hh != held.nrms.end() ? hh->second : bh->second;
-      eff.kept = eff.after < eff.before;
-      eff.evidence = fmt::format(
-          "a stopped axis holds {:.4g} off the constant load in the log (mean over its rest rows), the stick/slip "
-          "model {:.4g}: friction "
-          "smoothed below {:.3g} mm/s takes the {} error from {:.4g} to {:.4g} on the fitting rows and from {:.4g} "
-          "to {:.4g} on the held-out rows{}",
-          held_log, held_model, best_ws, key, bf->second, best_fit, eff.before, eff.after, eff.kept ? "" : " (not kept)");
-      if (eff.kept) final_machine = with_smooth(final_machine, ax.axis, best_ws);
-      out.effects.push_back(eff);
-    }
-    out.final_machine = final_machine;
+  for (AxisFromData& ax : out.axis) {
+    const Choice& c = best[index(ax.axis)];
+    if (!ax.identified || ax.velocity_loop_from_data || c.score >= 1e300) continue;
+    ax.gains.Kvp_torque_s_per_rad = c.Kvp;
+    ax.gains.Tn_s = c.Tn;
+    out.identified.axes[index(ax.axis)].loop.cascade = ax.gains;
+    ax.loop_source += fmt::format("; chosen on the fitting rows among 16 velocity loops: Kvp {:.4g}, Tn {:.4g} s "
+                                  "(fitting-row NRMS {:.4g})",
+                                  c.Kvp, c.Tn, c.score);
   }
+  out.final_machine = out.identified;
+}
 
-  // The catalogue effects the log's rate and resolution can show, each
-  // detected on the residual of the machine so far, replayed, and kept only
-  // where the held-out error falls.
-  search_catalogue_effects(out, runs);
+sim::MachineDefinition with_smooth_friction(const sim::MachineDefinition& base, Axis a, double ws) {
+  sim::MachineDefinition trial = base;
+  auto& fx = trial.axes[index(a)].drive.effects.smooth_friction;
+  fx.enabled = true;
+  fx.ws_rad_per_s = ws;
+  return trial;
+}
 
-  // Baselines fitted on the fitting rows: the rigid-body regression per axis.
+/// What a stopped axis holds off the constant load, mean over the fitting
+/// rows where the command has stood still for 0.2 s: in the log and in the
+/// replay of the identified machine.
+struct RestHolding {
+  double log{0.0}, model{0.0};
+  std::size_t rows{0};
+};
+RestHolding rest_holding(const std::vector<RunData>& runs, const FitRunErrors& id_replay, const AxisFromData& ax) {
+  RestHolding h;
+  for (std::size_t r = 0; id_replay.ok && r < runs.size(); ++r) {
+    const RunData& rd = runs[r];
+    const auto& T = rd.run->trace.at(ax.channel.column);
+    const auto* Tm = model_channel(id_replay.replays[r], ax.axis, ax.channel, true);
+    if (Tm == nullptr) continue;
+    const auto settle = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.2 / rd.run->sample_period_s)));
+    std::size_t still = 0;
+    for (std::size_t k = 0; k < rd.n_fit; ++k) {
+      still = direction(rd.kin[index(ax.axis)].v_mm_per_s[k], rd.v_move[index(ax.axis)]) == 0 ? still + 1 : 0;
+      if (still < settle || !rd.interior[k]) continue;
+      h.log += std::abs(T[k] - ax.c);
+      h.model += std::abs((*Tm)[k] - ax.c);
+      ++h.rows;
+    }
+  }
+  if (h.rows > 0) {
+    h.log /= static_cast<double>(h.rows);
+    h.model /= static_cast<double>(h.rows);
+  }
+  return h;
+}
+
+/// smooth_friction tried on one axis: the speed scale chosen on the fitting
+/// rows, kept where it lowers the held-out error.
+void try_smooth_friction_on_axis(DataCalibration& out, const std::vector<RunData>& runs, const AxisFromData& ax,
+                                 const FitRunErrors& id_replay, const ChannelErrors& base_fit,
+                                 const ChannelErrors& base_held, sim::MachineDefinition& final_machine) {
+  const std::string key = ax.channel.column;
+  const auto bf = base_fit.nrms.find(key);
+  const auto bh = base_held.nrms.find(key);
+  if (bf == base_fit.nrms.end() || bh == base_held.nrms.end()) return;
+  const RestHolding h = rest_holding(runs, id_replay, ax);
+  DataEffect eff;
+  eff.set_kind(EffectKind::kSmoothFriction);
+  eff.axis = ax.axis;
+  eff.before = eff.after = bh->second;
+  // Where the log samples slower than 2 ms, a rest period is a handful of
+  // samples of a loop that still settles: the signature is not read there,
+  // and the replay rule alone decides.
+  const bool resolves_rest = runs.front().run->sample_period_s <= 2e-3 + 1e-12;
+  if (resolves_rest && !(h.rows >= 10 && h.log < 0.5 * h.model)) {
+    eff.evidence = h.rows < 10
+                       ? fmt::format("not tried: {} fitting rows at rest, too few to see what the axis holds there",
+                                     h.rows)
+                       : fmt::format("not tried: at rest the log holds {:.4g} off the constant load on average, "
+                                     "the stick/slip model {:.4g}: the held torque does not relax",
+                                     h.log, h.model);
+    out.effects.push_back(eff);
+    return;
+  }
+  // rg = 1 mm/rad in a machine identified from data: rad/s are mm/s.
+  double v_move = 0.0;
+  for (const RunData& rd : runs) v_move = std::max(v_move, rd.v_move[index(ax.axis)]);
+  double best_ws = 0.0, best_fit = bf->second;
+  for (double f : {0.1, 0.3, 1.0}) {
+    const sim::MachineDefinition trial = with_smooth_friction(out.identified, ax.axis, f * v_move);
+    const ChannelErrors e = pooled_on_fit_runs(out, runs, trial, false);
+    const auto it = e.nrms.find(key);
+    if (it != e.nrms.end() && it->second < best_fit) {
+      best_fit = it->second;
+      best_ws = f * v_move;
+    }
+  }
+  if (best_ws <= 0.0) {
+    eff.evidence = fmt::format("no speed scale lowers the fitting rows' {} error ({:.4g})", key, bf->second);
+    out.effects.push_back(eff);
+    return;
+  }
+  eff.params[param_key(EffectKind::kSmoothFriction, EffectParam::smooth_friction_ws)] = best_ws;
+  const ChannelErrors held =
+      pooled_on_fit_runs(out, runs, with_smooth_friction(out.identified, ax.axis, best_ws), true);
+  const auto hh = held.nrms.find(key);
+  eff.after = hh != held.nrms.end() ? hh->second : bh->second;
+  eff.kept = eff.after < eff.before;
+  eff.evidence = fmt::format(
+      "a stopped axis holds {:.4g} off the constant load in the log (mean over its rest rows), the stick/slip "
+      "model {:.4g}: friction "
+      "smoothed below {:.3g} mm/s takes the {} error from {:.4g} to {:.4g} on the fitting rows and from {:.4g} "
+      "to {:.4g} on the held-out rows{}",
+      h.log, h.model, best_ws, key, bf->second, best_fit, eff.before, eff.after, eff.kept ? "" : " (not kept)");
+  if (eff.kept) final_machine = with_smooth_friction(final_machine, ax.axis, best_ws);
+  out.effects.push_back(eff);
+}
+
+/// Friction that relaxes at rest (smooth_friction). A stopped axis with
+/// stick/slip friction holds the Coulomb level of its last direction (the
+/// velocity loop winds up to the breakaway torque and the axis creeps until
+/// its error is within a count); real drives hold a torque spread about
+/// zero. The signature first: on the fitting rows where the command has
+/// stood still for 0.2 s, the torque the log holds off the constant load,
+/// against what the identified stick/slip model holds there (stick/slip
+/// holds whatever it stopped at, up to the Coulomb level; friction that
+/// relaxes lets the loop bring it to the load). The speed scale is chosen
+/// per axis on the fitting rows among three multiples of the axis's moving
+/// threshold; it is kept where it lowers the held-out error of the fitting
+/// runs (the rule every added effect follows).
+void try_smooth_friction(DataCalibration& out, const std::vector<RunData>& runs) {
+  const ChannelErrors base_fit = pooled_on_fit_runs(out, runs, out.identified, false);
+  const ChannelErrors base_held = pooled_on_fit_runs(out, runs, out.identified, true);
+  sim::MachineDefinition final_machine = out.identified;
+  const FitRunErrors id_replay = errors_on_fit_runs(runs, out.identified, out.axes, out.rounding, out.replays);
+  for (const AxisFromData& ax : out.axis)
+    if (ax.identified) try_smooth_friction_on_axis(out, runs, ax, id_replay, base_fit, base_held, final_machine);
+  out.final_machine = final_machine;
+}
+
+/// Baselines fitted on the fitting rows: the rigid-body regression per axis
+/// T = m a_cmd + Fc sgn(v_cmd) + b v_cmd + c, and the first-order lag of the
+/// tracking error e = lag v.
+AxisArray<Regression> fit_regressions(const DataCalibration& out, const std::vector<RunData>& runs) {
+  const Fitter fitter{runs};
   AxisArray<Regression> reg{};
   for (const AxisFromData& ax : out.axis) {
     const std::size_t i = index(ax.axis);
@@ -1813,91 +1992,107 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
     reg[i].ok = ls.ok;
     reg[i].theta = ls.theta;
   }
-  auto baselines = [&](const RunData& rd, std::size_t from, std::size_t to, ChannelErrors& zero, ChannelErrors& regr,
-                       PoolSet* pz, PoolSet* pr) {
-    PoolSet z, g;
-    for (const AxisFromData& ax : out.axis) {
-      const std::size_t i = index(ax.axis);
-      const auto& t = rd.run->trace;
-      const auto& ref = t.at(col(ax.axis, "_ref_mm"));
-      const auto& kin = rd.kin[i];
-      if (const auto* x = t.find(col(ax.axis, "_mm"))) {
-        Pool& pz1 = z[col(ax.axis, "_err_mm")];
-        Pool& pg1 = g[col(ax.axis, "_err_mm")];
-        for (std::size_t k = from; k < to; ++k) {
-          if (!rd.interior[k]) continue;
-          const double e = ref[k] - (*x)[k];
-          pz1.add(e, 0.0);
-          const double ref_smooth = rd.smooth->trace.at(col(ax.axis, "_ref_mm"))[k];
-          pg1.add(e, ref[k] - out.rounding.round(ref_smooth - reg[i].lag_s * kin.v_mm_per_s[k]));
-        }
-      }
-      if (const auto* vc = t.find(col(ax.axis, "_vcmd_mm_s"))) {
-        Pool& pz3 = z[col(ax.axis, "_vcmd_mm_s")];
-        for (std::size_t k = from; k < to; ++k)
-          if (rd.interior[k]) pz3.add((*vc)[k], 0.0);
-      }
-      const TorqueChannel ch = torque_channel(*rd.run, ax.axis);
-      if (!ch.present()) continue;
-      const auto& meas = t.at(ch.column);
-      Pool& pz2 = z[ch.column];
-      Pool& pg2 = g[ch.column];
+  return reg;
+}
+
+/// The model and the baselines are compared on the same rows: the interior
+/// rows of the replayed segments. One pool per model, over runs.
+struct ModelPools {
+  PoolSet nominal, identified, calibrated, zero, regression;
+};
+
+/// The zero model and the regression baselines of one run on rows [from, to).
+void baselines(const DataCalibration& out, const AxisArray<Regression>& reg, const RunData& rd, std::size_t from,
+               std::size_t to, RunErrors& re, ModelPools& pools) {
+  PoolSet z, g;
+  for (const AxisFromData& ax : out.axis) {
+    const std::size_t i = index(ax.axis);
+    const auto& t = rd.run->trace;
+    const auto& ref = t.at(col(ax.axis, "_ref_mm"));
+    const auto& kin = rd.kin[i];
+    if (const auto* x = t.find(col(ax.axis, "_mm"))) {
+      Pool& pz1 = z[col(ax.axis, "_err_mm")];
+      Pool& pg1 = g[col(ax.axis, "_err_mm")];
       for (std::size_t k = from; k < to; ++k) {
         if (!rd.interior[k]) continue;
-        pz2.add(meas[k], 0.0);
-        if (!reg[i].ok) continue;
-        const double v = kin.v_mm_per_s[k];
-        const double pred = reg[i].theta[0] * kin.a_mm_per_s2[k] + reg[i].theta[1] * direction(v, rd.v_move[i]) +
-                            reg[i].theta[2] * v + reg[i].theta[3];
-        pg2.add(meas[k], pred);
+        const double e = ref[k] - (*x)[k];
+        pz1.add(e, 0.0);
+        const double ref_smooth = rd.smooth->trace.at(col(ax.axis, "_ref_mm"))[k];
+        pg1.add(e, ref[k] - out.rounding.round(ref_smooth - reg[i].lag_s * kin.v_mm_per_s[k]));
       }
     }
-    zero = errors_from(z);
-    regr = errors_from(g);
-    if (pz)
-      for (const auto& [k, p] : z) (*pz)[k].add(p);
-    if (pr)
-      for (const auto& [k, p] : g) (*pr)[k].add(p);
-  };
-
-  // The model and the baselines are compared on the same rows: the interior
-  // rows of the replayed segments.
-  PoolSet pool_nom, pool_id, pool_cal, pool_zero, pool_reg;
-  auto pooled_errors = [](const PoolSet& pools, const std::vector<RunErrors>& list, ChannelErrors RunErrors::*which) {
-    ChannelErrors e = errors_from(pools);
-    for (const RunErrors& re : list)
-      for (const auto& [k, why] : (re.*which).not_computed)
-        if (!e.nrms.count(k)) e.not_computed[k] = fmt::format("{}: {}", re.run, why);
-    return e;
-  };
-  auto pool_runs = [&](const std::vector<RunErrors>& list, RunErrors& dst) {
-    dst.run = "pooled";
-    for (const RunErrors& re : list) {
-      dst.rows += re.rows;
-      dst.rows_compared += re.rows_compared;
+    if (const auto* vc = t.find(col(ax.axis, "_vcmd_mm_s"))) {
+      Pool& pz3 = z[col(ax.axis, "_vcmd_mm_s")];
+      for (std::size_t k = from; k < to; ++k)
+        if (rd.interior[k]) pz3.add((*vc)[k], 0.0);
     }
-    dst.identified = pooled_errors(pool_id, list, &RunErrors::identified);
-    dst.calibrated = pooled_errors(pool_cal, list, &RunErrors::calibrated);
-    dst.nominal = pooled_errors(pool_nom, list, &RunErrors::nominal);
-    dst.zero = pooled_errors(pool_zero, list, &RunErrors::zero);
-    dst.regression = pooled_errors(pool_reg, list, &RunErrors::regression);
-  };
+    const TorqueChannel ch = torque_channel(*rd.run, ax.axis);
+    if (!ch.present()) continue;
+    const auto& meas = t.at(ch.column);
+    Pool& pz2 = z[ch.column];
+    Pool& pg2 = g[ch.column];
+    for (std::size_t k = from; k < to; ++k) {
+      if (!rd.interior[k]) continue;
+      pz2.add(meas[k], 0.0);
+      if (!reg[i].ok) continue;
+      const double v = kin.v_mm_per_s[k];
+      const double pred = reg[i].theta[0] * kin.a_mm_per_s2[k] + reg[i].theta[1] * direction(v, rd.v_move[i]) +
+                          reg[i].theta[2] * v + reg[i].theta[3];
+      pg2.add(meas[k], pred);
+    }
+  }
+  re.zero = errors_from(z);
+  re.regression = errors_from(g);
+  for (const auto& [k, p] : z) pools.zero[k].add(p);
+  for (const auto& [k, p] : g) pools.regression[k].add(p);
+}
+
+ChannelErrors pooled_errors(const PoolSet& pools, const std::vector<RunErrors>& list, ChannelErrors RunErrors::*which) {
+  ChannelErrors e = errors_from(pools);
+  for (const RunErrors& re : list)
+    for (const auto& [k, why] : (re.*which).not_computed)
+      if (!e.nrms.count(k)) e.not_computed[k] = fmt::format("{}: {}", re.run, why);
+  return e;
+}
+
+void pool_runs(const std::vector<RunErrors>& list, const ModelPools& pools, RunErrors& dst) {
+  dst.run = "pooled";
+  for (const RunErrors& re : list) {
+    dst.rows += re.rows;
+    dst.rows_compared += re.rows_compared;
+  }
+  dst.identified = pooled_errors(pools.identified, list, &RunErrors::identified);
+  dst.calibrated = pooled_errors(pools.calibrated, list, &RunErrors::calibrated);
+  dst.nominal = pooled_errors(pools.nominal, list, &RunErrors::nominal);
+  dst.zero = pooled_errors(pools.zero, list, &RunErrors::zero);
+  dst.regression = pooled_errors(pools.regression, list, &RunErrors::regression);
+}
+
+/// Every model's errors on the held-out rows of each fitting run, pooled.
+void errors_on_fit_part(DataCalibration& out, const std::vector<RunData>& runs, const sim::MachineDefinition& nominal,
+                        const AxisArray<Regression>& reg) {
+  ModelPools pools;
   for (std::size_t r = 0; r < runs.size(); ++r) {
     RunErrors re;
     re.run = runs[r].run->dir.string();
     re.rows = runs[r].n;
     const std::size_t from = runs[r].n_fit, to = runs[r].n;
     for (std::size_t k = from; k < to; ++k) re.rows_compared += runs[r].interior[k] ? 1 : 0;
-    errors_on(out.identified, runs[r], from, to, true, r == 0 ? &out.replay_before : nullptr, re.identified, &pool_id);
-    errors_on(out.final_machine, runs[r], from, to, true, r == 0 ? &out.replay_after : nullptr, re.calibrated,
-              &pool_cal);
-    errors_on(nominal, runs[r], from, to, false, nullptr, re.nominal, &pool_nom);
-    baselines(runs[r], from, to, re.zero, re.regression, &pool_zero, &pool_reg);
+    errors_on(out, out.identified, runs[r], from, to, true, r == 0 ? &out.replay_before : nullptr, re.identified,
+              &pools.identified);
+    errors_on(out, out.final_machine, runs[r], from, to, true, r == 0 ? &out.replay_after : nullptr, re.calibrated,
+              &pools.calibrated);
+    errors_on(out, nominal, runs[r], from, to, false, nullptr, re.nominal, &pools.nominal);
+    baselines(out, reg, runs[r], from, to, re, pools);
     out.fit_runs.push_back(std::move(re));
   }
-  pool_runs(out.fit_runs, out.pooled_fit);
+  pool_runs(out.fit_runs, pools, out.pooled_fit);
+}
 
-  for (auto* p : {&pool_nom, &pool_id, &pool_cal, &pool_zero, &pool_reg}) p->clear();
+/// Every model's errors on the whole of each validation run, pooled.
+void errors_on_validation_runs(DataCalibration& out, const std::vector<MeasuredRun>& validate,
+                               const sim::MachineDefinition& nominal, const AxisArray<Regression>& reg) {
+  ModelPools pools;
   for (const MeasuredRun& v : validate) {
     std::vector<std::string> vnotes;
     RunData rd = prepare_run(v, out.axes, out.rounding, 0.0, vnotes);
@@ -1906,13 +2101,40 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
     re.run = v.dir.string();
     re.rows = rd.n;
     for (std::size_t k = 0; k < rd.n; ++k) re.rows_compared += rd.interior[k] ? 1 : 0;
-    errors_on(out.final_machine, rd, 0, rd.n, true, nullptr, re.calibrated, &pool_cal);
-    errors_on(out.identified, rd, 0, rd.n, true, nullptr, re.identified, &pool_id);
-    errors_on(nominal, rd, 0, rd.n, false, nullptr, re.nominal, &pool_nom);
-    baselines(rd, 0, rd.n, re.zero, re.regression, &pool_zero, &pool_reg);
+    errors_on(out, out.final_machine, rd, 0, rd.n, true, nullptr, re.calibrated, &pools.calibrated);
+    errors_on(out, out.identified, rd, 0, rd.n, true, nullptr, re.identified, &pools.identified);
+    errors_on(out, nominal, rd, 0, rd.n, false, nullptr, re.nominal, &pools.nominal);
+    baselines(out, reg, rd, 0, rd.n, re, pools);
     out.validation_runs.push_back(std::move(re));
   }
-  if (!out.validation_runs.empty()) pool_runs(out.validation_runs, out.pooled_validation);
+  if (!out.validation_runs.empty()) pool_runs(out.validation_runs, pools, out.pooled_validation);
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// Calibration
+
+DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const std::vector<MeasuredRun>& validate,
+                                    const sim::MachineDefinition& nominal, const DataCalibrationOptions& options) {
+  if (fit.empty()) throw ConfigError("calibrate: no run to fit");
+  DataCalibration out;
+  out.fit_fraction = options.fit_fraction;
+  check_fit_runs(fit, out);
+  choose_rounding(fit, out);
+  const MeasuredRun& r0 = fit.front();
+  const double Ts = controller_period(r0, options, out);
+  std::vector<RunData> runs;
+  for (const auto& r : fit) runs.push_back(prepare_run(r, out.axes, out.rounding, options.fit_fraction, out.notes));
+  out.identified = identify_machine(AxisFit{runs, Fitter{runs}, r0, Ts}, out);
+  out.final_machine = out.identified;
+  skip_unseen_effects(fit, out);
+  choose_velocity_loops(out, runs);
+  try_smooth_friction(out, runs);
+  search_catalogue_effects(out, runs);
+  const AxisArray<Regression> reg = fit_regressions(out, runs);
+  errors_on_fit_part(out, runs, nominal, reg);
+  errors_on_validation_runs(out, validate, nominal, reg);
   return out;
 }
 

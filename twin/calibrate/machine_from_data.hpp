@@ -28,6 +28,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "twin/calibrate/effect_registry.hpp"
 #include "twin/report/replay.hpp"
 
 namespace twin::analysis {
@@ -114,7 +115,8 @@ struct AxisFromData {
 /// An effect tried on the identified model: kept only where it lowers the
 /// held-out error of the axis's channel without raising the tracking error.
 struct DataEffect {
-  std::string effect;  ///< catalogue name
+  EffectKind kind{EffectKind::kStribeck};
+  std::string effect;  ///< catalogue name of `kind`, as reports give it
   Axis axis{Axis::kX};
   std::map<std::string, double> params;
   std::string evidence;
@@ -124,6 +126,11 @@ struct DataEffect {
   /// which is judged on the torque channel alone).
   std::map<std::string, double> before_channels, after_channels;
   bool kept{false};
+
+  void set_kind(EffectKind k) {
+    kind = k;
+    effect = std::string(feeddrive::effect_name(k));
+  }
 };
 
 struct RunErrors {

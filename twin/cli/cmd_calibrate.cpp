@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "twin/calibrate/calibrate.hpp"
+#include "twin/calibrate/effect_registry.hpp"
 #include "twin/force_calibrate/force_calibrate.hpp"
 #include "twin/calibrate/machine_from_data.hpp"
 #include "twin/report/plots.hpp"
@@ -101,7 +102,7 @@ std::vector<std::filesystem::path> make_plots(io::ResultSet& results, const anal
     if (it != axes.end())
       evidence = analysis::CalibrationEvidence{
           c.effect, c.axis, static_cast<std::size_t>(it - axes.begin()),
-          c.effect == "cogging" || c.effect == "screw_pitch_error" || c.effect == "position_dependent_friction"};
+          analysis::registry_entry(c.kind).plot == analysis::PlotAlong::kPosition};
   }
   return analysis::plot_calibration(results, "residuals.csv", axes, evidence);
 }
@@ -192,18 +193,156 @@ std::vector<std::filesystem::path> make_data_plots(io::ResultSet& results, const
   return {results.path("overlay.png"), results.path("evidence.png")};
 }
 
+struct CalibrateCommand {
+  std::vector<std::string> runs;
+  std::vector<std::string> validate;
+  std::string out;
+  std::string machine;
+  std::vector<std::string> sets;
+  bool no_plots{false};
+};
+
+// A machine the twin does not know: calibrated from the data alone.
+void calibrate_unknown_machine(const CalibrateCommand& opt, const std::vector<analysis::MeasuredRun>& fit_runs,
+                               const std::vector<analysis::MeasuredRun>& validate_runs) {
+  std::vector<std::string> nominal_notes;
+  sim::MachineDefinition nominal = analysis::machine_for_run(fit_runs.front(), "", &nominal_notes);
+  analysis::DataCalibration r = analysis::calibrate_from_data(fit_runs, validate_runs, nominal);
+  r.notes.insert(r.notes.begin(),
+                 "the runs name no machine the twin ships: the machine is identified from the data alone (cascade "
+                 "law, drives in the log's torque unit); the nominal machine the errors are compared with is the "
+                 "shipped " + std::string(io::kDefaultMachineName) + " standing in");
+  const std::filesystem::path out(opt.out);
+  io::ResultSet results(out, "calibrate");  // the files appear in OUT together, manifest.json last
+  analysis::write_data_trace(results.path("trace_before.csv"), fit_runs.front(), r.replay_before);
+  analysis::write_data_trace(results.path("trace.csv"), fit_runs.front(), r.replay_after);
+  std::string runs_text;
+  for (const auto& s : opt.runs) runs_text += (runs_text.empty() ? "" : " ") + s;
+  io::write_file_atomic(results.path("machine.yaml"),
+                        io::machine_to_yaml(r.final_machine, fmt::format("identified by twin calibrate from {}: "
+                                                                         "cascade loop and drives in the log's "
+                                                                         "torque unit (Kt = Ka = 1, rg = 1 mm/rad)",
+                                                                         runs_text)));
+  if (!opt.no_plots) {
+    try {
+      make_data_plots(results, fit_runs.front(), r);
+    } catch (const Error& e) {
+      r.notes.push_back(fmt::format("plots not drawn: {}", e.what()));
+    }
+  }
+  io::write_file_atomic(results.path("report.json"), analysis::data_calibration_report_json(r).dump(2) + "\n");
+  io::write_file_atomic(results.path("report.md"), analysis::data_calibration_report_markdown(r, runs_text));
+  results.commit();
+  for (const auto& n : r.notes) std::fprintf(stderr, "twin calibrate: note: %s\n", n.c_str());
+  std::printf("calibrated %s from the data (%zu runs, %d replays); wrote %s\n", runs_text.c_str(), fit_runs.size(),
+              r.replays, out.c_str());
+}
+
+// The errors of `m` on the whole of run `v` (report.json's validation_runs entries).
+nlohmann::json validation_errors(const analysis::MeasuredRun& v, const sim::MachineDefinition& m) {
+  nlohmann::json e = nlohmann::json::object();
+  try {
+    const analysis::ReplayResult rr = analysis::replay_run(v, m);
+    for (Axis a : v.axes) {
+      if (!m.axes[index(a)].present) continue;
+      const analysis::AxisErrors ae = analysis::axis_errors(v, rr, a, 0);
+      const std::string n(axis_name(a));
+      e[n + "_err_mm"] = ae.err_not_computed.empty() ? nlohmann::json(ae.err_mm) : nlohmann::json(nullptr);
+      if (ae.has_u || ae.has_current)
+        e[n + (ae.has_u ? "_u_V" : "_i_A")] =
+            ae.u_not_computed.empty() ? nlohmann::json(ae.u) : nlohmann::json(nullptr);
+    }
+  } catch (const Error& err) {
+    e["not_computed"] = fmt::format("the replay failed: {}", err.what());
+  }
+  return e;
+}
+
+// Runs of another program on the same machine, never fitted: their errors
+// with the machine the run names (nominal) and with the calibrated one.
+nlohmann::json validation_runs_json(const std::vector<analysis::MeasuredRun>& validate_runs,
+                                    const std::string& machine_name, const sim::MachineDefinition& calibrated) {
+  nlohmann::json list = nlohmann::json::array();
+  for (const auto& v : validate_runs) {
+    std::vector<std::string> vnotes;
+    const sim::MachineDefinition nominal = analysis::machine_for_run(v, machine_name, &vnotes);
+    nlohmann::json entry;
+    entry["run"] = v.dir.string();
+    entry["error_nominal"] = validation_errors(v, nominal);
+    entry["error_calibrated"] = validation_errors(v, calibrated);
+    list.push_back(entry);
+  }
+  return list;
+}
+
+// A machine the twin ships: its drives calibrated on the first run, the
+// others reported as validation runs.
+void calibrate_known_machine(const CalibrateCommand& opt, const std::vector<analysis::MeasuredRun>& fit_runs,
+                             std::vector<analysis::MeasuredRun> validate_runs) {
+  const analysis::MeasuredRun& run = fit_runs.front();
+  std::vector<std::string> notes;
+  sim::MachineDefinition machine = analysis::machine_for_run(run, opt.machine, &notes);
+  for (std::size_t i = 1; i < fit_runs.size(); ++i) {
+    notes.push_back(fmt::format("{}: the drive calibration of a known machine fits one run; this one is reported as "
+                                "a validation run",
+                                fit_runs[i].dir.string()));
+    validate_runs.push_back(fit_runs[i]);
+  }
+  apply_sets(machine, opt.sets);
+  analysis::CalibrationResult r = analysis::calibrate(run, machine);
+  r.notes.insert(r.notes.begin(), notes.begin(), notes.end());
+  const std::filesystem::path out(opt.out);
+  io::ResultSet results(out, "calibrate");  // the files appear in OUT together, manifest.json last
+  analysis::write_replay_trace(results.path("trace_before.csv"), r.replay_before);
+  analysis::write_replay_trace(results.path("trace.csv"), r.replay_after);
+  io::write_file_atomic(results.path("machine.yaml"),
+                        io::machine_to_yaml(r.final_machine, fmt::format("calibrated by twin calibrate from {}: "
+                                                                         "identified J, B, Tc and added effects",
+                                                                         opt.runs.front())));
+  nlohmann::json report = analysis::calibration_report_json(r);
+  if (!validate_runs.empty())
+    report["validation_runs"] = validation_runs_json(validate_runs, opt.machine, r.final_machine);
+  io::write_file_atomic(results.path("report.json"), report.dump(2) + "\n");
+  if (!opt.no_plots) {
+    try {
+      make_plots(results, run, r);
+    } catch (const Error& e) {
+      r.notes.push_back(fmt::format("plots not drawn: {}", e.what()));
+    }
+  }
+  io::write_file_atomic(results.path("report.md"), analysis::calibration_report_markdown(r, opt.runs.front()));
+  results.commit();
+  for (const auto& n : r.notes) std::fprintf(stderr, "twin calibrate: note: %s\n", n.c_str());
+  std::string added;
+  for (const auto& a : r.added)
+    added += fmt::format("{}{} on {}", added.empty() ? "" : ", ", a.candidate.effect, axis_name(a.candidate.axis));
+  std::printf("calibrated %s (%zu samples, %d replays): effects added: %s; wrote %s\n", opt.runs.front().c_str(),
+              r.replay_before.t_s.size(), r.replays, added.empty() ? "none" : added.c_str(), out.c_str());
+}
+
+void run_calibrate(const CalibrateCommand& opt) {
+  for (const auto& r : opt.runs) refuse_output_over_input("calibrate", opt.out, r, opt.machine);
+  for (const auto& r : opt.validate) refuse_output_over_input("calibrate", opt.out, r, opt.machine);
+  if (opt.runs.size() == 1 && analysis::force::is_force_data(opt.runs.front())) {
+    // A force run or series: meta.json has a `cut`.
+    analysis::force::run_force_calibration(opt.runs.front(), opt.out, opt.no_plots);
+    return;
+  }
+  std::vector<analysis::MeasuredRun> fit_runs, validate_runs;
+  for (const auto& r : opt.runs) fit_runs.push_back(analysis::load_run(r));
+  for (const auto& r : opt.validate) validate_runs.push_back(analysis::load_run(r));
+  const bool known = !opt.machine.empty() ||
+                     std::all_of(fit_runs.begin(), fit_runs.end(), [](const auto& r) { return names_known_machine(r); });
+  if (known)
+    calibrate_known_machine(opt, fit_runs, std::move(validate_runs));
+  else
+    calibrate_unknown_machine(opt, fit_runs, validate_runs);
+}
+
 }  // namespace
 
 void register_calibrate(CLI::App& app) {
-  struct Options {
-    std::vector<std::string> runs;
-    std::vector<std::string> validate;
-    std::string out;
-    std::string machine;
-    std::vector<std::string> sets;
-    bool no_plots{false};
-  };
-  auto opt = std::make_shared<Options>();
+  auto opt = std::make_shared<CalibrateCommand>();
   CLI::App* cmd = app.add_subcommand(
       "calibrate",
       "Identify J, B, Tc per axis from a measured run, trace the residual to missing effects, add those that "
@@ -217,122 +356,7 @@ void register_calibrate(CLI::App& app) {
   cmd->add_option("--machine", opt->machine, "machine definition (name or YAML file) replacing the run's meta.machine");
   cmd->add_option("--set", opt->sets, "override a parameter: <axis>.<name>=<value>, e.g. x.J=0.008")->take_all();
   cmd->add_flag("--no-plots", opt->no_plots, "skip the gnuplot figures");
-  cmd->callback([opt]() {
-    for (const auto& r : opt->runs) refuse_output_over_input("calibrate", opt->out, r, opt->machine);
-    for (const auto& r : opt->validate) refuse_output_over_input("calibrate", opt->out, r, opt->machine);
-    if (opt->runs.size() == 1 && analysis::force::is_force_data(opt->runs.front())) {
-      // A force run or series: meta.json has a `cut`.
-      analysis::force::run_force_calibration(opt->runs.front(), opt->out, opt->no_plots);
-      return;
-    }
-    std::vector<analysis::MeasuredRun> fit_runs, validate_runs;
-    for (const auto& r : opt->runs) fit_runs.push_back(analysis::load_run(r));
-    for (const auto& r : opt->validate) validate_runs.push_back(analysis::load_run(r));
-    const bool known = !opt->machine.empty() ||
-                       std::all_of(fit_runs.begin(), fit_runs.end(), [](const auto& r) { return names_known_machine(r); });
-    if (!known) {
-      // A machine the twin does not know: calibrated from the data alone.
-      std::vector<std::string> nominal_notes;
-      sim::MachineDefinition nominal = analysis::machine_for_run(fit_runs.front(), "", &nominal_notes);
-      analysis::DataCalibration r = analysis::calibrate_from_data(fit_runs, validate_runs, nominal);
-      r.notes.insert(r.notes.begin(),
-                     "the runs name no machine the twin ships: the machine is identified from the data alone (cascade "
-                     "law, drives in the log's torque unit); the nominal machine the errors are compared with is the "
-                     "shipped " + std::string(io::kDefaultMachineName) + " standing in");
-      const std::filesystem::path out(opt->out);
-      io::ResultSet results(out, "calibrate");  // the files appear in OUT together, manifest.json last
-      analysis::write_data_trace(results.path("trace_before.csv"), fit_runs.front(), r.replay_before);
-      analysis::write_data_trace(results.path("trace.csv"), fit_runs.front(), r.replay_after);
-      std::string runs_text;
-      for (const auto& s : opt->runs) runs_text += (runs_text.empty() ? "" : " ") + s;
-      io::write_file_atomic(results.path("machine.yaml"),
-                            io::machine_to_yaml(r.final_machine, fmt::format("identified by twin calibrate from {}: "
-                                                                             "cascade loop and drives in the log's "
-                                                                             "torque unit (Kt = Ka = 1, rg = 1 mm/rad)",
-                                                                             runs_text)));
-      if (!opt->no_plots) {
-        try {
-          make_data_plots(results, fit_runs.front(), r);
-        } catch (const Error& e) {
-          r.notes.push_back(fmt::format("plots not drawn: {}", e.what()));
-        }
-      }
-      io::write_file_atomic(results.path("report.json"), analysis::data_calibration_report_json(r).dump(2) + "\n");
-      io::write_file_atomic(results.path("report.md"), analysis::data_calibration_report_markdown(r, runs_text));
-      results.commit();
-      for (const auto& n : r.notes) std::fprintf(stderr, "twin calibrate: note: %s\n", n.c_str());
-      std::printf("calibrated %s from the data (%zu runs, %d replays); wrote %s\n", runs_text.c_str(),
-                  fit_runs.size(), r.replays, out.c_str());
-      return;
-    }
-    const analysis::MeasuredRun& run = fit_runs.front();
-    std::vector<std::string> notes;
-    sim::MachineDefinition machine = analysis::machine_for_run(run, opt->machine, &notes);
-    for (std::size_t i = 1; i < fit_runs.size(); ++i) {
-      notes.push_back(fmt::format("{}: the drive calibration of a known machine fits one run; this one is reported as "
-                                  "a validation run",
-                                  fit_runs[i].dir.string()));
-      validate_runs.push_back(fit_runs[i]);
-    }
-    apply_sets(machine, opt->sets);
-    analysis::CalibrationResult r = analysis::calibrate(run, machine);
-    r.notes.insert(r.notes.begin(), notes.begin(), notes.end());
-    const std::filesystem::path out(opt->out);
-    io::ResultSet results(out, "calibrate");  // the files appear in OUT together, manifest.json last
-    analysis::write_replay_trace(results.path("trace_before.csv"), r.replay_before);
-    analysis::write_replay_trace(results.path("trace.csv"), r.replay_after);
-    io::write_file_atomic(results.path("machine.yaml"),
-                          io::machine_to_yaml(r.final_machine, fmt::format("calibrated by twin calibrate from {}: "
-                                                                           "identified J, B, Tc and added effects",
-                                                                           opt->runs.front())));
-    nlohmann::json report = analysis::calibration_report_json(r);
-    // Runs of another program on the same machine, never fitted: their errors
-    // with the machine the run names (nominal) and with the calibrated one.
-    report["validation_runs"] = nlohmann::json::array();
-    for (const auto& v : validate_runs) {
-      std::vector<std::string> vnotes;
-      const sim::MachineDefinition nominal = analysis::machine_for_run(v, opt->machine, &vnotes);
-      nlohmann::json entry;
-      entry["run"] = v.dir.string();
-      for (const auto& [key, m] : {std::pair<const char*, const sim::MachineDefinition*>{"error_nominal", &nominal},
-                                   {"error_calibrated", &r.final_machine}}) {
-        nlohmann::json e = nlohmann::json::object();
-        try {
-          const analysis::ReplayResult rr = analysis::replay_run(v, *m);
-          for (Axis a : v.axes) {
-            if (!m->axes[index(a)].present) continue;
-            const analysis::AxisErrors ae = analysis::axis_errors(v, rr, a, 0);
-            const std::string n(axis_name(a));
-            e[n + "_err_mm"] = ae.err_not_computed.empty() ? nlohmann::json(ae.err_mm) : nlohmann::json(nullptr);
-            if (ae.has_u || ae.has_current)
-              e[n + (ae.has_u ? "_u_V" : "_i_A")] =
-                  ae.u_not_computed.empty() ? nlohmann::json(ae.u) : nlohmann::json(nullptr);
-          }
-        } catch (const Error& err) {
-          e["not_computed"] = fmt::format("the replay failed: {}", err.what());
-        }
-        entry[key] = e;
-      }
-      report["validation_runs"].push_back(entry);
-    }
-    if (validate_runs.empty()) report.erase("validation_runs");
-    io::write_file_atomic(results.path("report.json"), report.dump(2) + "\n");
-    if (!opt->no_plots) {
-      try {
-        make_plots(results, run, r);
-      } catch (const Error& e) {
-        r.notes.push_back(fmt::format("plots not drawn: {}", e.what()));
-      }
-    }
-    io::write_file_atomic(results.path("report.md"), analysis::calibration_report_markdown(r, opt->runs.front()));
-    results.commit();
-    for (const auto& n : r.notes) std::fprintf(stderr, "twin calibrate: note: %s\n", n.c_str());
-    std::string added;
-    for (const auto& a : r.added)
-      added += fmt::format("{}{} on {}", added.empty() ? "" : ", ", a.candidate.effect, axis_name(a.candidate.axis));
-    std::printf("calibrated %s (%zu samples, %d replays): effects added: %s; wrote %s\n", opt->runs.front().c_str(),
-                r.replay_before.t_s.size(), r.replays, added.empty() ? "none" : added.c_str(), out.c_str());
-  });
+  cmd->callback([opt]() { run_calibrate(*opt); });
 }
 
 }  // namespace twin::cli

@@ -25,14 +25,10 @@ std::optional<double> optional_number(const nlohmann::json& j, const char* key, 
   return v;
 }
 
-}  // namespace
-
-MeasuredRun load_run(const std::filesystem::path& dir) {
-  MeasuredRun run;
-  run.dir = dir;
-  if (!std::filesystem::is_directory(dir)) throw IoError(fmt::format("{}: not a run folder", dir.string()));
-  const auto meta_path = dir / "meta.json";
+// meta.json of a run folder (spec/measured-data.md).
+RunMeta read_meta(const std::filesystem::path& meta_path) {
   const std::string where = meta_path.string();
+  RunMeta m;
   nlohmann::json meta;
   try {
     meta = nlohmann::json::parse(io::read_file(meta_path));
@@ -42,26 +38,26 @@ MeasuredRun load_run(const std::filesystem::path& dir) {
   if (!meta.is_object()) throw ConfigError(fmt::format("{}: must be a JSON object", where));
   if (meta.contains("machine") && !meta["machine"].is_null()) {
     if (!meta["machine"].is_string()) throw ConfigError(fmt::format("{}: machine must be a string or null", where));
-    run.meta.machine = meta["machine"].get<std::string>();
+    m.machine = meta["machine"].get<std::string>();
   }
-  run.meta.controller_period_s = optional_number(meta, "controller_period_s", where);
-  run.meta.sample_period_s = optional_number(meta, "sample_period_s", where);
-  run.meta.encoder_resolution_mm = optional_number(meta, "encoder_resolution_mm", where);
+  m.controller_period_s = optional_number(meta, "controller_period_s", where);
+  m.sample_period_s = optional_number(meta, "sample_period_s", where);
+  m.encoder_resolution_mm = optional_number(meta, "encoder_resolution_mm", where);
   if (meta.contains("description") && meta["description"].is_string())
-    run.meta.description = meta["description"].get<std::string>();
+    m.description = meta["description"].get<std::string>();
   if (meta.contains("axes")) {
     if (!meta["axes"].is_array()) throw ConfigError(fmt::format("{}: axes must be a list", where));
     for (const auto& a : meta["axes"]) {
       const auto ax = a.is_string() ? parse_axis(a.get<std::string>()) : std::nullopt;
       if (!ax) throw ConfigError(fmt::format("{}: axes: unknown axis {}", where, a.dump()));
-      run.meta.axes.push_back(*ax);
+      m.axes.push_back(*ax);
     }
   }
-  std::filesystem::path trace_path = dir / "trace.csv";
-  if (!std::filesystem::exists(trace_path)) trace_path = dir / "trace.csv.gz";
-  if (!std::filesystem::exists(trace_path))
-    throw IoError(fmt::format("{}: no trace.csv or trace.csv.gz", dir.string()));
-  run.trace = io::read_trace_csv(trace_path);
+  return m;
+}
+
+// The trace's axes (those with a reference column), which must include meta.json's.
+void find_axes(MeasuredRun& run) {
   for (Axis a : kAllAxes)
     if (run.trace.find(std::string(axis_name(a)) + "_ref_mm")) run.axes.push_back(a);
   if (run.axes.empty()) throw IoError(fmt::format("{}: no <a>_ref_mm column (x_ref_mm, y_ref_mm or z_ref_mm)", run.trace.source));
@@ -69,6 +65,11 @@ MeasuredRun load_run(const std::filesystem::path& dir) {
     if (std::find(run.axes.begin(), run.axes.end(), a) == run.axes.end())
       throw IoError(fmt::format("{}: meta.json lists axis {} but the trace has no {}_ref_mm column", run.trace.source,
                                 axis_name(a), axis_name(a)));
+}
+
+// A u or current column constant over the whole run while its axis moves was
+// not recorded: left out, and said.
+void drop_unrecorded_channels(MeasuredRun& run) {
   for (Axis a : run.axes) {
     const std::string n(axis_name(a));
     const auto& ref = run.trace.at(n + "_ref_mm");
@@ -88,12 +89,16 @@ MeasuredRun load_run(const std::filesystem::path& dir) {
       run.trace.columns.erase(run.trace.columns.begin() + static_cast<std::ptrdiff_t>(c));
     }
   }
+}
+
+// The sample period of the trace's t_s, uniform within 1 %; a time stamp
+// that jitters by up to a fifth of a period about the uniform grid (a
+// logger's clock, not the loop's) is taken as on the grid and said; a
+// missing or doubled row is an error.
+double uniform_sample_period(MeasuredRun& run) {
   const auto& t = run.trace.at("t_s");
   if (t.size() < 3) throw IoError(fmt::format("{}: {} rows are too few to replay", run.trace.source, t.size()));
   const double dt = (t.back() - t.front()) / static_cast<double>(t.size() - 1);
-  // Uniform within 1 %; a time stamp that jitters by up to a fifth of a period
-  // about the uniform grid (a logger's clock, not the loop's) is taken as
-  // on the grid and said; a missing or doubled row is an error.
   double max_dev = 0.0;
   for (std::size_t r = 0; r < t.size(); ++r)
     max_dev = std::max(max_dev, std::abs(t[r] - t.front() - static_cast<double>(r) * dt));
@@ -108,9 +113,28 @@ MeasuredRun load_run(const std::filesystem::path& dir) {
     run.notes.push_back(fmt::format("{}: t_s jitters by up to {:.3g} s ({:.0f} % of the period) about a uniform grid: the "
                                     "rows are taken as sampled every {} s",
                                     run.trace.source, max_dev, 100.0 * max_dev / dt, dt));
+  return dt;
+}
+
+}  // namespace
+
+MeasuredRun load_run(const std::filesystem::path& dir) {
+  MeasuredRun run;
+  run.dir = dir;
+  if (!std::filesystem::is_directory(dir)) throw IoError(fmt::format("{}: not a run folder", dir.string()));
+  const auto meta_path = dir / "meta.json";
+  run.meta = read_meta(meta_path);
+  std::filesystem::path trace_path = dir / "trace.csv";
+  if (!std::filesystem::exists(trace_path)) trace_path = dir / "trace.csv.gz";
+  if (!std::filesystem::exists(trace_path))
+    throw IoError(fmt::format("{}: no trace.csv or trace.csv.gz", dir.string()));
+  run.trace = io::read_trace_csv(trace_path);
+  find_axes(run);
+  drop_unrecorded_channels(run);
+  const double dt = uniform_sample_period(run);
   run.sample_period_s = dt;
   if (run.meta.sample_period_s && std::abs(*run.meta.sample_period_s - dt) > 0.01 * dt)
-    throw IoError(fmt::format("{}: sample_period_s = {} s but the trace's t_s steps by {} s", where,
+    throw IoError(fmt::format("{}: sample_period_s = {} s but the trace's t_s steps by {} s", meta_path.string(),
                               *run.meta.sample_period_s, dt));
   return run;
 }
@@ -204,15 +228,10 @@ std::vector<double> upsample_reference(const std::vector<double>& r, std::int64_
 /// 0.1 ms loop needs 10; 1000 allows a 0.1 s log of that loop.
 constexpr std::int64_t kMaxUpsampling = 1000;
 
-ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& machine_in, std::size_t rows,
-                        feeddrive::IntegratorOptions options, ChannelSampling sampling) {
-  ReplayResult res;
-  res.axes = run.axes;
-  sim::MachineDefinition machine = machine_in;
-  // Only the run's axes are simulated.
-  for (Axis a : kAllAxes)
-    if (std::find(run.axes.begin(), run.axes.end(), a) == run.axes.end()) machine.axes[index(a)].present = false;
-  const double Ts = machine.Ts_s;
+namespace {
+
+// Controller periods per trace sample: a whole number, at most kMaxUpsampling.
+std::int64_t upsampling(const MeasuredRun& run, double Ts) {
   const double ratio = run.sample_period_s / Ts;
   if (!(ratio < static_cast<double>(kMaxUpsampling) + 0.5))
     throw ConfigError(fmt::format("{}: the trace is sampled every {} s, {:.4g} controller periods of {} s: more than "
@@ -224,63 +243,64 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
         "{}: the trace is sampled every {} s, which is not a whole multiple of the controller period {} s: the "
         "reference the loop saw cannot be rebuilt",
         run.trace.source, run.sample_period_s, Ts));
-  const std::size_t n_rows = rows == 0 ? run.trace.num_rows() : std::min(rows, run.trace.num_rows());
-  if (m > 1)
-    res.notes.push_back(fmt::format("trace sampled every {} s = {} controller periods: the reference is interpolated "
-                                    "by a monotone cubic to Ts = {} s and the twin's outputs are taken at the trace's samples",
-                                    run.sample_period_s, m, Ts));
-  const auto& t = run.trace.at("t_s");
-  const std::int64_t n_ticks = static_cast<std::int64_t>(n_rows - 1) * m + 1;
-  AxisArray<std::vector<double>> ref;
+  return m;
+}
+
+// The reference of every axis at the loop's rate and its start position.
+// The machine that made the run did not alarm: the following-error limit of
+// the replay is raised to at least twice the run's own largest error.
+struct Start {
+  AxisArray<std::vector<double>> ref{};
   AxisArray<double> x0{};
+};
+Start replay_start(const MeasuredRun& run, std::size_t n_rows, std::int64_t m, sim::MachineDefinition& machine,
+                   ReplayResult& res) {
+  Start st;
   for (Axis a : run.axes) {
     const std::string n(axis_name(a));
     const auto& r = run.trace.at(n + "_ref_mm");
-    auto& dst = ref[index(a)];
-    dst = upsample_reference(std::vector<double>(r.begin(), r.begin() + static_cast<std::ptrdiff_t>(n_rows)), m);
+    st.ref[index(a)] =
+        upsample_reference(std::vector<double>(r.begin(), r.begin() + static_cast<std::ptrdiff_t>(n_rows)), m);
     const auto* xm = run.trace.find(n + "_mm");
-    x0[index(a)] = xm ? (*xm)[0] : r[0];
-    // The machine that made the run did not alarm: the following-error limit
-    // of the replay must allow at least twice the run's own largest error.
-    if (xm) {
-      double e_max = 0.0;
-      for (std::size_t k = 0; k < std::min(r.size(), xm->size()); ++k) e_max = std::max(e_max, std::abs(r[k] - (*xm)[k]));
-      auto& lim = machine.axes[index(a)].following_error_limit_mm;
-      if (2.0 * e_max > lim) {
-        res.notes.push_back(fmt::format("axis {}: the run's tracking error reaches {:.3f} mm; the replay's following-error "
-                                        "limit is raised from {} mm to {:.3f} mm",
-                                        n, e_max, lim, 2.0 * e_max));
-        lim = 2.0 * e_max;
-      }
+    st.x0[index(a)] = xm ? (*xm)[0] : r[0];
+    if (!xm) continue;
+    double e_max = 0.0;
+    for (std::size_t k = 0; k < std::min(r.size(), xm->size()); ++k) e_max = std::max(e_max, std::abs(r[k] - (*xm)[k]));
+    auto& lim = machine.axes[index(a)].following_error_limit_mm;
+    if (2.0 * e_max > lim) {
+      res.notes.push_back(fmt::format("axis {}: the run's tracking error reaches {:.3f} mm; the replay's following-error "
+                                      "limit is raised from {} mm to {:.3f} mm",
+                                      n, e_max, lim, 2.0 * e_max));
+      lim = 2.0 * e_max;
     }
   }
-  auto reference = std::make_shared<sim::SampledReference>(std::move(ref), Ts);
-  sim::CoSimulation cosim(machine, reference, nullptr, x0, options);
+  return st;
+}
+
+void reserve_rows(ReplayResult& res, std::size_t n_rows) {
   res.t_s.reserve(n_rows);
-  for (Axis a : run.axes) {
-    res.x_ref_mm[index(a)].reserve(n_rows);
-    res.x_mm[index(a)].reserve(n_rows);
-    res.u_V[index(a)].reserve(n_rows);
-    res.i_A[index(a)].reserve(n_rows);
-    res.Tm[index(a)].reserve(n_rows);
-    res.vcmd_mm_per_s[index(a)].reserve(n_rows);
-  }
-  // Running sums of the torque-side channels per tick (kMeanOverNeighbours):
-  // the mean over ticks [a, b] is (S[b + 1] - S[a]) / (b - a + 1).
-  const bool window = sampling == ChannelSampling::kMeanOverNeighbours && m > 1;
-  AxisArray<std::array<std::vector<double>, 3>> sums{};
-  if (window)
-    for (Axis a : run.axes)
-      for (auto& v : sums[index(a)]) {
-        v.reserve(static_cast<std::size_t>(n_ticks) + 1);
-        v.push_back(0.0);
-      }
+  for (Axis a : res.axes)
+    for (auto* v : {&res.x_ref_mm[index(a)], &res.x_mm[index(a)], &res.u_V[index(a)], &res.i_A[index(a)],
+                    &res.Tm[index(a)], &res.vcmd_mm_per_s[index(a)]})
+      v->reserve(n_rows);
+}
+
+// Running sums of the torque-side channels (u, i, Tm) per tick, for
+// ChannelSampling::kMeanOverNeighbours: the mean over ticks [a, b] is
+// (S[b + 1] - S[a]) / (b - a + 1).
+using TickSums = AxisArray<std::array<std::vector<double>, 3>>;
+
+// Steps the co-simulation over every tick, keeping the outputs at the trace's
+// samples (and the running sums where `sums` is given).
+void run_ticks(sim::CoSimulation& cosim, const MeasuredRun& run, std::int64_t n_ticks, std::int64_t m,
+               ReplayResult& res, TickSums* sums) {
+  const auto& t = run.trace.at("t_s");
   for (std::int64_t k = 0; k < n_ticks; ++k) {
     const sim::Snapshot& s = cosim.step();
-    if (window)
+    if (sums)
       for (Axis a : run.axes) {
         const auto& x = s.axes[index(a)];
-        auto& S = sums[index(a)];
+        auto& S = (*sums)[index(a)];
         S[0].push_back(S[0].back() + x.u_V);
         S[1].push_back(S[1].back() + x.i_A);
         S[2].push_back(S[2].back() + x.Tm_Nm);
@@ -297,24 +317,62 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
       res.vcmd_mm_per_s[index(a)].push_back(x.vcmd_mm_per_s);
     }
   }
-  if (window) {
-    res.notes.push_back(fmt::format("the twin's u, current and torque at a row are their mean over the two sample "
-                                    "periods around it ({} s): where the log samples every {} s, a stop or a change "
-                                    "of speed falls at a time inside them the log does not give",
-                                    2.0 * run.sample_period_s, run.sample_period_s));
-    for (Axis a : run.axes) {
-      const auto& S = sums[index(a)];
-      for (std::size_t r = 0; r < res.t_s.size(); ++r) {
-        const std::int64_t c = static_cast<std::int64_t>(r) * m;
-        const auto lo = static_cast<std::size_t>(std::max<std::int64_t>(c - m, 0));
-        const auto hi = static_cast<std::size_t>(std::min<std::int64_t>(c + m, n_ticks - 1));
-        const double n_in = static_cast<double>(hi - lo + 1);
-        res.u_V[index(a)][r] = (S[0][hi + 1] - S[0][lo]) / n_in;
-        res.i_A[index(a)][r] = (S[1][hi + 1] - S[1][lo]) / n_in;
-        res.Tm[index(a)][r] = (S[2][hi + 1] - S[2][lo]) / n_in;
-      }
+}
+
+// u, current and torque at each row as their mean over the ticks of the two
+// sample periods around it.
+void mean_over_neighbours(const TickSums& sums, const MeasuredRun& run, std::int64_t n_ticks, std::int64_t m,
+                          ReplayResult& res) {
+  res.notes.push_back(fmt::format("the twin's u, current and torque at a row are their mean over the two sample "
+                                  "periods around it ({} s): where the log samples every {} s, a stop or a change "
+                                  "of speed falls at a time inside them the log does not give",
+                                  2.0 * run.sample_period_s, run.sample_period_s));
+  for (Axis a : run.axes) {
+    const auto& S = sums[index(a)];
+    for (std::size_t r = 0; r < res.t_s.size(); ++r) {
+      const std::int64_t c = static_cast<std::int64_t>(r) * m;
+      const auto lo = static_cast<std::size_t>(std::max<std::int64_t>(c - m, 0));
+      const auto hi = static_cast<std::size_t>(std::min<std::int64_t>(c + m, n_ticks - 1));
+      const double n_in = static_cast<double>(hi - lo + 1);
+      res.u_V[index(a)][r] = (S[0][hi + 1] - S[0][lo]) / n_in;
+      res.i_A[index(a)][r] = (S[1][hi + 1] - S[1][lo]) / n_in;
+      res.Tm[index(a)][r] = (S[2][hi + 1] - S[2][lo]) / n_in;
     }
   }
+}
+
+}  // namespace
+
+ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& machine_in, std::size_t rows,
+                        feeddrive::IntegratorOptions options, ChannelSampling sampling) {
+  ReplayResult res;
+  res.axes = run.axes;
+  sim::MachineDefinition machine = machine_in;
+  // Only the run's axes are simulated.
+  for (Axis a : kAllAxes)
+    if (std::find(run.axes.begin(), run.axes.end(), a) == run.axes.end()) machine.axes[index(a)].present = false;
+  const double Ts = machine.Ts_s;
+  const std::int64_t m = upsampling(run, Ts);
+  const std::size_t n_rows = rows == 0 ? run.trace.num_rows() : std::min(rows, run.trace.num_rows());
+  if (m > 1)
+    res.notes.push_back(fmt::format("trace sampled every {} s = {} controller periods: the reference is interpolated "
+                                    "by a monotone cubic to Ts = {} s and the twin's outputs are taken at the trace's samples",
+                                    run.sample_period_s, m, Ts));
+  const std::int64_t n_ticks = static_cast<std::int64_t>(n_rows - 1) * m + 1;
+  Start st = replay_start(run, n_rows, m, machine, res);
+  auto reference = std::make_shared<sim::SampledReference>(std::move(st.ref), Ts);
+  sim::CoSimulation cosim(machine, reference, nullptr, st.x0, options);
+  reserve_rows(res, n_rows);
+  const bool window = sampling == ChannelSampling::kMeanOverNeighbours && m > 1;
+  TickSums sums{};
+  if (window)
+    for (Axis a : run.axes)
+      for (auto& v : sums[index(a)]) {
+        v.reserve(static_cast<std::size_t>(n_ticks) + 1);
+        v.push_back(0.0);
+      }
+  run_ticks(cosim, run, n_ticks, m, res, window ? &sums : nullptr);
+  if (window) mean_over_neighbours(sums, run, n_ticks, m, res);
   return res;
 }
 

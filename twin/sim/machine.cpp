@@ -6,6 +6,7 @@
 
 #include <fmt/format.h>
 
+#include "feeddrive/effect_catalogue.hpp"
 #include "twin/core/error.hpp"
 
 namespace twin::sim {
@@ -49,25 +50,10 @@ std::vector<AxisParamSpec> make_axis_specs() {
       TWIN_AXIS_PARAM("travel_min", "mm", "lower end of travel", a.travel_min_mm),
       TWIN_AXIS_PARAM("travel_max", "mm", "upper end of travel", a.travel_max_mm),
       TWIN_AXIS_PARAM("following_error_limit", "mm", "following-error alarm", a.following_error_limit_mm),
-      TWIN_EFFECT_PARAM("stribeck.Ts_static", "N m", "static friction level", stribeck, Ts_static_Nm),
-      TWIN_EFFECT_PARAM("stribeck.ws", "rad/s", "Stribeck speed", stribeck, ws_rad_per_s),
-      TWIN_EFFECT_PARAM("cogging.amplitude_Nm", "N m", "cogging torque amplitude", cogging, amplitude_Nm),
-      TWIN_EFFECT_PARAM("cogging.cycles_per_rev", "1", "cogging periods per motor revolution", cogging, cycles_per_rev),
-      TWIN_EFFECT_PARAM("cogging.phase_rad", "rad", "cogging phase", cogging, phase_rad),
-      TWIN_EFFECT_PARAM("screw_pitch_error.amplitude_mm", "mm", "lead error amplitude", screw_pitch_error, amplitude_mm),
-      TWIN_EFFECT_PARAM("screw_pitch_error.period_mm", "mm", "lead error period", screw_pitch_error, period_mm),
-      TWIN_EFFECT_PARAM("screw_pitch_error.phase_rad", "rad", "lead error phase", screw_pitch_error, phase_rad),
-      TWIN_EFFECT_PARAM("backlash.gap_mm", "mm", "lost motion at reversal", backlash, gap_mm),
-      TWIN_EFFECT_PARAM("constant_load.torque_Nm", "N m", "constant load torque", constant_load, torque_Nm),
-      TWIN_EFFECT_PARAM("position_dependent_friction.dTc_Nm", "N m", "extra Coulomb friction in the band", position_dependent_friction, dTc_Nm),
-      TWIN_EFFECT_PARAM("position_dependent_friction.x_start_mm", "mm", "band start", position_dependent_friction, x_start_mm),
-      TWIN_EFFECT_PARAM("position_dependent_friction.x_end_mm", "mm", "band end", position_dependent_friction, x_end_mm),
-      TWIN_EFFECT_PARAM("delay.delay_s", "s", "command delay", delay, delay_s),
-      TWIN_EFFECT_PARAM("compliance.K_Nm_per_rad", "N m/rad", "torsional stiffness motor-load", compliance, K_Nm_per_rad),
-      TWIN_EFFECT_PARAM("compliance.C_Nm_s_per_rad", "N m s/rad", "torsional damping motor-load", compliance, C_Nm_s_per_rad),
-      TWIN_EFFECT_PARAM("compliance.load_fraction", "1", "share of J on the load side", compliance, load_fraction),
-      TWIN_EFFECT_PARAM("current_saturation.i_max_A", "A", "current limit", current_saturation, i_max_A),
-      TWIN_EFFECT_PARAM("smooth_friction.ws", "rad/s", "speed below which Coulomb friction is smoothed (no stiction)", smooth_friction, ws_rad_per_s),
+      // The drive effects' parameters (feeddrive/effect_catalogue.hpp), as "<effect>.<name>".
+#define TWIN_EFFECT_ROW(EFFECT, NAME, FIELD, UNIT, DOC) TWIN_EFFECT_PARAM(#EFFECT "." #NAME, UNIT, DOC, EFFECT, FIELD),
+      TWIN_DRIVE_EFFECT_PARAMS(TWIN_EFFECT_ROW)
+#undef TWIN_EFFECT_ROW
   };
 }
 #undef TWIN_AXIS_PARAM
