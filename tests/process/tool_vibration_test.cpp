@@ -1,0 +1,80 @@
+#include "process/tool_vibration.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+#include "twin/core/error.hpp"
+
+namespace twin::process {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+// A step force on one mode against the closed-form step response of a damped
+// oscillator, x(t) = F/k (1 - e^(-s t) (cos wd t + s/wd sin wd t)). The
+// zero-order-hold discretisation is exact for a force held over each step,
+// so after 300 steps (several periods) only rounding remains: 1e-12 of F/k.
+TEST(ToolVibration, StepForceMatchesTheClosedFormStepResponse) {
+  ToolTipFrf frf;
+  frf.x = {ToolTipMode{2100.0, 0.03, 1.2e7}};
+  frf.y = {ToolTipMode{900.0, 0.2, 5.0e6}};
+  ToolVibration v(frf);
+  const double F = 150.0;
+  const double dt = 3.7e-5;
+  for (int n = 1; n <= 300; ++n) {
+    v.advance((n - 1) * dt, dt, {F, -F}, 1.0);
+    const double t = n * dt;
+    for (int d = 0; d < 2; ++d) {
+      const ToolTipMode& m = d == 0 ? frf.x[0] : frf.y[0];
+      const double wn = 2 * kPi * m.fn_Hz, s = m.zeta * wn, wd = wn * std::sqrt(1 - m.zeta * m.zeta);
+      const double x_mm = (d == 0 ? F : -F) / m.k_N_per_m * 1e3 *
+                          (1 - std::exp(-s * t) * (std::cos(wd * t) + s / wd * std::sin(wd * t)));
+      ASSERT_NEAR(v.deflection_mm()[static_cast<std::size_t>(d)], x_mm, 1e-12 * F / m.k_N_per_m * 1e3) << n;
+    }
+  }
+}
+
+// Two modes in one direction add (the FRF is their sum): the static
+// deflection under a long-held force is F (1/k1 + 1/k2), to 1e-9 after 200
+// periods of the slower mode at 5 % damping (e^-63 of the transient left).
+TEST(ToolVibration, ModesInOneDirectionAdd) {
+  ToolTipFrf frf;
+  frf.y = {ToolTipMode{500.0, 0.05, 4.0e6}, ToolTipMode{3000.0, 0.05, 2.0e7}};
+  ToolVibration v(frf);
+  const double dt = 2e-5;
+  for (int n = 0; n < 20000; ++n) v.advance(n * dt, dt, {0.0, 80.0}, 1e-3);
+  EXPECT_NEAR(v.deflection_mm()[1], 80.0 * (1 / 4.0e6 + 1 / 2.0e7) * 1e3, 1e-9);
+  EXPECT_EQ(v.deflection_mm()[0], 0.0);
+}
+
+// The recorded deflection: linear between the recorded points, zero before
+// the first (the tool at rest), the latest after the last; points older than
+// the kept span are forgotten. The predicted state equals the advanced one.
+TEST(ToolVibration, HistoryInterpolatesAndForgets) {
+  ToolTipFrf frf;
+  frf.x = {ToolTipMode{1000.0, 0.05, 1.0e7}};
+  ToolVibration v(frf);
+  const double dt = 1e-4;
+  std::vector<double> u{0.0};
+  for (int n = 0; n < 50; ++n) {
+    const auto pred = v.predict_mm(dt, {100.0, 0.0});
+    v.advance(n * dt, dt, {100.0, 0.0}, 2e-3);
+    EXPECT_EQ(pred[0], v.deflection_mm()[0]);
+    u.push_back(v.deflection_mm()[0]);
+  }
+  EXPECT_NEAR(v.deflection_at_mm(45.25 * dt)[0], 0.75 * u[45] + 0.25 * u[46], 1e-15);
+  EXPECT_EQ(v.deflection_at_mm(60 * dt)[0], u[50]);
+  EXPECT_EQ(v.deflection_at_mm(-1.0)[0], 0.0);   // before anything was recorded: at rest
+  EXPECT_EQ(v.deflection_at_mm(10 * dt)[0], 0.0);   // forgotten (older than 2 ms before t = 5 ms)
+}
+
+TEST(ToolVibration, BadModesAreRefused) {
+  ToolTipFrf frf;
+  frf.x = {ToolTipMode{1000.0, 0.0, 1.0e7}};
+  EXPECT_THROW(ToolVibration{frf}, ConfigError);
+}
+
+}  // namespace
+}  // namespace twin::process
