@@ -1,5 +1,7 @@
 #include "twin/structure/lobe_study.hpp"
 
+#include "twin/structure/chatter_check.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -165,6 +167,11 @@ std::vector<std::filesystem::path> write_lobe_study(io::ResultSet& results, cons
     j["chatter_Hz"] = number_or_null(finite_or_null(s.chatter_Hz));
     j["stable"] = s.stable;
     j["verdict"] = !std::isfinite(s.a_crit_mm) ? "no lobe covers the speed" : (s.stable ? "stable" : "chatter");
+    if (!s.checks.empty()) {
+      j["check"] = chatter_checks_json(s.checks);
+      io::write_file_atomic(results.path("check.csv"), chatter_checks_csv(s.checks));
+      written.push_back(results.path("check.csv"));
+    }
     io::write_file_atomic(results.path("report.json"), j.dump(2) + "\n");
     written.push_back(results.path("report.json"));
   }
