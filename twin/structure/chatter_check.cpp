@@ -104,7 +104,7 @@ Spectrum force_ratio(const std::vector<std::array<double, 2>>& F, std::size_t b,
     return p;
   };
   double harmonic = 0.0;
-  for (int k = 1; k * tooth_Hz < 0.5 / Ts; ++k) harmonic = std::max(harmonic, power(k * tooth_Hz));
+  for (int k = 0; k * tooth_Hz < 0.5 / Ts; ++k) harmonic = std::max(harmonic, power(k * tooth_Hz));
   Spectrum s;
   double best = 0.0;
   for (double f = std::ceil(f_lo * L) / L; f <= std::min(f_hi, 0.5 / Ts); f += 1.0 / L) {
