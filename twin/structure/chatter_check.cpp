@@ -3,13 +3,13 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
-#include <complex>
 #include <limits>
 #include <numbers>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "process/chatter_spectrum.hpp"
 #include "process/milling_process.hpp"
 #include "twin/core/error.hpp"
 #include "twin/core/units.hpp"
@@ -80,43 +80,6 @@ std::unique_ptr<process::MillingProcess> straight_cut(const io::Scenario& sc, co
   return p;
 }
 
-struct Spectrum {
-  double ratio{0.0};
-  double chatter_Hz{0.0};
-};
-
-/// r of the header over samples [b, e) of the x and y force (Ts apart).
-Spectrum force_ratio(const std::vector<std::array<double, 2>>& F, std::size_t b, std::size_t e, double Ts,
-                     double tooth_Hz, double f_lo, double f_hi) {
-  const std::size_t n = e - b;
-  const double L = static_cast<double>(n) * Ts;
-  std::vector<double> w(n);
-  for (std::size_t i = 0; i < n; ++i) w[i] = 0.5 - 0.5 * std::cos(2.0 * kPi * static_cast<double>(i) / n);
-  const auto power = [&](double f) {
-    double p = 0.0;
-    for (int c = 0; c < 2; ++c) {
-      std::complex<double> X{};
-      const std::complex<double> step = std::polar(1.0, -2.0 * kPi * f * Ts);
-      std::complex<double> rot{1.0, 0.0};
-      for (std::size_t i = 0; i < n; ++i, rot *= step) X += w[i] * F[b + i][static_cast<std::size_t>(c)] * rot;
-      p += std::norm(X);
-    }
-    return p;
-  };
-  double harmonic = 0.0;
-  for (int k = 0; k * tooth_Hz < 0.5 / Ts; ++k) harmonic = std::max(harmonic, power(k * tooth_Hz));
-  Spectrum s;
-  double best = 0.0;
-  for (double f = std::ceil(f_lo * L) / L; f <= std::min(f_hi, 0.5 / Ts); f += 1.0 / L) {
-    const double k = std::round(f / tooth_Hz);
-    if (std::abs(f - k * tooth_Hz) <= 3.0 / L) continue;
-    const double p = power(f);
-    if (p > best) best = p, s.chatter_Hz = f;
-  }
-  s.ratio = harmonic > 0.0 ? std::sqrt(best / harmonic) : 0.0;
-  return s;
-}
-
 double lobe_depth(const LobeStudy& study, double rpm) {
   const double a = study.lobes.critical_depth_mm(rpm);
   if (std::isfinite(a)) return a;
@@ -181,11 +144,11 @@ ChatterCheckResult check_chatter(const io::Scenario& sc, const LobeStudy& study,
   res.simulated_s = 3.0 * static_cast<double>(window) * Ts;
   const double f_lo = 0.5 * study.tool_tip.fn_min_Hz(), f_hi = 1.5 * study.tool_tip.fn_max_Hz();
   const auto w = static_cast<std::size_t>(window);
-  res.ratio_early = force_ratio(F, w, 2 * w, Ts, res.tooth_Hz, f_lo, f_hi).ratio;
-  const Spectrum last = force_ratio(F, 2 * w, 3 * w, Ts, res.tooth_Hz, f_lo, f_hi);
+  res.ratio_early = process::chatter_spectrum(F, w, 2 * w, Ts, res.tooth_Hz, f_lo, f_hi).ratio;
+  const process::ChatterSpectrum last = process::chatter_spectrum(F, 2 * w, 3 * w, Ts, res.tooth_Hz, f_lo, f_hi);
   res.ratio = last.ratio;
   res.chatter_Hz = last.chatter_Hz;
-  res.chatter = res.ratio >= 0.05 || (res.ratio > 2e-3 && res.ratio >= 1.2 * res.ratio_early);
+  res.chatter = process::chatter_verdict(res.ratio_early, res.ratio);
   return res;
 }
 

@@ -12,16 +12,10 @@
 /// programmed feed from the first tick. The run lasts three windows of
 /// L = max(0.1 s, 16 tooth periods).
 ///
-/// The verdict: in windows 2 and 3 the tick-averaged force on the workpiece in
-/// x and y (what the drives see) is Hann-windowed; r = (the largest
-/// non-harmonic line between half the lowest and 1.5 times the highest tool
-/// mode, more than 3 bins from any tooth harmonic) / (the largest tooth
-/// harmonic, k >= 1), amplitude, summed over x and y in power. A stable cut
-/// rings down after the tool enters (r falls to a floor of a few 1e-3: the
-/// height map's cells, crossed at v / cell, modulate the engagement); chatter
-/// grows (r rises) until teeth leave the cut and it holds a limit cycle (r of
-/// order 0.1 to 1). Chatter: r_3 >= 0.05, or r_3 >= 1.2 r_2 above the floor
-/// (r_3 > 2e-3).
+/// The verdict (process/chatter_spectrum.hpp): the tick-averaged force on the
+/// workpiece in x and y (what the drives see) in windows 2 and 3, r_2 and r_3
+/// between half the lowest and 1.5 times the highest tool mode;
+/// chatter_verdict(r_2, r_3).
 #include <string>
 #include <vector>
 
