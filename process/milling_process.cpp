@@ -15,6 +15,8 @@ namespace {
 /// at Ts = 1e-4 s, beyond the G-code reader's 200000 rpm and twenty times the
 /// shipped scenarios' fastest spindle (12000 rpm).
 constexpr int kMaxForceSamplesPerTick = 1000;
+/// The smallest descent that updates the stock by itself (see update_stock).
+constexpr double kDescent_mm = 1e-4;
 }  // namespace
 
 std::string ProcessSetup::summary() const {
@@ -27,7 +29,11 @@ MillingProcess::MillingProcess(const ProcessSetup& setup)
     : model_(setup.tool, setup.coefficients, setup.lead_deg, setup.options),
       stock_(setup.stock),
       phi_rad_(setup.spindle_angle0_deg * kRadPerDeg),
-      vibration_(setup.tool_tip.empty() ? ToolVibration() : ToolVibration(setup.tool_tip)) {
+      vibration_(setup.tool_tip.empty() ? ToolVibration() : ToolVibration(setup.tool_tip)),
+      substeps_per_mode_period_(setup.substeps_per_mode_period) {
+  if (!(substeps_per_mode_period_ >= 1.0 && substeps_per_mode_period_ <= 100.0))
+    throw ConfigError(fmt::format("process: substeps_per_mode_period = {} must be in [1, 100]",
+                                  substeps_per_mode_period_));
   if (!std::isfinite(setup.tilt_deg) || std::abs(setup.tilt_deg) >= 60.0)
     throw ConfigError(fmt::format("process: tilt_deg = {} must be in (-60, 60) deg", setup.tilt_deg));
   if (!std::isfinite(phi_rad_)) throw ConfigError("process: spindle_angle0_deg is not finite");
@@ -62,7 +68,7 @@ int MillingProcess::substeps(const ProcessInput& in, double omega_rad_per_s) con
   const double angle_step_rad = model_.options().angle_step_deg * kRadPerDeg;
   double n_sub_wanted = std::ceil(dphi_tick / angle_step_rad - 1e-9);
   if (!vibration_.empty())
-    n_sub_wanted = std::max(n_sub_wanted, std::ceil(kSubstepsPerModePeriod * vibration_.fn_max_Hz() * in.Ts_s - 1e-9));
+    n_sub_wanted = std::max(n_sub_wanted, std::ceil(substeps_per_mode_period_ * vibration_.fn_max_Hz() * in.Ts_s - 1e-9));
   if (!(n_sub_wanted <= kMaxForceSamplesPerTick))
     throw ModelError(fmt::format(
         "process: spindle {} rpm turns {:.4g} deg per tick of {} s: {:.4g} force samples of {} deg, more than the {} a "
@@ -167,7 +173,11 @@ double MillingProcess::update_stock(const ProcessInput& in) {
     last_removed_mm_ = p;
   }
   const double moved = std::hypot(p_next[0] - last_removed_mm_[0], p_next[1] - last_removed_mm_[1]);
-  if (moved >= 2.0 * stock_.cell_mm() || p_next[2] < last_removed_mm_[2] - 1e-6) {
+  // A descent of less than kDescent_mm waits for the next update (the cells
+  // over the tip then lag by that much at most, far below anything the force
+  // or the engagement read): a Z axis held against gravity moves by a few nm
+  // from tick to tick, and a whole sweep every tick would cost more than the cut.
+  if (moved >= 2.0 * stock_.cell_mm() || p_next[2] < last_removed_mm_[2] - kDescent_mm) {
     // An update may visit only the cells this move can still lower when the
     // one before it was level or rising (the cells over its end's flat core
     // are then at the tip height); after a descent it visits every cell.

@@ -17,7 +17,7 @@
 ///     leaves material behind the tool, never ahead of it, and the chip
 ///     condition ignores what lies behind.
 /// With tool-tip modes (ProcessSetup::tool_tip) the tool vibrates: the tick is
-/// cut into n_sub = max(the angle steps above, ceil(8 fn_max Ts)) substeps;
+/// cut into n_sub = max(the angle steps above, ceil(substeps_per_mode_period fn_max Ts)) substeps;
 /// in substep s of length dt the force is sampled at its midpoint (spindle
 /// angle, tool position, and the deflection predicted there from the state
 /// and the previous substep's force) with the regenerative chip of
@@ -57,6 +57,8 @@ struct ProcessSetup {
   /// The tool tip's modes in the cut (empty: a rigid tool, the force model as
   /// it is without them). See MillingProcess.
   ToolTipFrf tool_tip;
+  /// With tool modes: the fewest force samples per period of the highest mode.
+  double substeps_per_mode_period{8.0};
   /// One line: tool, material, stock size.
   std::string summary() const;
 };
@@ -77,9 +79,6 @@ class MillingProcess final : public ProcessModel {
   double spindle_angle_rad() const noexcept { return phi_rad_; }
   /// The probe distance outside the edge radius (one cell), mm.
   double probe_mm() const noexcept { return stock_.cell_mm(); }
-
-  /// Substeps per period of the highest tool mode (see above).
-  static constexpr double kSubstepsPerModePeriod = 8.0;
 
  private:
   /// The tick's geometry, shared by the rigid and the vibrating sampling.
@@ -110,6 +109,7 @@ class MillingProcess final : public ProcessModel {
   std::array<double, 3> last_removed_mm_{};
   bool last_sweep_level_{true};   ///< the last update did not move down (by more than 1e-9 mm)
   ToolVibration vibration_;        ///< empty: a rigid tool
+  double substeps_per_mode_period_{8.0};
   std::array<double, 2> F_tool_prev_N_{};   ///< the last substep's force on the tool (x, y)
   double sle_mm_{0.0};             ///< the last surface location error sampled
 };
