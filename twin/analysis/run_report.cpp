@@ -70,6 +70,35 @@ class ToolStatistics {
   bool chatter_{false};
 };
 
+/// The statistics of a vibrating tool, when the scenario's process has one.
+std::optional<ToolStatistics> tool_statistics(const io::Scenario& sc) {
+  if (!sc.make_process || !sc.process_setup || sc.process_setup->tool_tip.empty()) return std::nullopt;
+  return ToolStatistics(sc.process_setup->tool_tip, sc.process_setup->tool.flutes, sc.machine.Ts_s);
+}
+
+/// The run's plots (gnuplot reads no gzip: a gzip trace is drawn from a plain
+/// copy in the staging folder, which is not part of the result).
+std::vector<std::filesystem::path> draw_run_plots(io::ResultSet& results, const RunOptions& options,
+                                                  const std::string& trace_name, std::size_t rows,
+                                                  const std::vector<Axis>& axes, const RunStatistics& stats,
+                                                  bool cutting, const controller::Trajectory& traj) {
+  if (options.trace_format == io::TraceFormat::kCsv)
+    return plot_run(results, trace_name, rows, axes, stats.corners(), cutting, &traj);
+  const auto plain = results.staging_dir() / "plot-trace.csv";
+  io::gunzip_file(results.path(trace_name), plain);
+  std::vector<std::filesystem::path> plots;
+  try {
+    plots = plot_run(results, plain.filename().string(), rows, axes, stats.corners(), cutting, &traj);
+  } catch (const Error&) {
+    std::error_code ec;
+    std::filesystem::remove(plain, ec);
+    throw;
+  }
+  std::error_code ec;
+  std::filesystem::remove(plain, ec);
+  return plots;
+}
+
 }  // namespace
 
 std::vector<std::string> run_trace_columns(const std::vector<Axis>& axes, bool tool_modes) {
@@ -473,13 +502,10 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
   if (options.log_every < 1)
     throw ConfigError(fmt::format("--log-every: {} is not a whole number of ticks >= 1", options.log_every));
   const std::string trace_name = io::trace_file_name(options.trace_format);
-  const bool tool_modes =
-      scenario.make_process && scenario.process_setup && !scenario.process_setup->tool_tip.empty();
+  std::optional<ToolStatistics> tool_stats = tool_statistics(scenario);
+  const bool tool_modes = tool_stats.has_value();
   io::TraceWriter writer(results.path(trace_name), run_trace_columns(axes, tool_modes));
   RunStatistics stats(program, traj, axes, scenario.machine.encoder_resolution_mm);
-  std::optional<ToolStatistics> tool_stats;
-  if (tool_modes)
-    tool_stats.emplace(scenario.process_setup->tool_tip, scenario.process_setup->tool.flutes, scenario.machine.Ts_s);
   std::vector<double> row;
   for (std::int64_t k = 0, next_log = 0; k < total; ++k) {
     const sim::Snapshot& s = cosim.step();
@@ -508,25 +534,8 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
   std::vector<std::filesystem::path> plots;
   if (options.plots) {
     try {
-      if (options.trace_format == io::TraceFormat::kCsv) {
-        plots = plot_run(results, trace_name, writer.num_rows(), axes, stats.corners(),
-                         scenario.make_process != nullptr, &traj);
-      } else {
-        // gnuplot reads no gzip (and no shell pipe is opened): the plots are drawn
-        // from a plain copy in the staging folder, which is not part of the result.
-        const auto plain = results.staging_dir() / "plot-trace.csv";
-        io::gunzip_file(results.path(trace_name), plain);
-        try {
-          plots = plot_run(results, plain.filename().string(), writer.num_rows(), axes, stats.corners(),
-                           scenario.make_process != nullptr, &traj);
-        } catch (const Error&) {
-          std::error_code ec;
-          std::filesystem::remove(plain, ec);
-          throw;
-        }
-        std::error_code ec;
-        std::filesystem::remove(plain, ec);
-      }
+      plots = draw_run_plots(results, options, trace_name, writer.num_rows(), axes, stats,
+                             scenario.make_process != nullptr, traj);
     } catch (const Error&) {
       results.commit();  // the trace and the summary stand without the plots
       throw;
