@@ -72,7 +72,7 @@ class ToolStatistics {
 
 /// The statistics of a vibrating tool, when the scenario's process has one.
 std::optional<ToolStatistics> tool_statistics(const io::Scenario& sc) {
-  if (!sc.make_process || !sc.process_setup || sc.process_setup->tool_tip.empty()) return std::nullopt;
+  if (!io::vibrating_tool(sc)) return std::nullopt;
   return ToolStatistics(sc.process_setup->tool_tip, sc.process_setup->tool.flutes, sc.machine.Ts_s);
 }
 

@@ -97,6 +97,10 @@ void set_tool_modes(Scenario& s, const process::ToolTipFrf& tool_tip) {
   s.make_process = [setup = *s.process_setup]() { return process::make_process(setup); };
 }
 
+bool vibrating_tool(const Scenario& s) {
+  return s.make_process && s.process_setup && !s.process_setup->tool_tip.empty();
+}
+
 controller::Program parse_program(const Scenario& s) {
   controller::Program program =
       controller::parse_gcode(s.program_text, s.program_path.string(), s.start_mm, s.machine.rapid_mm_per_min);

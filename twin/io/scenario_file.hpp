@@ -43,6 +43,8 @@ Scenario load_scenario(const std::filesystem::path& path, const std::string& mac
 /// tool); nothing for an air cut. load_scenario does this with the machine's
 /// modes when the machine file has a `structure:`.
 void set_tool_modes(Scenario& scenario, const process::ToolTipFrf& tool_tip);
+/// True when the scenario cuts with a vibrating tool (its process has tool-tip modes).
+bool vibrating_tool(const Scenario& scenario);
 /// Parses the scenario's program against its (possibly overridden) machine;
 /// ConfigError if the program does not fit in the machine's travel
 /// (controller::check_travel).
