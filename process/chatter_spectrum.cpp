@@ -5,6 +5,8 @@
 #include <complex>
 #include <numbers>
 
+#include <unsupported/Eigen/FFT>
+
 namespace twin::process {
 
 ChatterSpectrum chatter_spectrum(const std::vector<std::array<double, 2>>& F, std::size_t b, std::size_t e, double Ts,
@@ -29,11 +31,21 @@ ChatterSpectrum chatter_spectrum(const std::vector<std::array<double, 2>>& F, st
   };
   double harmonic = 0.0;
   for (int k = 0; k * tooth_Hz < 0.5 / Ts; ++k) harmonic = std::max(harmonic, power(k * tooth_Hz));
+  // The non-harmonic lines on the 1/L grid: the FFT's bins of the windowed signal.
+  Eigen::FFT<double> fft;
+  std::vector<std::complex<double>> X[2];
+  for (std::size_t c = 0; c < 2; ++c) {
+    std::vector<double> x(n);
+    for (std::size_t i = 0; i < n; ++i) x[i] = w[i] * F[b + i][c];
+    fft.fwd(X[c], x);
+  }
   double best = 0.0;
-  for (double f = std::ceil(f_lo * L) / L; f <= std::min(f_hi, 0.5 / Ts); f += 1.0 / L) {
+  const auto m_hi = static_cast<std::size_t>(std::floor(std::min(f_hi, 0.5 / Ts) * L));
+  for (auto m = static_cast<std::size_t>(std::ceil(f_lo * L)); m <= m_hi && m < n; ++m) {
+    const double f = static_cast<double>(m) / L;
     const double k = std::round(f / tooth_Hz);
     if (std::abs(f - k * tooth_Hz) <= 3.0 / L) continue;
-    const double p = power(f);
+    const double p = std::norm(X[0][m]) + std::norm(X[1][m]);
     if (p > best) best = p, s.chatter_Hz = f;
   }
   s.ratio = harmonic > 0.0 ? std::sqrt(best / harmonic) : 0.0;

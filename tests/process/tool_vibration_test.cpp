@@ -5,6 +5,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "process/chatter_spectrum.hpp"
 #include "process/milling_process.hpp"
 #include "twin/core/error.hpp"
 
@@ -113,6 +114,28 @@ TEST(ToolVibration, SlotSurfaceLocationErrorIsTheStaticDeflectionAtTheWall) {
   }
   ASSERT_TRUE(out.tool_modes);
   EXPECT_NEAR(std::abs(out.sle_mm), Ktc * a * fz / ky * 1e3, 0.02 * Ktc * a * fz / ky * 1e3);
+}
+
+// The spectrum ratio on a synthetic force: a mean of 100 N in x, a tooth
+// harmonic of 30 N at 400 Hz in y and a 2 N line at 1030 Hz in x, 0.1 s at
+// 10 kHz (both frequencies on the 10 Hz grid). With a Hann window a line of
+// amplitude A on the grid reads A n / 4 and the mean M reads M n / 2, so
+// r = (2 n / 4) / (100 n / 2) = 0.01 exactly (to rounding), at 1030 Hz; the
+// harmonic at 400 Hz (and the mean) are not counted as non-harmonic.
+TEST(ChatterSpectrum, RatioOfALineToTheMeanUnderAHannWindow) {
+  const double Ts = 1e-4;
+  std::vector<std::array<double, 2>> F;
+  for (int i = 0; i < 1000; ++i) {
+    const double t = i * Ts;
+    F.push_back({100.0 + 2.0 * std::cos(2 * kPi * 1030.0 * t + 0.3), 30.0 * std::sin(2 * kPi * 400.0 * t)});
+  }
+  const ChatterSpectrum s = chatter_spectrum(F, 0, F.size(), Ts, 400.0, 300.0, 3000.0);
+  EXPECT_NEAR(s.ratio, 0.01, 1e-9);
+  EXPECT_EQ(s.chatter_Hz, 1030.0);
+  EXPECT_TRUE(chatter_verdict(0.01, 0.06));    // a limit cycle
+  EXPECT_TRUE(chatter_verdict(0.004, 0.005));  // growing above the floor
+  EXPECT_FALSE(chatter_verdict(0.005, 0.004)); // ringing down
+  EXPECT_FALSE(chatter_verdict(0.001, 0.0019)); // growing within the floor
 }
 
 TEST(ToolVibration, BadModesAreRefused) {
