@@ -55,6 +55,16 @@ struct ForceModelOptions {
   void validate(const std::string& where) const;
 };
 
+/// The dynamic (regenerative) chip of a vibrating tool: du_mm[m-1] = u(t) -
+/// u(t - m T), the tool's deflection now against m tooth periods T ago. The
+/// edge of flute j cuts the surface the nearest earlier flute left:
+///   h_r = min_{m=1..N} ( m f . n + R_j(z) - R_{j-m}(z) + du_m . n ),  n = (sin phi_j, cos phi_j),
+/// so a tooth that a vibration lifts out of the cut leaves the surface to the
+/// next (Tlusty's multiple regeneration).
+struct Regeneration {
+  std::array<std::array<double, 2>, 16> du_mm{};   ///< m = 1 .. flutes (at most 16)
+};
+
 /// The result of one force evaluation at one spindle angle.
 struct ForceSample {
   std::array<double, 3> F_tool_N{};   ///< force on the tool
@@ -77,9 +87,12 @@ class MillingForceModel {
   /// Force at spindle angle phi_rad with the tool tip at p_mm, feed per tooth
   /// vector f_mm (xy), disks up to z_top_mm (absolute) only. `material(x, y, z)`
   /// says whether a point lies in remaining material; probe_mm as above.
+  /// With `regen`, the chip is the dynamic one of Regeneration (p_mm stays the
+  /// undeflected tool: the material test is the rigid tool's).
   template <class Material>
   ForceSample sample(double phi_rad, const std::array<double, 3>& p_mm, const std::array<double, 2>& f_mm,
-                     double z_top_mm, double probe_mm, const Material& material) const;
+                     double z_top_mm, double probe_mm, const Material& material,
+                     const Regeneration* regen = nullptr) const;
 
   /// Engaged arc (deg) of the edge circle at height z_local_mm above the tip:
   /// the angles where the edge moves into material (v_dir . r > 0) and the
@@ -143,7 +156,7 @@ class MillingForceModel {
 template <class Material>
 ForceSample MillingForceModel::sample(double phi_rad, const std::array<double, 3>& p_mm,
                                       const std::array<double, 2>& f_mm, double z_top_mm, double probe_mm,
-                                      const Material& material) const {
+                                      const Material& material, const Regeneration* regen) const {
   ForceSample out;
   const int N = tool_.flutes;
   const double f_abs = std::hypot(f_mm[0], f_mm[1]);
@@ -169,7 +182,13 @@ ForceSample MillingForceModel::sample(double phi_rad, const std::array<double, 3
       const double c = cj * d.cos_lag + sj * d.sin_lag;
       const double h0 = f_mm[0] * s + f_mm[1] * c;
       double h_r = h0;
-      if (tool_.runout_rho_mm > 0.0) {
+      if (regen != nullptr) {
+        h_r = 1e300;
+        for (int m = 1; m <= N; ++m) {
+          const auto& du = regen->du_mm[static_cast<std::size_t>(m - 1)];
+          h_r = std::min(h_r, m * h0 + dR[j] - dR[((j - m) % N + N) % N] + du[0] * s + du[1] * c);
+        }
+      } else if (tool_.runout_rho_mm > 0.0) {
         const double Rj = dR[j];
         h_r = 1e300;
         for (int m = 1; m <= N; ++m) h_r = std::min(h_r, m * h0 + Rj - dR[((j - m) % N + N) % N]);

@@ -27,6 +27,12 @@ struct ProcessOutput {
   double spindle_torque_Nm{0.0};          ///< cutting torque about the tool axis, tick average
   double power_W{0.0};                    ///< cutting power, tick average
   double removed_mm3{0.0};                ///< material removed in the tick
+  /// A vibrating tool (tool-tip modes in the process): its deflection at t_k
+  /// and the surface location error of the last tooth that passed a finished
+  /// wall (deflection along the wall's outward normal; > 0: into the wall).
+  bool tool_modes{false};
+  std::array<double, 2> deflection_mm{};
+  double sle_mm{0.0};
 };
 
 class ProcessModel {

@@ -50,7 +50,8 @@ RunSize plan_run_size(const io::Scenario& scenario) {
   const double settle_ticks = std::ceil(scenario.settle_s / Ts);
   const double rows = static_cast<double>(traj.num_ticks()) + settle_ticks;
   size.duration_s = rows * Ts;
-  const double columns = static_cast<double>(analysis::run_trace_columns(scenario.machine.present_axes()).size());
+  const double columns = static_cast<double>(
+      analysis::run_trace_columns(scenario.machine.present_axes(), io::vibrating_tool(scenario)).size());
   size.trace_mb = rows * columns * kTraceBytesPerField / 1e6;
   size.rows = rows < 9e18 ? static_cast<std::int64_t>(rows) : std::numeric_limits<std::int64_t>::max();
   return size;

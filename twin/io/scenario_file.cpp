@@ -84,8 +84,21 @@ Scenario load_scenario(const std::filesystem::path& path, const std::string& mac
     s.process_summary = setup.summary;
     s.make_process = setup.make;
     s.process_setup = setup.setup;
+    // A machine with a structure cuts with its tool-tip modes (the tool
+    // vibrates, the chip regenerates); without `structure:` the tool is rigid.
+    if (s.machine.structure && !s.machine.tool_tip.empty()) set_tool_modes(s, s.machine.tool_tip);
   }
   return s;
+}
+
+void set_tool_modes(Scenario& s, const process::ToolTipFrf& tool_tip) {
+  if (!s.process_setup) return;
+  s.process_setup->tool_tip = tool_tip;
+  s.make_process = [setup = *s.process_setup]() { return process::make_process(setup); };
+}
+
+bool vibrating_tool(const Scenario& s) {
+  return s.make_process && s.process_setup && !s.process_setup->tool_tip.empty();
 }
 
 controller::Program parse_program(const Scenario& s) {

@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include <fmt/format.h>
 
+#include "process/chatter_spectrum.hpp"
 #include "twin/report/plots.hpp"
 #include "twin/core/error.hpp"
 #include "twin/core/units.hpp"
@@ -14,7 +16,92 @@
 
 namespace twin::analysis {
 
-std::vector<std::string> run_trace_columns(const std::vector<Axis>& axes) {
+namespace {
+
+/// A vibrating tool's figures over a run: the largest deflection and surface
+/// location error, and the chatter verdict of the force spectrum
+/// (process/chatter_spectrum.hpp) over consecutive windows of steady cutting
+/// (engaged, the same spindle speed), L = max(0.1 s, 16 tooth periods).
+class ToolStatistics {
+ public:
+  ToolStatistics(const process::ToolTipFrf& frf, int flutes, double Ts_s)
+      : f_lo_(0.5 * frf.fn_min_Hz()), f_hi_(1.5 * frf.fn_max_Hz()), flutes_(flutes), Ts_(Ts_s) {}
+  void add(const sim::Snapshot& s) {
+    if (!s.tool_modes) return;
+    max_deflection_um_ = std::max(max_deflection_um_, std::hypot(s.tool_deflection_um[0], s.tool_deflection_um[1]));
+    max_sle_um_ = std::max(max_sle_um_, std::abs(s.sle_um));
+    if (!(s.engagement_deg > 0.0 && s.spindle_rpm > 0.0) || s.spindle_rpm != rpm_) {
+      F_.clear();
+      r_prev_ = -1.0;
+      rpm_ = s.spindle_rpm;
+      if (!(s.engagement_deg > 0.0 && s.spindle_rpm > 0.0)) return;
+    }
+    F_.push_back({s.F_avg_N[0], s.F_avg_N[1]});
+    const double tooth_Hz = rpm_ / 60.0 * flutes_;
+    const auto window = static_cast<std::size_t>(std::ceil(std::max(0.1, 16.0 / tooth_Hz) / Ts_));
+    if (F_.size() < window) return;
+    const process::ChatterSpectrum sp = process::chatter_spectrum(F_, 0, window, Ts_, tooth_Hz, f_lo_, f_hi_);
+    if (r_prev_ >= 0.0) {
+      ++judged_;
+      if (process::chatter_verdict(r_prev_, sp.ratio)) chatter_ = true;
+      if (sp.ratio > max_ratio_) max_ratio_ = sp.ratio, chatter_Hz_ = sp.chatter_Hz;
+    }
+    r_prev_ = sp.ratio;
+    F_.clear();
+  }
+  nlohmann::json summary() const {
+    return {{"max_deflection_um", max_deflection_um_},
+            {"max_abs_surface_location_error_um", max_sle_um_},
+            {"chatter", judged_ > 0 ? nlohmann::json(chatter_ ? "chatter" : "stable") : nlohmann::json("not judged")},
+            {"windows_judged", judged_},
+            {"max_nonharmonic_ratio", max_ratio_},
+            {"nonharmonic_Hz", chatter_Hz_}};
+  }
+
+ private:
+  double f_lo_, f_hi_;
+  int flutes_;
+  double Ts_;
+  double rpm_{0.0};
+  std::vector<std::array<double, 2>> F_;
+  double r_prev_{-1.0};
+  double max_deflection_um_{0.0}, max_sle_um_{0.0}, max_ratio_{0.0}, chatter_Hz_{0.0};
+  int judged_{0};
+  bool chatter_{false};
+};
+
+/// The statistics of a vibrating tool, when the scenario's process has one.
+std::optional<ToolStatistics> tool_statistics(const io::Scenario& sc) {
+  if (!io::vibrating_tool(sc)) return std::nullopt;
+  return ToolStatistics(sc.process_setup->tool_tip, sc.process_setup->tool.flutes, sc.machine.Ts_s);
+}
+
+/// The run's plots (gnuplot reads no gzip: a gzip trace is drawn from a plain
+/// copy in the staging folder, which is not part of the result).
+std::vector<std::filesystem::path> draw_run_plots(io::ResultSet& results, const RunOptions& options,
+                                                  const std::string& trace_name, std::size_t rows,
+                                                  const std::vector<Axis>& axes, const RunStatistics& stats,
+                                                  bool cutting, const controller::Trajectory& traj) {
+  if (options.trace_format == io::TraceFormat::kCsv)
+    return plot_run(results, trace_name, rows, axes, stats.corners(), cutting, &traj);
+  const auto plain = results.staging_dir() / "plot-trace.csv";
+  io::gunzip_file(results.path(trace_name), plain);
+  std::vector<std::filesystem::path> plots;
+  try {
+    plots = plot_run(results, plain.filename().string(), rows, axes, stats.corners(), cutting, &traj);
+  } catch (const Error&) {
+    std::error_code ec;
+    std::filesystem::remove(plain, ec);
+    throw;
+  }
+  std::error_code ec;
+  std::filesystem::remove(plain, ec);
+  return plots;
+}
+
+}  // namespace
+
+std::vector<std::string> run_trace_columns(const std::vector<Axis>& axes, bool tool_modes) {
   std::vector<std::string> c{"t_s"};
   for (Axis a : axes) {
     const std::string n(axis_name(a));
@@ -30,10 +117,13 @@ std::vector<std::string> run_trace_columns(const std::vector<Axis>& axes) {
                      "fz_avg_N", "block"});
   // The cascade law's velocity command (spec/measured-data.md); 0 under the FADAL law.
   for (Axis a : axes) c.push_back(std::string(axis_name(a)) + "_vcmd_mm_s");
+  // A vibrating tool: its deflection and the surface location error (process/milling_process.hpp).
+  if (tool_modes) c.insert(c.end(), {"tool_dx_um", "tool_dy_um", "sle_um"});
   return c;
 }
 
-void fill_run_trace_row(const sim::Snapshot& s, const std::vector<Axis>& axes, std::vector<double>& row) {
+void fill_run_trace_row(const sim::Snapshot& s, const std::vector<Axis>& axes, std::vector<double>& row,
+                        bool tool_modes) {
   row.clear();
   row.push_back(s.t_s);
   for (Axis a : axes) {
@@ -49,6 +139,7 @@ void fill_run_trace_row(const sim::Snapshot& s, const std::vector<Axis>& axes, s
                          s.contour_error_mm, s.engagement_deg, s.chip_mm, s.spindle_torque_Nm, s.cutting_power_W,
                          s.F_avg_N[0], s.F_avg_N[1], s.F_avg_N[2], static_cast<double>(s.block)});
   for (Axis a : axes) row.push_back(s.axes[index(a)].vcmd_mm_per_s);
+  if (tool_modes) row.insert(row.end(), {s.tool_deflection_um[0], s.tool_deflection_um[1], s.sle_um});
 }
 
 std::vector<CornerWindow> corner_windows(const controller::Trajectory& traj, const controller::Program& program) {
@@ -441,14 +532,17 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
   if (options.log_every < 1)
     throw ConfigError(fmt::format("--log-every: {} is not a whole number of ticks >= 1", options.log_every));
   const std::string trace_name = io::trace_file_name(options.trace_format);
-  io::TraceWriter writer(results.path(trace_name), run_trace_columns(axes));
+  std::optional<ToolStatistics> tool_stats = tool_statistics(scenario);
+  const bool tool_modes = tool_stats.has_value();
+  io::TraceWriter writer(results.path(trace_name), run_trace_columns(axes, tool_modes));
   RunStatistics stats(program, traj, axes, scenario.machine.encoder_resolution_mm);
   std::vector<double> row;
   for (std::int64_t k = 0, next_log = 0; k < total; ++k) {
     const sim::Snapshot& s = cosim.step();
     stats.add(s);
+    if (tool_stats) tool_stats->add(s);
     if (k == next_log) {
-      fill_run_trace_row(s, axes, row);
+      fill_run_trace_row(s, axes, row, tool_modes);
       writer.write_row(row);
       next_log += options.log_every;
     }
@@ -462,6 +556,7 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
   summary["Ts_s"] = scenario.machine.Ts_s;
   const nlohmann::json st = stats.summary();
   summary.update(st);
+  if (tool_stats) summary["tool"] = tool_stats->summary();
   summary["trace"] = {{"file", trace_name}, {"log_every_ticks", options.log_every}, {"rows", writer.num_rows()}};
   writer.commit();
   io::write_file_atomic(results.path("summary.json"), summary.dump(2) + "\n");
@@ -469,25 +564,8 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
   std::vector<std::filesystem::path> plots;
   if (options.plots) {
     try {
-      if (options.trace_format == io::TraceFormat::kCsv) {
-        plots = plot_run(results, trace_name, writer.num_rows(), axes, stats.corners(),
-                         scenario.make_process != nullptr, &traj);
-      } else {
-        // gnuplot reads no gzip (and no shell pipe is opened): the plots are drawn
-        // from a plain copy in the staging folder, which is not part of the result.
-        const auto plain = results.staging_dir() / "plot-trace.csv";
-        io::gunzip_file(results.path(trace_name), plain);
-        try {
-          plots = plot_run(results, plain.filename().string(), writer.num_rows(), axes, stats.corners(),
-                           scenario.make_process != nullptr, &traj);
-        } catch (const Error&) {
-          std::error_code ec;
-          std::filesystem::remove(plain, ec);
-          throw;
-        }
-        std::error_code ec;
-        std::filesystem::remove(plain, ec);
-      }
+      plots = draw_run_plots(results, options, trace_name, writer.num_rows(), axes, stats,
+                             scenario.make_process != nullptr, traj);
     } catch (const Error&) {
       results.commit();  // the trace and the summary stand without the plots
       throw;

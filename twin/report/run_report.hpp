@@ -19,9 +19,10 @@
 namespace twin::analysis {
 
 /// Column names of a simulated trace for the given axes (spec columns first).
-std::vector<std::string> run_trace_columns(const std::vector<Axis>& axes);
+std::vector<std::string> run_trace_columns(const std::vector<Axis>& axes, bool tool_modes = false);
 /// Fills one row in the order of run_trace_columns.
-void fill_run_trace_row(const sim::Snapshot& s, const std::vector<Axis>& axes, std::vector<double>& row);
+void fill_run_trace_row(const sim::Snapshot& s, const std::vector<Axis>& axes, std::vector<double>& row,
+                        bool tool_modes = false);
 
 /// Corner windows on the reference: where the reference speed dips below the
 /// programmed feed around each corner.

@@ -80,27 +80,7 @@ const Snapshot& CoSimulation::step() {
   row.spindle_rpm = spindle_override_rpm_ ? *spindle_override_rpm_ : ref.spindle_rpm;
 
   // 3. Process over [t_k, t_k+1).
-  std::array<double, 3> F_avg_N = F_ext_N_;
-  row.F_N = F_ext_N_;
-  if (process_) {
-    process::ProcessInput pin;
-    pin.k = k_;
-    pin.t_s = t;
-    pin.Ts_s = Ts;
-    pin.p_mm = p_mm;
-    pin.v_mm_per_s = v_mm_per_s;
-    pin.spindle_rpm = row.spindle_rpm;
-    const process::ProcessOutput pout = process_->step(pin);
-    for (std::size_t c = 0; c < 3; ++c) {
-      F_avg_N[c] += pout.F_avg_N[c];
-      row.F_N[c] += pout.F_N[c];
-    }
-    row.engagement_deg = pout.engagement_deg;
-    row.chip_mm = pout.chip_mm;
-    row.spindle_torque_Nm = pout.spindle_torque_Nm;
-    row.cutting_power_W = pout.power_W;
-  }
-  row.F_avg_N = F_avg_N;
+  const std::array<double, 3> F_avg_N = run_process(row, p_mm, v_mm_per_s);
 
   // 4. Position loops; 5. drive inputs.
   for (std::size_t i = 0; i < axes_.size(); ++i) {
@@ -126,37 +106,7 @@ const Snapshot& CoSimulation::step() {
     const feeddrive::DriveOutput out = drives_.output(i);
     s.i_A = out.i_A;
     s.Tm_Nm = out.Tm_Nm;
-    const double limit = machine_.axes[a].following_error_limit_mm;
-    if (!std::isfinite(out.x_mm) || !std::isfinite(out.w_rad_per_s) || !std::isfinite(s.u_V))
-      throw ModelError(fmt::format("axis {} became non-finite at t = {:.4f} s (tick {}): check the gains and the model",
-                                   axis_name(axes_[i]), t, k_));
-    if (std::abs(s.e_mm) > limit)
-      throw ModelError(fmt::format(
-          "axis {} unstable or overloaded at t = {:.4f} s (tick {}): tracking error {:.4g} mm exceeds the following-error "
-          "limit {:g} mm (u = {:.3g} V{}); check the gains",
-          axis_name(axes_[i]), t, k_, s.e_mm, limit, s.u_V, s.saturated ? ", at the clamp" : ""));
-    // An unstable loop whose growth the clamp bounds rings at +-u_max with
-    // the sign of u flipping: judged over blocks of 20 ms, a block is bad when
-    // u sits at the clamp for half of it and changes sign at least 4 times;
-    // three bad blocks in a row (60 ms) are not a transient.
-    ClampWatch& w = clamp_watch_[i];
-    const double u_prev = last_.k == k_ - 1 ? last_.axes[a].u_V : 0.0;
-    w.saturated_ticks += s.saturated ? 1 : 0;
-    w.flips += (s.saturated && u_prev * s.u_V < 0.0) ? 1 : 0;
-    if (++w.ticks_in_block * Ts >= 0.02 - 1e-12) {
-      const bool bad = 2 * w.saturated_ticks >= w.ticks_in_block && w.flips >= 4;
-      w.bad_blocks = bad ? w.bad_blocks + 1 : 0;
-      w.ticks_in_block = w.saturated_ticks = w.flips = 0;
-      if (w.bad_blocks >= 3)
-        throw ModelError(fmt::format(
-            "axis {} unstable at t = {:.4f} s (tick {}): the command oscillates between its limits ({}) for 60 ms "
-            "(tracking error {:.3g} mm); check the gains",
-            axis_name(axes_[i]), t, k_,
-            machine_.axes[a].loop.law == controller::LoopLaw::kCascade
-                ? fmt::format("torque +-{:g}", machine_.axes[a].loop.cascade.T_max)
-                : fmt::format("+-{:g} V", machine_.axes[a].loop.u_max_V),
-            s.e_mm));
-    }
+    check_axis(i, s, out, t);
     v_real2 += s.v_mm_per_s * s.v_mm_per_s;
     dev[a] = s.x_true_mm - s.x_ref_mm;
   }
@@ -174,6 +124,71 @@ const Snapshot& CoSimulation::step() {
   last_ = row;
   ++k_;
   return last_;
+}
+
+std::array<double, 3> CoSimulation::run_process(Snapshot& row, const std::array<double, 3>& p_mm,
+                                                const std::array<double, 3>& v_mm_per_s) {
+  std::array<double, 3> F_avg_N = F_ext_N_;
+  row.F_N = F_ext_N_;
+  if (process_) {
+    process::ProcessInput pin;
+    pin.k = k_;
+    pin.t_s = row.t_s;
+    pin.Ts_s = machine_.Ts_s;
+    pin.p_mm = p_mm;
+    pin.v_mm_per_s = v_mm_per_s;
+    pin.spindle_rpm = row.spindle_rpm;
+    const process::ProcessOutput pout = process_->step(pin);
+    for (std::size_t c = 0; c < 3; ++c) {
+      F_avg_N[c] += pout.F_avg_N[c];
+      row.F_N[c] += pout.F_N[c];
+    }
+    row.engagement_deg = pout.engagement_deg;
+    row.chip_mm = pout.chip_mm;
+    row.spindle_torque_Nm = pout.spindle_torque_Nm;
+    row.cutting_power_W = pout.power_W;
+    row.tool_modes = pout.tool_modes;
+    row.tool_deflection_um = {pout.deflection_mm[0] * 1e3, pout.deflection_mm[1] * 1e3};
+    row.sle_um = pout.sle_mm * 1e3;
+  }
+  row.F_avg_N = F_avg_N;
+  return F_avg_N;
+}
+
+void CoSimulation::check_axis(std::size_t i, const AxisSnapshot& s, const feeddrive::DriveOutput& out, double t) {
+  const std::size_t a = index(axes_[i]);
+  const double Ts = machine_.Ts_s;
+  const double limit = machine_.axes[a].following_error_limit_mm;
+  if (!std::isfinite(out.x_mm) || !std::isfinite(out.w_rad_per_s) || !std::isfinite(s.u_V))
+    throw ModelError(fmt::format("axis {} became non-finite at t = {:.4f} s (tick {}): check the gains and the model",
+                                 axis_name(axes_[i]), t, k_));
+  if (std::abs(s.e_mm) > limit)
+    throw ModelError(fmt::format(
+        "axis {} unstable or overloaded at t = {:.4f} s (tick {}): tracking error {:.4g} mm exceeds the following-error "
+        "limit {:g} mm (u = {:.3g} V{}); check the gains",
+        axis_name(axes_[i]), t, k_, s.e_mm, limit, s.u_V, s.saturated ? ", at the clamp" : ""));
+  // An unstable loop whose growth the clamp bounds rings at +-u_max with
+  // the sign of u flipping: judged over blocks of 20 ms, a block is bad when
+  // u sits at the clamp for half of it and changes sign at least 4 times;
+  // three bad blocks in a row (60 ms) are not a transient.
+  ClampWatch& w = clamp_watch_[i];
+  const double u_prev = last_.k == k_ - 1 ? last_.axes[a].u_V : 0.0;
+  w.saturated_ticks += s.saturated ? 1 : 0;
+  w.flips += (s.saturated && u_prev * s.u_V < 0.0) ? 1 : 0;
+  if (++w.ticks_in_block * Ts >= 0.02 - 1e-12) {
+    const bool bad = 2 * w.saturated_ticks >= w.ticks_in_block && w.flips >= 4;
+    w.bad_blocks = bad ? w.bad_blocks + 1 : 0;
+    w.ticks_in_block = w.saturated_ticks = w.flips = 0;
+    if (w.bad_blocks >= 3)
+      throw ModelError(fmt::format(
+          "axis {} unstable at t = {:.4f} s (tick {}): the command oscillates between its limits ({}) for 60 ms "
+          "(tracking error {:.3g} mm); check the gains",
+          axis_name(axes_[i]), t, k_,
+          machine_.axes[a].loop.law == controller::LoopLaw::kCascade
+              ? fmt::format("torque +-{:g}", machine_.axes[a].loop.cascade.T_max)
+              : fmt::format("+-{:g} V", machine_.axes[a].loop.u_max_V),
+          s.e_mm));
+  }
 }
 
 const feeddrive::DriveState& CoSimulation::drive_state(Axis a) const {

@@ -47,6 +47,11 @@ struct Snapshot {
   double chip_mm{0.0};
   double spindle_torque_Nm{0.0};
   double cutting_power_W{0.0};
+  /// A vibrating tool (a machine with structure and tool-tip modes): the
+  /// tool's deflection at t_k and the last surface location error (process/milling_process.hpp).
+  bool tool_modes{false};
+  std::array<double, 2> tool_deflection_um{};
+  double sle_um{0.0};
   double feed_programmed_mm_per_min{0.0};
   double feed_ref_mm_per_min{0.0};   ///< speed of the reference along the path
   double feed_real_mm_per_min{0.0};  ///< speed of the real tool
@@ -111,6 +116,12 @@ class CoSimulation {
   void set_state(const CoSimState& state);
 
  private:
+  /// Step 3: the process over [t_k, t_k+1) into `row`; returns the force the drives see.
+  std::array<double, 3> run_process(Snapshot& row, const std::array<double, 3>& p_mm,
+                                    const std::array<double, 3>& v_mm_per_s);
+  /// Step 6's health checks of axis i (runaway, command limit cycle).
+  void check_axis(std::size_t i, const AxisSnapshot& s, const feeddrive::DriveOutput& out, double t_s);
+
   MachineDefinition machine_;
   std::vector<Axis> axes_;
   std::shared_ptr<const ReferenceSource> reference_;

@@ -1,5 +1,7 @@
 #include "twin/structure/lobe_study.hpp"
 
+#include "twin/structure/chatter_check.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -114,8 +116,46 @@ std::string lobe_summary(const LobeStudy& s) {
                      s.stable ? "stable" : "chatter expected");
 }
 
+namespace {
+
+/// report.json of the study (without the checks).
+nlohmann::json report_json(const LobeStudy& s) {
+  nlohmann::json j;
+  j["command"] = "lobes";
+  j["scenario"] = s.scenario;
+  j["machine"] = s.machine;
+  j["method"] = "zero-order (Altintas and Budak 1995)";
+  j["tool_tip"] = {{"source", s.tool_tip_source}, {"x", modes_json(s.tool_tip.x)}, {"y", modes_json(s.tool_tip.y)}};
+  j["cut"] = {{"spindle_rpm", s.rpm},
+              {"ap_mm", s.cut.ap_mm},
+              {"phi_st_deg", s.cut.immersion.phi_st_rad * 180.0 / kPi},
+              {"phi_ex_deg", s.cut.immersion.phi_ex_rad * 180.0 / kPi},
+              {"feed_angle_deg", s.cut.feed_angle_deg},
+              {"fz_mm", s.cut.fz_mm},
+              {"length_mm", s.cut.length_mm},
+              {"first_line", s.cut.first_line},
+              {"distinct_cuts_in_program", s.cut_conditions}};
+  j["coefficients"] = {{"teeth", s.settings.teeth},
+                       {"h_mean_mm", s.coefficients.h_mean_mm},
+                       {"Ktc_N_per_mm2", s.coefficients.Ktc_N_per_mm2},
+                       {"Kr_ratio", s.coefficients.Kr_ratio}};
+  j["a_lim_min_mm"] = s.lobes.a_lim_min_mm;
+  j["a_lim_min_chatter_Hz"] = s.lobes.a_lim_min_chatter_Hz;
+  j["a_crit_mm"] = number_or_null(s.a_crit_mm);
+  j["chatter_Hz"] = number_or_null(finite_or_null(s.chatter_Hz));
+  j["stable"] = s.stable;
+  j["verdict"] = !std::isfinite(s.a_crit_mm) ? "no lobe covers the speed" : (s.stable ? "stable" : "chatter");
+  return j;
+}
+
+}  // namespace
+
 std::vector<std::filesystem::path> write_lobe_study(io::ResultSet& results, const LobeStudy& s) {
   std::vector<std::filesystem::path> written;
+  if (!s.checks.empty()) {
+    io::write_file_atomic(results.path("check.csv"), chatter_checks_csv(s.checks));
+    written.push_back(results.path("check.csv"));
+  }
   {
     std::ostringstream o;
     o.precision(10);
@@ -140,31 +180,8 @@ std::vector<std::filesystem::path> write_lobe_study(io::ResultSet& results, cons
     written.push_back(results.path("boundary.csv"));
   }
   {
-    nlohmann::json j;
-    j["command"] = "lobes";
-    j["scenario"] = s.scenario;
-    j["machine"] = s.machine;
-    j["method"] = "zero-order (Altintas and Budak 1995)";
-    j["tool_tip"] = {{"source", s.tool_tip_source}, {"x", modes_json(s.tool_tip.x)}, {"y", modes_json(s.tool_tip.y)}};
-    j["cut"] = {{"spindle_rpm", s.rpm},
-                {"ap_mm", s.cut.ap_mm},
-                {"phi_st_deg", s.cut.immersion.phi_st_rad * 180.0 / kPi},
-                {"phi_ex_deg", s.cut.immersion.phi_ex_rad * 180.0 / kPi},
-                {"feed_angle_deg", s.cut.feed_angle_deg},
-                {"fz_mm", s.cut.fz_mm},
-                {"length_mm", s.cut.length_mm},
-                {"first_line", s.cut.first_line},
-                {"distinct_cuts_in_program", s.cut_conditions}};
-    j["coefficients"] = {{"teeth", s.settings.teeth},
-                         {"h_mean_mm", s.coefficients.h_mean_mm},
-                         {"Ktc_N_per_mm2", s.coefficients.Ktc_N_per_mm2},
-                         {"Kr_ratio", s.coefficients.Kr_ratio}};
-    j["a_lim_min_mm"] = s.lobes.a_lim_min_mm;
-    j["a_lim_min_chatter_Hz"] = s.lobes.a_lim_min_chatter_Hz;
-    j["a_crit_mm"] = number_or_null(s.a_crit_mm);
-    j["chatter_Hz"] = number_or_null(finite_or_null(s.chatter_Hz));
-    j["stable"] = s.stable;
-    j["verdict"] = !std::isfinite(s.a_crit_mm) ? "no lobe covers the speed" : (s.stable ? "stable" : "chatter");
+    nlohmann::json j = report_json(s);
+    if (!s.checks.empty()) j["check"] = chatter_checks_json(s.checks);
     io::write_file_atomic(results.path("report.json"), j.dump(2) + "\n");
     written.push_back(results.path("report.json"));
   }

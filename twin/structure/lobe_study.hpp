@@ -20,6 +20,26 @@ struct LobeStudyOptions {
   void validate() const;
 };
 
+struct ChatterCheckPoint {
+  double spindle_rpm{0.0};
+  double ap_mm{0.0};
+  /// "RPM:DEPTH_mm"; throws ConfigError naming the text when malformed or out of range.
+  static ChatterCheckPoint parse(const std::string& text);
+};
+
+struct ChatterCheckResult {
+  ChatterCheckPoint point;
+  double a_crit_mm{0.0};          ///< the lobes' critical depth at the speed (inf: none covers it)
+  bool lobe_chatter{false};       ///< ap >= a_crit
+  bool chatter{false};            ///< the twin's verdict
+  double ratio_early{0.0};        ///< r in window 2
+  double ratio{0.0};              ///< r in window 3
+  double chatter_Hz{0.0};         ///< the largest non-harmonic line in window 3
+  double tooth_Hz{0.0};
+  double max_deflection_um{0.0};  ///< |tool deflection| in window 3
+  double simulated_s{0.0};
+};
+
 struct LobeStudy {
   std::string scenario;
   std::string machine;
@@ -36,6 +56,7 @@ struct LobeStudy {
   bool stable{true};                     ///< ap below a_crit
   double rpm_min{0.0}, rpm_max{0.0};     ///< range of the boundary table
   std::vector<std::array<double, 3>> boundary;   ///< rpm, a_crit_mm, chatter_Hz
+  std::vector<ChatterCheckResult> checks;         ///< the check mode's points (twin/structure/chatter_check)
 };
 
 /// Throws ConfigError when the scenario has no process, the machine no tool-tip

@@ -102,6 +102,34 @@ TEST(LobeStudy, CommandWritesItsResultSet) {
   EXPECT_THAT(slurp(d / "stdout.txt"), ::testing::HasSubstr("critical depth"));
 }
 
+// The check mode on the default scenario: far below the lobes' critical
+// depth (4.97 mm at 1200 rpm) the coupled twin's straight cut is stable, far
+// above it chatters; check.csv and report.json carry both verdicts, and the
+// lobes' critical depth is the report's own. A malformed point is refused in
+// one line and nothing is written.
+TEST(LobeStudy, CheckModeRunsTheCoupledTwinBesideTheLobes) {
+  const auto d = work();
+  ASSERT_EQ(sh(d, twin() + " lobes -o " + (d / "out").string() + " --check 1200:1 --check 1200:9"), 0)
+      << slurp(d / "stderr.txt");
+  const auto j = nlohmann::json::parse(slurp(d / "out" / "report.json"));
+  ASSERT_EQ(j["check"].size(), 2u);
+  for (const auto& c : j["check"]) EXPECT_NEAR(c["a_crit_mm"].get<double>(), j["a_crit_mm"].get<double>(), 1e-12);
+  EXPECT_EQ(j["check"][0]["lobes_verdict"], "stable");
+  EXPECT_EQ(j["check"][0]["twin_verdict"], "stable");
+  EXPECT_EQ(j["check"][1]["lobes_verdict"], "chatter");
+  EXPECT_EQ(j["check"][1]["twin_verdict"], "chatter");
+  const std::string csv = slurp(d / "out" / "check.csv");
+  EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 3);
+  EXPECT_THAT(slurp(d / "stdout.txt"), ::testing::HasSubstr("check 1200 rpm, ap 9 mm: lobes chatter"));
+  const auto bad = work() / "bad";
+  std::filesystem::create_directories(bad);
+  EXPECT_NE(sh(bad, twin() + " lobes -o " + (bad / "out").string() + " --check 1200mm"), 0);
+  const std::string err = slurp(bad / "stderr.txt");
+  EXPECT_THAT(err, ::testing::HasSubstr("expected RPM:DEPTH_mm"));
+  EXPECT_EQ(std::count(err.begin(), err.end(), '\n'), 1);
+  EXPECT_FALSE(std::filesystem::exists(bad / "out"));
+}
+
 TEST(LobeStudy, AMachineWithoutToolTipModesIsRefusedInOneLine) {
   const auto d = work();
   const std::string machine = slurp(std::filesystem::path(TWIN_SOURCE_DIR) / "scenarios/machines/fadal2216.yaml");

@@ -144,6 +144,32 @@ TEST(StructureMachine, DefaultScenarioRunsOnTheStructureMachine) {
   const double Tg = (s.head_kg * kG - s.counterbalance_N) * m.axes[index(Axis::kZ)].drive.rg_mm_per_rad / 1000.0 /
                     s.screw_efficiency;
   EXPECT_NEAR(T.back(), Tg, m.axes[index(Axis::kZ)].drive.Tc_pos_Nm);
+
+  // The tool's modes vibrate in the cut (structure and tool_tip). Over the
+  // cut the tool's mean deflection is the modes' static response to the mean
+  // force on it, -mean(F_workpiece) / k per direction: the mean of a linear
+  // system's response over a long window is its DC gain times the mean input,
+  // up to the state at the window's ends over its length (the tool rings down
+  // in milliseconds; the cut lasts seconds). 0.1 % covers the ticks at entry
+  // and exit and the force held over a tick against the deflection at its
+  // start (measured: 4e-6).
+  const auto& engaged = t.at("engagement_deg");
+  for (const char* c : {"x", "y"}) {
+    const auto& u = t.at(std::string("tool_d") + c + "_um");
+    const auto& F = t.at(std::string("f") + c + "_avg_N");
+    double su = 0.0, sf = 0.0;
+    int n = 0;
+    for (std::size_t k = 0; k < engaged.size(); ++k)
+      if (engaged[k] > 0.0) su += u[k], sf += F[k], ++n;
+    ASSERT_GT(n, 10000);
+    const double k_N_per_m = (c[0] == 'x' ? m.tool_tip.x : m.tool_tip.y).front().k_N_per_m;
+    const double static_um = -sf / n / k_N_per_m * 1e6;
+    EXPECT_NEAR(su / n, static_um, 1e-3 * std::abs(static_um)) << c;
+  }
+  EXPECT_NE(t.find("sle_um"), nullptr);
+  const auto summary = slurp(out / "summary.json");
+  EXPECT_NE(summary.find("\"max_deflection_um\""), std::string::npos);
+  EXPECT_NE(summary.find("\"chatter\": \"stable\""), std::string::npos);   // 1 mm against the lobes' 4.97 mm
 }
 
 // A screw stiffness makes the drive two masses: the motor and screw (the file's
