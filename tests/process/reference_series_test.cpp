@@ -90,7 +90,11 @@ class ReferenceProcess {
       swept_once_ = true;
       last_ = p;
     }
-    if (std::hypot(next[0] - last_[0], next[1] - last_[1]) >= 2.0 * stock_.cell_mm || next[2] < last_[2] - 1e-6) {
+    // The process's schedule of stock updates (process/milling_process.cpp):
+    // every two cells of travel, or a descent of 0.1 um. The stock lags the
+    // tool by up to that much by design; with another schedule the two stocks
+    // would differ at the run's end by where each last caught up.
+    if (std::hypot(next[0] - last_[0], next[1] - last_[1]) >= 2.0 * stock_.cell_mm || next[2] < last_[2] - 1e-4) {
       out.removed_mm3 += sweep(last_, next);
       last_ = next;
     }
