@@ -219,8 +219,12 @@ json process_setup_to_json(const process::ProcessSetup& s) {
 }
 
 std::unique_ptr<process::ProcessModel> make_process_from_json(const nlohmann::json& j) {
-  const std::string where = "process";
   if (j.is_null()) return nullptr;
+  return process::make_process(process_setup_from_json(j));
+}
+
+process::ProcessSetup process_setup_from_json(const nlohmann::json& j) {
+  const std::string where = "process";
   require_object(j, where);
   process::ProcessSetup setup;
   for (const auto& [key, v] : j.items()) {
@@ -234,7 +238,7 @@ std::unique_ptr<process::ProcessModel> make_process_from_json(const nlohmann::js
     else if (key == "spindle_angle0_deg") setup.spindle_angle0_deg = number(v, w);
     else unknown_key(where, key);
   }
-  return process::make_process(setup);
+  return setup;
 }
 
 }  // namespace twin::fmu

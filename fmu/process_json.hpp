@@ -29,6 +29,8 @@ namespace twin::fmu {
 /// @throws ConfigError naming the key and the value for an unknown key, a
 /// value of the wrong type, or a setup that process::ProcessSetup rejects.
 std::unique_ptr<process::ProcessModel> make_process_from_json(const nlohmann::json& process);
+/// The setup make_process_from_json builds from (`process` not null).
+process::ProcessSetup process_setup_from_json(const nlohmann::json& process);
 
 /// The JSON form of a complete setup (every field, numbers to the last
 /// bit), which make_process_from_json turns back into the same process.

@@ -6,7 +6,6 @@
 #include <fmt/format.h>
 
 #include "twin/core/error.hpp"
-#include "twin/io/process_binding.hpp"
 #include "twin/io/yaml_util.hpp"
 
 namespace twin::io {
@@ -243,15 +242,6 @@ process::ProcessSetup parse_process_setup(const YAML::Node& n, const std::string
   if (!std::isfinite(s.tilt_deg) || std::abs(s.tilt_deg) >= 60.0)
     throw ConfigError(fmt::format("{}: process.tilt_deg = {} must be in (-60, 60)", where, s.tilt_deg));
   return s;
-}
-
-ProcessBinding bind_process(const YAML::Node& node, const std::string& where, const std::filesystem::path& dir) {
-  const process::ProcessSetup setup = parse_process_setup(node, where, dir);
-  ProcessBinding b;
-  b.summary = setup.summary();
-  b.make = [setup]() { return process::make_process(setup); };
-  b.setup = setup;
-  return b;
 }
 
 }  // namespace twin::io

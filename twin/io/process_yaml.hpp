@@ -1,8 +1,7 @@
 #pragma once
 /// Reads the `process:` section of a scenario and the tool and material
 /// files it names (YAML, see docs/process.md for the schema). Every problem is
-/// a ConfigError "file:line: process.key ...". bind_process (declared in
-/// process_binding.hpp) is implemented here on top of these.
+/// a ConfigError "file:line: process.key ...".
 #include <filesystem>
 #include <string>
 
