@@ -20,6 +20,7 @@ using nlohmann::json;
 class JsonSetupNode final : public sim::SetupNode {
  public:
   explicit JsonSetupNode(const json& j) : j_(j) {}
+  const char* format() const override { return "JSON"; }
   bool is_map() const override { return j_.is_object(); }
   bool is_list() const override { return j_.is_array(); }
   bool is_scalar() const override { return j_.is_primitive() && !j_.is_null(); }

@@ -16,6 +16,7 @@ namespace {
 class YamlSetupNode final : public sim::SetupNode {
  public:
   YamlSetupNode(YAML::Node node, std::filesystem::path dir) : node_(std::move(node)), dir_(std::move(dir)) {}
+  const char* format() const override { return "YAML"; }
   bool is_map() const override { return node_.IsMap(); }
   bool is_list() const override { return node_.IsSequence(); }
   bool is_scalar() const override { return node_.IsScalar(); }

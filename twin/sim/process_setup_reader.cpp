@@ -13,7 +13,8 @@ namespace {
 using Node = std::unique_ptr<SetupNode>;
 
 void require_map(const SetupNode* node, const std::string& where, const std::string& what) {
-  if (node == nullptr || !node->is_map()) throw ConfigError(fmt::format("{}: {} must be a YAML map", where, what));
+  if (node == nullptr) throw ConfigError(fmt::format("{}: {} must be a map", where, what));
+  if (!node->is_map()) throw ConfigError(fmt::format("{}: {} must be a {} map", where, what, node->format()));
 }
 
 void check_keys(const SetupNode& node, const std::string& where, const std::string& prefix,

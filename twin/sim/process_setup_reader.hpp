@@ -17,6 +17,8 @@ namespace twin::sim {
 class SetupNode {
  public:
   virtual ~SetupNode() = default;
+  /// The document's format, for messages ("YAML", "JSON").
+  virtual const char* format() const = 0;
   virtual bool is_map() const = 0;
   virtual bool is_list() const = 0;
   virtual bool is_scalar() const = 0;
