@@ -142,7 +142,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
       };
     auto inst = std::make_unique<Instance>(name, std::move(sink), loggingOn != fmi2False, std::move(slave));
     inst->log_call("fmi2Instantiate", fmt::format("scenario {}, GUID {}, resources {}",
-                                                  inst->slave().model().scenario_name, inst->slave().identity(),
+                                                  inst->slave().model().name, inst->slave().identity(),
                                                   fmuResourceLocation));
     return inst.release();
   } catch (const std::exception& e) {

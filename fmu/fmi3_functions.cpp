@@ -152,7 +152,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
       };
     auto inst = std::make_unique<Instance>(name, std::move(sink), loggingOn, std::move(slave));
     inst->log_call("fmi3InstantiateCoSimulation",
-                   fmt::format("scenario {}, instantiationToken {}, resources {}", inst->slave().model().scenario_name,
+                   fmt::format("scenario {}, instantiationToken {}, resources {}", inst->slave().model().name,
                                inst->slave().identity(), resourcePath));
     return inst.release();
   } catch (const std::exception& e) {

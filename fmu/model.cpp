@@ -90,7 +90,7 @@ FmuModel model_from_json(const std::string& text_in, const std::string& where) {
     throw ConfigError(fmt::format("{}: version {} is not {}", where, j["version"].dump(), kVersion));
   FmuModel model;
   model.model_json = text_in;
-  model.scenario_name = text(member(j, "scenario", where), where + ": scenario");
+  model.name = text(member(j, "scenario", where), where + ": scenario");
   const json& m = member(j, "machine", where);
   sim::MachineDefinition& machine = model.machine;
   machine.name = text(member(m, "name", where + ": machine"), where + ": machine.name");
@@ -126,7 +126,7 @@ FmuModel model_from_json(const std::string& text_in, const std::string& where) {
     ax.loop.Ts_s = machine.Ts_s;
   }
   machine.validate();
-  model.program_name = text(member(j, "program_name", where), where + ": program_name");
+  model.program_path = text(member(j, "program_name", where), where + ": program_name");
   model.program_text = text(member(j, "program", where), where + ": program");
   const json& s = member(j, "start_mm", where);
   if (!s.is_array() || s.size() != 3) throw ConfigError(fmt::format("{}: start_mm must be [x, y, z]", where));
@@ -136,8 +136,8 @@ FmuModel model_from_json(const std::string& text_in, const std::string& where) {
     throw ConfigError(fmt::format("{}: settle_s = {} must be in [0, 60] s", where, model.settle_s));
   const json& proc = member(j, "process", where);
   if (!proc.is_null()) {
-    model.process_json = proc.dump();
-    make_process_from_json(proc);  // fails here, with the key, rather than at the first step
+    model.process_setup = process_setup_from_json(proc);
+    process::make_process(*model.process_setup);  // fails here, with the key, rather than at the first step
   }
   // A program out of the machine's travel, or one no run could finish, is
   // refused here (at export and at fmi2Instantiate), not at the first step.
@@ -151,33 +151,21 @@ FmuModel model_from_json(const std::string& text_in, const std::string& where) {
   return model;
 }
 
-std::unique_ptr<process::ProcessModel> FmuModel::make_process() const {
-  if (process_json.empty()) return nullptr;
-  return make_process_from_json(nlohmann::json::parse(process_json));
-}
-
-controller::Trajectory FmuModel::plan_program(const sim::MachineDefinition& m) const {
-  const controller::Program program = controller::parse_gcode(program_text, program_name, start_mm, m.rapid_mm_per_min);
-  AxisArray<double> lo{}, hi{};
-  for (std::size_t a = 0; a < kNumAxes; ++a) {
-    lo[a] = m.axes[a].travel_min_mm;
-    hi[a] = m.axes[a].travel_max_mm;
-  }
-  controller::check_travel(program, lo, hi);
-  controller::Trajectory t = controller::plan_trajectory(program, m.motion_limits(), m.Ts_s);
-  const double duration_s = t.duration_s() + settle_s;
+sim::PlannedProgram FmuModel::plan_program(const sim::MachineDefinition& m) const {
+  sim::PlannedProgram planned = sim::plan_program(*this, m);
+  const double duration_s = planned.trajectory().duration_s() + settle_s;
   const double ticks = std::ceil(duration_s / m.Ts_s);
   if (!(duration_s <= kMaxProgramDuration_s) || !(ticks <= kMaxProgramTicks))
     throw ConfigError(fmt::format(
         "{}: the program is planned to run {:.6g} s ({:.6g} ticks of Ts = {} s, settle_s included); an FMU runs at "
         "most {:g} s and {:g} ticks of a program",
-        program_name, duration_s, ticks, m.Ts_s, kMaxProgramDuration_s, kMaxProgramTicks));
-  return t;
+        program_path.string(), duration_s, ticks, m.Ts_s, kMaxProgramDuration_s, kMaxProgramTicks));
+  return planned;
 }
 
 double FmuModel::program_duration_s() const {
   if (!has_program()) return 0.0;
-  return plan_program(machine).duration_s() + settle_s;
+  return plan_program(machine).trajectory().duration_s() + settle_s;
 }
 
 }  // namespace twin::fmu

@@ -16,6 +16,7 @@
 #include "process/process_model.hpp"
 #include "twin/core/axis.hpp"
 #include "twin/sim/machine.hpp"
+#include "twin/sim/scenario.hpp"
 
 namespace twin::fmu {
 
@@ -27,29 +28,22 @@ namespace twin::fmu {
 inline constexpr double kMaxProgramDuration_s = 86400.0;
 inline constexpr double kMaxProgramTicks = 1e9;
 
-struct FmuModel {
-  std::string scenario_name;
-  sim::MachineDefinition machine;
-  std::string program_name;     ///< file name of the part program (messages)
-  std::string program_text;     ///< G-code; empty: mode 2 is not available
-  AxisArray<double> start_mm{};
-  double settle_s{0.0};
-  std::string process_json;     ///< the scenario's process section as JSON text; empty for an air cut
+/// The scenario the FMU carries (program_path: the program's file name, for
+/// messages; program_text empty: mode 2 is not available) and the text it
+/// was read from.
+struct FmuModel : sim::Scenario {
   std::string model_json;       ///< the exact text this model was read from (hashed into the GUID)
 
   bool has_program() const noexcept { return !program_text.empty(); }
-  bool has_process() const noexcept { return !process_json.empty(); }
+  bool has_process() const noexcept { return process_setup.has_value(); }
   /// Cycle time of the program plus settle_s, s (0 without a program).
   double program_duration_s() const;
   /// The program parsed for `machine` (its rapid rate, travel, limits and
-  /// Ts) and planned. @throws ConfigError naming the program's file and line
+  /// Ts) and planned (sim::plan_program). @throws ConfigError naming the program's file and line
   /// for a move beyond the machine's travel (controller::check_travel), and
   /// giving both figures and both limits for a program planned longer than
   /// kMaxProgramDuration_s or kMaxProgramTicks.
-  controller::Trajectory plan_program(const sim::MachineDefinition& machine) const;
-  /// A fresh process model at its initial state (null for an air cut).
-  /// @throws ConfigError when the process section cannot be built.
-  std::unique_ptr<process::ProcessModel> make_process() const;
+  sim::PlannedProgram plan_program(const sim::MachineDefinition& machine) const;
 };
 
 /// JSON text of the model (format "twin-fmu-model", version 1).

@@ -143,10 +143,10 @@ std::string xml_head(const FmuModel& model, const char* version, const char* tok
       "<fmiModelDescription fmiVersion=\"{}\" modelName=\"{}\" {}=\"{}\"\n"
       "  description=\"{}\"\n"
       "  generationTool=\"twin export-fmu\" variableNamingConvention=\"flat\"{}>\n",
-      version, xml_escape("MachineTwin " + model.scenario_name), token_name, kGuidPlaceholder,
+      version, xml_escape("MachineTwin " + model.name), token_name, kGuidPlaceholder,
       xml_escape(fmt::format("Digital twin of the {} milling machine (feed drives, position loops, interpolator, "
                              "cutting process), scenario {}. The controller samples its inputs every Ts = {} s; {}.",
-                             model.machine.name, model.scenario_name, model.machine.Ts_s, steps)),
+                             model.machine.name, model.name, model.machine.Ts_s, steps)),
       extra);
 }
 

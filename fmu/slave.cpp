@@ -54,15 +54,16 @@ void Slave::build_cosim() {
   if (reference_mode_ == kModeProgram) {
     if (!model_.has_program())
       throw ConfigError(fmt::format("mode = {}: scenario '{}' has no part program; use mode = {} (x_ref_mm inputs)",
-                                    kModeProgram, model_.scenario_name, kModeExternal));
+                                    kModeProgram, model_.name, kModeExternal));
     // With the parameters as set now (travel, limits, Ts): checked again.
-    reference = std::make_shared<sim::ProgramReference>(model_.plan_program(machine_));
+    reference = model_.plan_program(machine_).reference;
     external_.reset();
   } else {
     external_ = std::make_shared<sim::ExternalReference>(inputs_.x_ref_mm);
     reference = external_;
   }
-  cosim_ = std::make_unique<sim::CoSimulation>(machine_, reference, model_.make_process(), model_.start_mm);
+  cosim_ = std::make_unique<sim::CoSimulation>(
+      sim::build_cosimulation(model_, {.machine = &machine_, .reference = std::move(reference)}));
   machine_changed_ = false;
 }
 
@@ -244,7 +245,7 @@ void Slave::set_integer(std::size_t vr, int value) {
     throw ConfigError(fmt::format("mode = {} must be {} (x_ref_mm inputs) or {} (part program)", value,
                                   kModeExternal, kModeProgram));
   if (value == kModeProgram && !model_.has_program())
-    throw ConfigError(fmt::format("mode = {}: scenario '{}' has no part program", value, model_.scenario_name));
+    throw ConfigError(fmt::format("mode = {}: scenario '{}' has no part program", value, model_.name));
   reference_mode_ = value;
 }
 

@@ -20,7 +20,7 @@ void run_ticks(benchmark::State& state, const sim::MachineDefinition& m,
                const AxisArray<double>& start) {
   const std::int64_t ticks = ref->num_ticks();
   for (auto _ : state) {
-    sim::CoSimulation cs(m, ref, cutting ? cutting->make_process() : nullptr, start);
+    sim::CoSimulation cs(m, ref, cutting ? process::make_process(*cutting->process_setup) : nullptr, start);
     double sink = 0.0;
     for (std::int64_t k = 0; k < ticks; ++k) sink += cs.step().contour_error_mm;
     benchmark::DoNotOptimize(sink);

@@ -14,6 +14,7 @@
 #include <memory>
 
 #include "twin/io/scenario_file.hpp"
+#include "twin/sim/scenario.hpp"
 #include "twin/sim/cosimulation.hpp"
 
 namespace twin {
@@ -26,14 +27,13 @@ struct Deviation {
 
 Deviation run_side_by_side(bool coupled) {
   const io::Scenario sc = io::load_scenario(io::default_scenario_path());
-  const auto program = io::parse_program(sc);
-  auto ref = std::make_shared<sim::ProgramReference>(
-      controller::plan_trajectory(program, sc.machine.motion_limits(), sc.machine.Ts_s));
-  const std::int64_t ticks = ref->num_ticks() + static_cast<std::int64_t>(std::ceil(sc.settle_s / sc.machine.Ts_s));
+  const sim::PlannedProgram planned = sim::plan_program(sc, sc.machine);
+  const std::int64_t ticks = sim::run_ticks(sc, planned.trajectory());
   feeddrive::IntegratorOptions every_tick;
   every_tick.exact_linear_ticks = false;
-  sim::CoSimulation fast(sc.machine, ref, coupled ? sc.make_process() : nullptr, sc.start_mm);
-  sim::CoSimulation slow(sc.machine, ref, coupled ? sc.make_process() : nullptr, sc.start_mm, every_tick);
+  sim::CoSimulation fast = sim::build_cosimulation(sc, {.reference = planned.reference, .air_cut = !coupled});
+  sim::CoSimulation slow =
+      sim::build_cosimulation(sc, {.reference = planned.reference, .air_cut = !coupled, .integrator = every_tick});
   Deviation d;
   for (std::int64_t k = 0; k < ticks; ++k) {
     const sim::Snapshot& a = fast.step();

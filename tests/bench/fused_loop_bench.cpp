@@ -11,7 +11,7 @@
 //     Karnopp stick at rest (|net| <= Tc sticks) and a stop when w changes
 //     sign inside a substep (w set to 0 at the substep's end: no root finding),
 //     integrated by classical RK4 with `substeps` fixed substeps per tick,
-//   - coupled: the same process model (scenario.make_process(), the same
+//   - coupled: the same process model (process::make_process of the scenario's setup, the same
 //     ProcessModel::step call per tick) loading the drives with Td = F rg.
 // Each benchmark iteration times the twin's tick loop and then the fused
 // loop's (construction excluded from both, as `twin bench` does; thread CPU
@@ -35,6 +35,7 @@
 #include <benchmark/benchmark.h>
 
 #include "twin/io/scenario_file.hpp"
+#include "twin/sim/scenario.hpp"
 #include "twin/sim/cosimulation.hpp"
 
 namespace {
@@ -175,9 +176,9 @@ struct FusedLoop {
 // the whole run (untimed).
 double fused_deviation_mm(bool coupled, int substeps) {
   const Setup& s = setup();
-  sim::CoSimulation cs(s.sc.machine, s.ref, coupled ? s.sc.make_process() : nullptr, s.sc.start_mm);
+  sim::CoSimulation cs = sim::build_cosimulation(s.sc, {.reference = s.ref, .air_cut = !coupled});
   FusedLoop f(s.sc.machine, s.sc.start_mm, substeps);
-  auto proc = coupled ? s.sc.make_process() : nullptr;
+  auto proc = coupled ? process::make_process(*s.sc.process_setup) : nullptr;
   double worst = 0.0;
   for (std::int64_t k = 0; k < s.ticks; ++k) {
     const sim::Snapshot& row = cs.step();
@@ -208,13 +209,14 @@ void BM_TwinVsFusedLoop(benchmark::State& state) {
   const Setup& s = setup();
   double twin_s = 0.0, fused_s = 0.0;
   for (auto _ : state) {
-    sim::CoSimulation cs(s.sc.machine, s.ref, coupled ? s.sc.make_process() : nullptr, s.sc.start_mm, options);
+    sim::CoSimulation cs =
+        sim::build_cosimulation(s.sc, {.reference = s.ref, .air_cut = !coupled, .integrator = options});
     double sink = 0.0;
     const double t0 = thread_cpu_s();
     for (std::int64_t k = 0; k < s.ticks; ++k) sink += cs.step().contour_error_mm;
     const double t1 = thread_cpu_s();
     FusedLoop f(s.sc.machine, s.sc.start_mm, substeps);
-    auto proc = coupled ? s.sc.make_process() : nullptr;
+    auto proc = coupled ? process::make_process(*s.sc.process_setup) : nullptr;
     const double t2 = thread_cpu_s();
     for (std::int64_t k = 0; k < s.ticks; ++k) sink += f.tick(k, *s.ref, proc.get());
     const double t3 = thread_cpu_s();

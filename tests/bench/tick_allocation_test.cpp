@@ -23,6 +23,7 @@
 
 #include "feeddrive/drive_bank.hpp"
 #include "twin/io/scenario_file.hpp"
+#include "twin/sim/scenario.hpp"
 #include "twin/sim/cosimulation.hpp"
 
 namespace {
@@ -101,11 +102,9 @@ struct Counts {
 // the allocations of the next `n` ticks.
 Counts allocations_in_ticks(bool coupled, std::int64_t warmup, std::int64_t n) {
   const io::Scenario sc = io::load_scenario(io::default_scenario_path());
-  const auto program = io::parse_program(sc);
-  auto ref = std::make_shared<sim::ProgramReference>(
-      controller::plan_trajectory(program, sc.machine.motion_limits(), sc.machine.Ts_s));
+  const auto ref = sim::plan_program(sc, sc.machine).reference;
   EXPECT_GE(ref->num_ticks(), warmup + n);
-  sim::CoSimulation cs(sc.machine, ref, coupled ? sc.make_process() : nullptr, sc.start_mm);
+  sim::CoSimulation cs = sim::build_cosimulation(sc, {.reference = ref, .air_cut = !coupled});
   double sink = 0.0;
   for (std::int64_t k = 0; k < warmup; ++k) sink += cs.step().contour_error_mm;
   const long before = g_allocations.load();

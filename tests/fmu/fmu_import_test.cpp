@@ -30,6 +30,7 @@
 #include "fmu_importer.hpp"
 #include "twin/core/units.hpp"
 #include "twin/io/scenario_file.hpp"
+#include "twin/sim/scenario.hpp"
 #include "twin/sim/cosimulation.hpp"
 #include "twin/sim/reference.hpp"
 
@@ -86,13 +87,12 @@ Outputs native_run(const std::string& scenario_path, int mode, const std::vector
   std::shared_ptr<sim::ExternalReference> ext;
   std::shared_ptr<const sim::ReferenceSource> ref;
   if (mode == 2) {
-    ref = std::make_shared<sim::ProgramReference>(
-        controller::plan_trajectory(io::parse_program(sc), sc.machine.motion_limits(), sc.machine.Ts_s));
+    ref = sim::plan_program(sc, sc.machine).reference;
   } else {
     ext = std::make_shared<sim::ExternalReference>(sc.start_mm);
     ref = ext;
   }
-  sim::CoSimulation cosim(sc.machine, ref, sc.make_process ? sc.make_process() : nullptr, sc.start_mm);
+  sim::CoSimulation cosim = sim::build_cosimulation(sc, {.reference = ref});
   const auto outs = expected_outputs(cosim.axes());
   Outputs r;
   r.names = names;
@@ -220,9 +220,7 @@ TEST_F(FmuImport, DefaultScenarioWhileCuttingEqualsNativeAndRestoresState) {
   const std::string path = io::default_scenario_path().string();
   load(TWIN_FMU_DEFAULT, path);
   const io::Scenario sc = io::load_scenario(path);
-  auto ref = std::make_shared<sim::ProgramReference>(
-      controller::plan_trajectory(io::parse_program(sc), sc.machine.motion_limits(), sc.machine.Ts_s));
-  sim::CoSimulation cosim(sc.machine, ref, sc.make_process(), sc.start_mm);
+  sim::CoSimulation cosim = sim::build_cosimulation(sc);
   const auto outs = expected_outputs(cosim.axes());
   const auto& f = fmu_->fn();
   fmi2Component c = fmu_->instantiate("cut");

@@ -18,13 +18,14 @@
 namespace twin::fmu {
 namespace {
 
+// The keys of a scenario's `process:` section (docs/process.md), in JSON.
 const char* kProcess = R"({
-  "tool": {"name": "em10", "shape": "bull_nose", "diameter_mm": 10, "flutes": 2, "helix_deg": 30,
+  "tool": {"name": "em10", "type": "bull_nose", "diameter_mm": 10, "flutes": 2, "helix_deg": 30,
            "corner_radius_mm": 1.5, "flute_length_mm": 22},
-  "coefficients": {"name": "lin", "linear": {"Ktc_N_per_mm2": 800, "Krc_N_per_mm2": 250, "Kac_N_per_mm2": 100,
-                   "Kte_N_per_mm": 25, "Kre_N_per_mm": 30, "Kae_N_per_mm": 5}},
-  "stock": {"rectangle_mm": [0, 0, 40, 40], "top_z_mm": 0, "bottom_z_mm": -20, "cell_mm": 0.05},
-  "options": {"dz_mm": 0.2, "angle_step_deg": 2.0},
+  "material": {"name": "lin", "sets": [{"Ktc_N_per_mm2": 800, "Krc_N_per_mm2": 250, "Kac_N_per_mm2": 100,
+                                        "Kte_N_per_mm": 25, "Kre_N_per_mm": 30, "Kae_N_per_mm": 5}]},
+  "stock": {"box_mm": [0, 0, 40, 40], "top_z_mm": 0, "bottom_z_mm": -20, "cell_mm": 0.05},
+  "model": {"dz_mm": 0.2, "angle_step_deg": 2.0},
   "spindle_angle0_deg": 10
 })";
 

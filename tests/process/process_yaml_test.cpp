@@ -8,7 +8,6 @@
 
 #include "process/milling_process.hpp"
 #include "twin/core/error.hpp"
-#include "twin/io/process_binding.hpp"
 #include "twin/io/process_yaml.hpp"
 #include "twin/io/yaml_util.hpp"
 
@@ -21,10 +20,11 @@ TEST(ProcessYaml, ShippedScenariosBuildProcesses) {
   for (const char* name : {"fadal_pocket_corner", "pocket_rectangle", "slot", "aluminium_hsm"}) {
     const auto file = kScenarios / name / "scenario.yaml";
     const YAML::Node root = load_yaml_file(file);
-    const ProcessBinding b = bind_process(root["process"], file.string() + ": process", file.parent_path());
-    auto model = b.make();
+    const process::ProcessSetup setup =
+        parse_process_setup(root["process"], file.string() + ": process", file.parent_path());
+    auto model = process::make_process(setup);
     ASSERT_NE(model, nullptr) << name;
-    EXPECT_FALSE(b.summary.empty());
+    EXPECT_FALSE(setup.summary().empty());
   }
 }
 

@@ -30,9 +30,9 @@ void register_bench(CLI::App& app) {
     io::Scenario scenario = io::load_scenario(path, opt->machine);
     apply_sets(scenario.machine, opt->sets);
     std::printf("scenario %s, %s\n", scenario.name.c_str(),
-                scenario.make_process ? scenario.process_summary.c_str() : "air cut");
+                sim::process_summary(scenario).c_str());
     for (bool air : {true, false}) {
-      if (!air && !scenario.make_process) break;
+      if (!air && !scenario.process_setup) break;
       const auto r = analysis::benchmark_scenario(scenario, air, opt->repeat);
       std::printf("%-8s %8.3f s simulated (%lld ticks) in %8.4f s: real-time factor %7.1fx, %6.3f us per tick\n",
                   air ? "air cut" : "coupled", r.simulated_s, static_cast<long long>(r.ticks), r.wall_s,

@@ -43,9 +43,9 @@ void add_budget_options(CLI::App& cmd, RunBudget& budget) {
 }
 
 RunSize plan_run_size(const io::Scenario& scenario) {
-  const controller::Program program = io::parse_program(scenario);
   const double Ts = scenario.machine.Ts_s;
-  const controller::Trajectory traj = controller::plan_trajectory(program, scenario.machine.motion_limits(), Ts);
+  const sim::PlannedProgram planned = sim::plan_program(scenario, scenario.machine);
+  const controller::Trajectory& traj = planned.trajectory();
   RunSize size;
   const double settle_ticks = std::ceil(scenario.settle_s / Ts);
   const double rows = static_cast<double>(traj.num_ticks()) + settle_ticks;

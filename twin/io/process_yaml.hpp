@@ -1,8 +1,9 @@
 #pragma once
 /// Reads the `process:` section of a scenario and the tool and material
-/// files it names (YAML, see docs/process.md for the schema). Every problem is
-/// a ConfigError "file:line: process.key ...". bind_process (declared in
-/// process_binding.hpp) is implemented here on top of these.
+/// files it names (YAML, see docs/process.md for the schema) through the one
+/// process setup reader (twin/sim/process_setup_reader.hpp), which the FMU's
+/// resources go through as well. Every problem is a ConfigError
+/// "file:line: process.key ...".
 #include <filesystem>
 #include <string>
 

@@ -5,11 +5,10 @@
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
-#include "controller/interpolator.hpp"
 #include "twin/core/error.hpp"
 #include "twin/io/atomic_file.hpp"
 #include "twin/io/machine_file.hpp"
-#include "twin/io/process_binding.hpp"
+#include "twin/io/process_yaml.hpp"
 #include "twin/io/yaml_util.hpp"
 
 namespace twin::io {
@@ -80,10 +79,7 @@ Scenario load_scenario(const std::filesystem::path& path, const std::string& mac
   }
   s.program_text = read_file(s.program_path, controller::kMaxProgramBytes);
   if (process_node && !process_node.IsNull()) {
-    ProcessBinding setup = bind_process(process_node, where + ": process", dir);
-    s.process_summary = setup.summary;
-    s.make_process = setup.make;
-    s.process_setup = setup.setup;
+    s.process_setup = parse_process_setup(process_node, where + ": process", dir);
     // A machine with a structure cuts with its tool-tip modes (the tool
     // vibrates, the chip regenerates); without `structure:` the tool is rigid.
     if (s.machine.structure && !s.machine.tool_tip.empty()) set_tool_modes(s, s.machine.tool_tip);
@@ -92,25 +88,9 @@ Scenario load_scenario(const std::filesystem::path& path, const std::string& mac
 }
 
 void set_tool_modes(Scenario& s, const process::ToolTipFrf& tool_tip) {
-  if (!s.process_setup) return;
-  s.process_setup->tool_tip = tool_tip;
-  s.make_process = [setup = *s.process_setup]() { return process::make_process(setup); };
+  if (s.process_setup) s.process_setup->tool_tip = tool_tip;
 }
 
-bool vibrating_tool(const Scenario& s) {
-  return s.make_process && s.process_setup && !s.process_setup->tool_tip.empty();
-}
-
-controller::Program parse_program(const Scenario& s) {
-  controller::Program program =
-      controller::parse_gcode(s.program_text, s.program_path.string(), s.start_mm, s.machine.rapid_mm_per_min);
-  AxisArray<double> lo{}, hi{};
-  for (std::size_t a = 0; a < kNumAxes; ++a) {
-    lo[a] = s.machine.axes[a].travel_min_mm;
-    hi[a] = s.machine.axes[a].travel_max_mm;
-  }
-  controller::check_travel(program, lo, hi);
-  return program;
-}
+bool vibrating_tool(const Scenario& s) { return s.process_setup && !s.process_setup->tool_tip.empty(); }
 
 }  // namespace twin::io

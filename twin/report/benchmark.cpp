@@ -2,27 +2,22 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <memory>
 
-#include "twin/sim/cosimulation.hpp"
-#include "twin/sim/reference.hpp"
+#include "twin/sim/scenario.hpp"
 
 namespace twin::analysis {
 
 BenchmarkResult benchmark_scenario(const io::Scenario& scenario, bool air_cut, int repeat) {
-  const controller::Program program = io::parse_program(scenario);
-  auto reference = std::make_shared<sim::ProgramReference>(
-      controller::plan_trajectory(program, scenario.machine.motion_limits(), scenario.machine.Ts_s));
-  const std::int64_t ticks =
-      reference->num_ticks() + static_cast<std::int64_t>(std::ceil(scenario.settle_s / scenario.machine.Ts_s));
+  // Planned once: every repeat follows the same reference.
+  const sim::PlannedProgram planned = sim::plan_program(scenario, scenario.machine);
+  const std::int64_t ticks = sim::run_ticks(scenario, planned.trajectory());
   BenchmarkResult best;
   best.ticks = ticks;
   best.simulated_s = static_cast<double>(ticks) * scenario.machine.Ts_s;
   best.wall_s = 1e300;
   for (int r = 0; r < std::max(1, repeat); ++r) {
-    sim::CoSimulation cs(scenario.machine, reference,
-                         (air_cut || !scenario.make_process) ? nullptr : scenario.make_process(), scenario.start_mm);
+    sim::CoSimulation cs = sim::build_cosimulation(scenario, {.reference = planned.reference, .air_cut = air_cut});
     const auto t0 = std::chrono::steady_clock::now();
     double sink = 0.0;
     for (std::int64_t k = 0; k < ticks; ++k) sink += cs.step().contour_error_mm;

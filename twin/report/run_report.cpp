@@ -12,7 +12,7 @@
 #include "twin/core/units.hpp"
 #include "twin/io/atomic_file.hpp"
 #include "twin/io/trace_csv.hpp"
-#include "twin/sim/reference.hpp"
+#include "twin/sim/scenario.hpp"
 
 namespace twin::analysis {
 
@@ -515,15 +515,12 @@ nlohmann::json RunStatistics::summary() const {
 }
 
 RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options) {
-  const controller::Program program = io::parse_program(scenario);
-  auto reference = std::make_shared<sim::ProgramReference>(
-      controller::plan_trajectory(program, scenario.machine.motion_limits(), scenario.machine.Ts_s));
-  const controller::Trajectory& traj = reference->trajectory();
-  sim::CoSimulation cosim(scenario.machine, reference, scenario.make_process ? scenario.make_process() : nullptr,
-                          scenario.start_mm);
+  const sim::PlannedProgram planned = sim::plan_program(scenario, scenario.machine);
+  const controller::Program& program = planned.program;
+  const controller::Trajectory& traj = planned.trajectory();
+  sim::CoSimulation cosim = sim::build_cosimulation(scenario, {.reference = planned.reference});
   const auto& axes = cosim.axes();
-  const std::int64_t settle_ticks = static_cast<std::int64_t>(std::ceil(scenario.settle_s / scenario.machine.Ts_s));
-  const std::int64_t total = traj.num_ticks() + settle_ticks;
+  const std::int64_t total = sim::run_ticks(scenario, traj);
 
   // Every file is written in the result set's staging folder and appears in
   // OUT with the others, the manifest last (io::ResultSet).
@@ -552,7 +549,7 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
   summary["scenario"] = scenario.name;
   summary["machine"] = scenario.machine.name;
   summary["program"] = scenario.program_path.string();
-  summary["process"] = scenario.make_process ? scenario.process_summary : std::string("air cut");
+  summary["process"] = sim::process_summary(scenario);
   summary["Ts_s"] = scenario.machine.Ts_s;
   const nlohmann::json st = stats.summary();
   summary.update(st);
@@ -565,7 +562,7 @@ RunOutputs run_scenario(const io::Scenario& scenario, const RunOptions& options)
   if (options.plots) {
     try {
       plots = draw_run_plots(results, options, trace_name, writer.num_rows(), axes, stats,
-                             scenario.make_process != nullptr, traj);
+                             scenario.process_setup.has_value(), traj);
     } catch (const Error&) {
       results.commit();  // the trace and the summary stand without the plots
       throw;

@@ -12,8 +12,7 @@
 #include "twin/core/error.hpp"
 #include "twin/core/units.hpp"
 #include "twin/io/atomic_file.hpp"
-#include "twin/sim/cosimulation.hpp"
-#include "twin/sim/reference.hpp"
+#include "twin/sim/scenario.hpp"
 
 namespace twin::analysis {
 
@@ -73,15 +72,15 @@ ConstraintValues linear_constraints(const LinearPlant& plant, const controller::
 
 PlannedScenario plan_scenario(const io::Scenario& scenario) {
   PlannedScenario p;
-  p.program = io::parse_program(scenario);
-  p.trajectory = controller::plan_trajectory(p.program, scenario.machine.motion_limits(), scenario.machine.Ts_s);
+  sim::PlannedProgram planned = sim::plan_program(scenario, scenario.machine);
+  p.program = std::move(planned.program);
+  p.trajectory = planned.trajectory();
   p.corners = corner_windows(p.trajectory, p.program);
   for (const auto& c : p.corners)
     if (is_feed_move(p.program, c.corner.block_before) && is_feed_move(p.program, c.corner.block_after))
       p.tuning_corners.push_back(c);
   if (p.tuning_corners.empty()) p.tuning_corners = p.corners;
-  p.total_ticks =
-      p.trajectory.num_ticks() + static_cast<std::int64_t>(std::ceil(scenario.settle_s / scenario.machine.Ts_s));
+  p.total_ticks = sim::run_ticks(scenario, p.trajectory);
   if (p.tuning_corners.empty()) {
     // A program without corners (a straight slot): its errors are judged over the whole run.
     CornerWindow whole;
@@ -240,11 +239,12 @@ class WindowFigures {
 ScenarioMetrics simulate_window(const io::Scenario& scenario, const PlannedScenario& planned,
                                 const sim::MachineDefinition& machine, const SimulationWindow& window,
                                 CornerTrace* trace, std::int64_t trace_begin, std::int64_t trace_end) {
-  auto reference = std::make_shared<sim::ProgramReference>(planned.trajectory);
   const std::int64_t k0 = window.k_begin;
   AxisArray<double> x0 = scenario.start_mm;
   if (k0 > 0) x0 = planned.trajectory.sample(k0).x_mm;
-  sim::CoSimulation cosim(machine, reference, scenario.make_process ? scenario.make_process() : nullptr, x0);
+  sim::CoSimulation cosim = sim::build_cosimulation(
+      scenario,
+      {.machine = &machine, .reference = std::make_shared<sim::ProgramReference>(planned.trajectory), .start_mm = x0});
   const auto& axes = cosim.axes();
   if (k0 > 0) start_in_motion(cosim, machine, planned.trajectory, k0);
   if (trace) *trace = CornerTrace{};

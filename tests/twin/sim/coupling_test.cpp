@@ -14,6 +14,7 @@
 
 #include "feeddrive/drive_bank.hpp"
 #include "twin/io/scenario_file.hpp"
+#include "twin/sim/scenario.hpp"
 #include "twin/sim/cosimulation.hpp"
 
 namespace twin {
@@ -21,12 +22,12 @@ namespace {
 
 TEST(Coupling, EnergyBalanceAndCuttingWorkThroughTheCorner) {
   const io::Scenario sc = io::load_scenario(io::default_scenario_path());
-  ASSERT_TRUE(sc.make_process);
-  const controller::Program program = io::parse_program(sc);
-  auto ref = std::make_shared<sim::ProgramReference>(
-      controller::plan_trajectory(program, sc.machine.motion_limits(), sc.machine.Ts_s));
+  ASSERT_TRUE(sc.process_setup);
+  const sim::PlannedProgram planned = sim::plan_program(sc, sc.machine);
+  const controller::Program& program = planned.program;
+  const auto& ref = planned.reference;
   ASSERT_FALSE(ref->trajectory().corners().empty());
-  sim::CoSimulation cs(sc.machine, ref, sc.make_process(), sc.start_mm);
+  sim::CoSimulation cs = sim::build_cosimulation(sc, {.reference = ref});
 
   double process_work_J = 0.0;
   double max_engagement_deg = 0.0, engagement_before_deg = 0.0;
