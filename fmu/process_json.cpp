@@ -117,6 +117,54 @@ json stock_to_json(const process::StockSpec& stock) {
           {"pockets", pockets}};
 }
 
+/// The tool's modes when it vibrates in the cut (a machine with `structure:`
+/// and `tool_tip:`): set by the scenario from its machine, not by the process
+/// section of a scenario file, so they are read here beside the reader.
+constexpr const char* kToolTip = "tool_tip";
+constexpr const char* kSubsteps = "substeps_per_mode_period";
+
+json modes_to_json(const std::vector<process::ToolTipMode>& modes) {
+  json out = json::array();
+  for (const auto& m : modes) out.push_back({{"fn_Hz", m.fn_Hz}, {"zeta", m.zeta}, {"k_N_per_m", m.k_N_per_m}});
+  return out;
+}
+
+std::vector<process::ToolTipMode> modes_from_json(const json& j, const std::string& where) {
+  if (!j.is_array()) throw ConfigError(fmt::format("{} must be a list of modes", where));
+  std::vector<process::ToolTipMode> out;
+  for (std::size_t i = 0; i < j.size(); ++i) {
+    const std::string w = fmt::format("{}[{}]", where, i);
+    const json& m = j[i];
+    if (!m.is_object() || m.size() != 3 || !m.contains("fn_Hz") || !m.contains("zeta") || !m.contains("k_N_per_m"))
+      throw ConfigError(fmt::format("{} must be a map of fn_Hz, zeta and k_N_per_m", w));
+    process::ToolTipMode mode;
+    mode.fn_Hz = JsonSetupNode(m.at("fn_Hz")).number(w + ".fn_Hz");
+    mode.zeta = JsonSetupNode(m.at("zeta")).number(w + ".zeta");
+    mode.k_N_per_m = JsonSetupNode(m.at("k_N_per_m")).number(w + ".k_N_per_m");
+    out.push_back(mode);
+  }
+  return out;
+}
+
+/// Reads the tool's modes from `j`'s tool_tip and substeps entries into `setup`.
+void read_tool_modes(const json& j, process::ProcessSetup& setup) {
+  if (j.contains(kToolTip)) {
+    const json& t = j.at(kToolTip);
+    if (!t.is_object()) throw ConfigError("process: tool_tip must be a map of x and y modes");
+    for (const auto& [key, v] : t.items()) {
+      if (key == "x")
+        setup.tool_tip.x = modes_from_json(v, "process: tool_tip.x");
+      else if (key == "y")
+        setup.tool_tip.y = modes_from_json(v, "process: tool_tip.y");
+      else
+        throw ConfigError(fmt::format("process: tool_tip: unknown key '{}' (x, y)", key));
+    }
+    setup.tool_tip.validate("process: tool_tip");
+  }
+  if (j.contains(kSubsteps))
+    setup.substeps_per_mode_period = JsonSetupNode(j.at(kSubsteps)).number(std::string("process: ") + kSubsteps);
+}
+
 }  // namespace
 
 json process_setup_to_json(const process::ProcessSetup& s) {
@@ -130,11 +178,22 @@ json process_setup_to_json(const process::ProcessSetup& s) {
   j["lead_deg"] = s.lead_deg;
   j["tilt_deg"] = s.tilt_deg;
   j["spindle_angle0_deg"] = s.spindle_angle0_deg;
+  if (!s.tool_tip.empty()) {
+    j[kToolTip] = {{"x", modes_to_json(s.tool_tip.x)}, {"y", modes_to_json(s.tool_tip.y)}};
+    j[kSubsteps] = s.substeps_per_mode_period;
+  }
   return j;
 }
 
 process::ProcessSetup process_setup_from_json(const nlohmann::json& j) {
-  return sim::read_process_setup(JsonSetupNode(j), "process");
+  if (!j.is_object() || (!j.contains(kToolTip) && !j.contains(kSubsteps)))
+    return sim::read_process_setup(JsonSetupNode(j), "process");
+  json rest = j;
+  rest.erase(kToolTip);
+  rest.erase(kSubsteps);
+  process::ProcessSetup setup = sim::read_process_setup(JsonSetupNode(rest), "process");
+  read_tool_modes(j, setup);
+  return setup;
 }
 
 std::unique_ptr<process::ProcessModel> make_process_from_json(const nlohmann::json& j) {

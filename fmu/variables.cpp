@@ -56,12 +56,19 @@ const std::array<OutputSpec, 15> kOutputs{{
     {"cutting_power_W", "W", "cutting power", [](const sim::Snapshot& s) { return s.cutting_power_W; }},
 }};
 
+/// Outputs of a tool that vibrates in the cut (the trace's tool columns).
+const std::array<OutputSpec, 3> kToolOutputs{{
+    {"tool_dx_um", "um", "the tool tip's deflection, x", [](const sim::Snapshot& s) { return s.tool_deflection_um[0]; }},
+    {"tool_dy_um", "um", "the tool tip's deflection, y", [](const sim::Snapshot& s) { return s.tool_deflection_um[1]; }},
+    {"sle_um", "um", "surface location error at the finished wall (last sampled)", [](const sim::Snapshot& s) { return s.sle_um; }},
+}};
+
 /// Twin unit text -> FMI unit name.
 struct UnitAlias {
   std::string_view twin;
   std::string_view fmi;
 };
-constexpr std::array<UnitAlias, 31> kUnitAliases{{
+constexpr std::array<UnitAlias, 32> kUnitAliases{{
     {"A/V", "A/V"},          {"N m/A", "N.m/A"},         {"kg m^2", "kg.m2"},   {"kg m^2/s", "kg.m2/s"},
     {"mm/rad", "mm/rad"},    {"V/mm", "V/mm"},           {"V/(s mm)", "V/(s.mm)"}, {"V s/mm", "V.s/mm"},
     {"V s^2/mm", "V.s2/mm"}, {"N m", "N.m"},             {"V", "V"},            {"mm/s", "mm/s"},
@@ -71,7 +78,7 @@ constexpr std::array<UnitAlias, 31> kUnitAliases{{
     {"deg", "deg"},          {"N", "N"},                 {"W", "W"},
     // The cascade law's gains (torque in N m on a machine the FMU exports).
     {"1/s", "1/s"},          {"torque unit", "N.m"},     {"torque unit s/rad", "N.m.s/rad"},
-    {"torque unit s^2/rad", "N.m.s2/rad"},
+    {"torque unit s^2/rad", "N.m.s2/rad"}, {"um", "um"},
 }};
 
 }  // namespace
@@ -94,6 +101,7 @@ const std::vector<UnitDefinition>& unit_definitions() {
       {"mm/s2", 0, 1, -2, 0, 0, 1e-3},
       {"mm/s3", 0, 1, -3, 0, 0, 1e-3},
       {"mm", 0, 1, 0, 0, 0, 1e-3},
+      {"um", 0, 1, 0, 0, 0, 1e-6},
       {"rad/s", 0, 0, -1, 0, 1, 1.0},
       {"1", 0, 0, 0, 0, 0, 1.0},
       {"rad", 0, 0, 0, 0, 1, 1.0},
@@ -129,7 +137,7 @@ bool is_tunable_axis_param(const sim::AxisParamSpec& spec) {
   return n == "Kp" || n == "Ki" || n == "Kd" || n == "K1" || n == "K2";
 }
 
-std::vector<Variable> make_variables(const sim::MachineDefinition& machine) {
+std::vector<Variable> make_variables(const sim::MachineDefinition& machine, bool vibrating_tool) {
   std::vector<Variable> v;
   const std::vector<Axis> axes = machine.present_axes();
   {
@@ -218,7 +226,7 @@ std::vector<Variable> make_variables(const sim::MachineDefinition& machine) {
       v.push_back(out);
     }
   }
-  for (const auto& o : kOutputs) {
+  const auto add_output = [&v](const OutputSpec& o) {
     Variable out;
     out.name = o.name;
     out.unit = fmi_unit(o.unit);
@@ -226,7 +234,10 @@ std::vector<Variable> make_variables(const sim::MachineDefinition& machine) {
     out.kind = VarKind::kOutput;
     out.output = o.get;
     v.push_back(out);
-  }
+  };
+  for (const auto& o : kOutputs) add_output(o);
+  if (vibrating_tool)
+    for (const auto& o : kToolOutputs) add_output(o);
   {
     Variable out;
     out.name = "block";

@@ -80,8 +80,10 @@ const std::vector<UnitDefinition>& unit_definitions();
 /// in the table (a new parameter needs its unit added there).
 std::string fmi_unit(std::string_view twin_unit);
 
-/// The table for a machine (only its present axes get rows).
-std::vector<Variable> make_variables(const sim::MachineDefinition& machine);
+/// The table for a machine (only its present axes get rows); with
+/// `vibrating_tool` (the process cuts with the tool's modes) the outputs
+/// gain the tool's deflection and surface location error.
+std::vector<Variable> make_variables(const sim::MachineDefinition& machine, bool vibrating_tool = false);
 
 /// The value of a Real parameter row (kMachineParam or kAxisParam) in `machine`.
 double get_parameter(const Variable& v, const sim::MachineDefinition& machine);
