@@ -19,14 +19,17 @@ std::optional<LoopLaw> parse_loop_law(std::string_view name) noexcept {
   return std::nullopt;
 }
 
+void validate_sample_period(std::string_view where, double Ts_s) {
+  if (!std::isfinite(Ts_s)) throw ConfigError(fmt::format("{}: Ts = {} must be finite", where, Ts_s));
+  if (!(Ts_s > 0.0 && Ts_s <= 0.1))
+    throw ConfigError(fmt::format("{}: Ts = {} s must be in (0, 0.1]", where, Ts_s));
+}
+
 void PositionLoopParams::validate(std::string_view where) const {
   auto finite = [&](const char* name, double v) {
     if (!std::isfinite(v))
       throw ConfigError(fmt::format("{}: {} = {} must be finite", where, name, v));
   };
-  finite("Ts", Ts_s);
-  if (!(Ts_s > 0.0 && Ts_s <= 0.1))
-    throw ConfigError(fmt::format("{}: Ts = {} s must be in (0, 0.1]", where, Ts_s));
   if (law == LoopLaw::kCascade) {
     const CascadeGains& c = cascade;
     finite("Kv", c.Kv_per_s);
@@ -60,14 +63,15 @@ void PositionLoopParams::validate(std::string_view where) const {
                                   Ki_V_per_s_mm, Kd_V_s_per_mm));
 }
 
-PositionLoop::PositionLoop(const PositionLoopParams& params, const DriveScale& drive)
-    : params_(params), drive_(drive) {
+PositionLoop::PositionLoop(const PositionLoopParams& params, double Ts_s, const DriveScale& drive)
+    : params_(params), Ts_s_(Ts_s), drive_(drive) {
+  validate_sample_period("position loop", Ts_s_);
   params_.validate("position loop");
   if (params_.law == LoopLaw::kCascade) {
     if (!(drive_.rg_mm_per_rad > 0.0) || !(drive_.Ka_A_per_V > 0.0) || !(drive_.Kt_Nm_per_A > 0.0))
       throw ConfigError(fmt::format("position loop: the cascade needs rg, Ka, Kt > 0 (got {}, {}, {})",
                                     drive_.rg_mm_per_rad, drive_.Ka_A_per_V, drive_.Kt_Nm_per_A));
-    lag_a_ = params_.cascade.tau_i_s > 0.0 ? std::exp(-params_.Ts_s / params_.cascade.tau_i_s) : 0.0;
+    lag_a_ = params_.cascade.tau_i_s > 0.0 ? std::exp(-Ts_s_ / params_.cascade.tau_i_s) : 0.0;
   }
 }
 
@@ -81,7 +85,7 @@ void PositionLoop::reset(double x_ref0_mm, double x_meas0_mm) noexcept {
 
 void PositionLoop::cascade_step(PositionLoopOutput& out, double x_meas_mm, double v_meas_mm_per_s) {
   const CascadeGains& g = params_.cascade;
-  const double Ts = params_.Ts_s;
+  const double Ts = Ts_s_;
   const double rg = drive_.rg_mm_per_rad;
   const double v_meas = std::isfinite(v_meas_mm_per_s) ? v_meas_mm_per_s : (x_meas_mm - state_.x_meas_prev_mm) / Ts;
   out.vcmd_mm_per_s = g.Kv_per_s * out.e_mm + g.kff * out.v_ref_mm_per_s;
@@ -105,7 +109,7 @@ PositionLoopOutput PositionLoop::step(std::int64_t k, double x_ref_mm, double x_
   if (!primed_) reset(x_ref_mm, x_meas_mm);
   if (state_.last_k >= 0 && k != state_.last_k + 1)
     throw InternalError(fmt::format("position loop stepped at tick {} after tick {}", k, state_.last_k));
-  const double Ts = params_.Ts_s;
+  const double Ts = Ts_s_;
   PositionLoopOutput out;
   out.e_mm = x_ref_mm - x_meas_mm;
   out.v_ref_mm_per_s = (x_ref_mm - state_.x_ref_prev_mm) / Ts;

@@ -60,9 +60,11 @@ struct PositionLoopParams {
   double K2_V_s_per_mm{0.0};
   double u_max_V{10.0};
   CascadeGains cascade;
-  double Ts_s{1e-4};
   void validate(std::string_view where) const;
 };
+
+/// Throws ConfigError "<where>: Ts = ... s must be in (0, 0.1]" (or "must be finite").
+void validate_sample_period(std::string_view where, double Ts_s);
 
 struct PositionLoopState {
   double I_mm_s{0.0};
@@ -90,7 +92,8 @@ struct PositionLoopOutput {
 
 class PositionLoop {
  public:
-  explicit PositionLoop(const PositionLoopParams& params, const DriveScale& drive = {});
+  /// `Ts_s` is the machine's sample period.
+  PositionLoop(const PositionLoopParams& params, double Ts_s, const DriveScale& drive = {});
   /// Starts from rest at x_ref0: v_ref and a_ref are 0 at the first tick and
   /// the derivative term sees e[-1] = e[0] (no kick at the first sample).
   void reset(double x_ref0_mm, double x_meas0_mm) noexcept;
@@ -101,6 +104,7 @@ class PositionLoop {
   PositionLoopOutput step(std::int64_t k, double x_ref_mm, double x_meas_mm,
                           double v_meas_mm_per_s = std::numeric_limits<double>::quiet_NaN());
   const PositionLoopParams& params() const noexcept { return params_; }
+  double Ts_s() const noexcept { return Ts_s_; }
   const PositionLoopState& state() const noexcept { return state_; }
   void set_state(const PositionLoopState& s) noexcept {
     state_ = s;
@@ -110,6 +114,7 @@ class PositionLoop {
  private:
   void cascade_step(PositionLoopOutput& out, double x_meas_mm, double v_meas_mm_per_s);
   PositionLoopParams params_;
+  double Ts_s_;
   DriveScale drive_;
   double lag_a_{0.0};
   PositionLoopState state_;

@@ -1526,7 +1526,6 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
     def.drive.effects.constant_load.torque_Nm = ax.c;
     def.loop.law = controller::LoopLaw::kCascade;
     def.loop.cascade = ax.gains;
-    def.loop.Ts_s = Ts;
     def.following_error_limit_mm = 1e3;
     out.axis.push_back(ax);
   }

@@ -113,8 +113,8 @@ class FadalLaw final : public LinearLaw {
   double command_limit(const controller::PositionLoopParams& g) const override { return g.u_max_V; }
 
   /// State [I[k-1] (when Ki > 0), e[k-1], x_ref[k-1], v_ref[k-1]].
-  ControllerRealisation realise(const controller::PositionLoopParams& g, const LinearPlant&) const override {
-    const double Ts = g.Ts_s;
+  ControllerRealisation realise(const controller::PositionLoopParams& g, double Ts,
+                                const LinearPlant&) const override {
     const bool integral = g.Ki_V_per_s_mm != 0.0;
     const int iI = integral ? 0 : -1, ie = integral ? 1 : 0, ir = ie + 1, iv = ie + 2, n = ie + 3;
     RealisationBuilder b(n);
@@ -166,9 +166,10 @@ class CascadeLaw final : public LinearLaw {
   double command_limit(const controller::PositionLoopParams& g) const override { return g.cascade.T_max; }
 
   /// State [Iv[k-1] (when Tn > 0), Tf[k-1] (when tau_i > 0), x_ref[k-1], v_ref[k-1]].
-  ControllerRealisation realise(const controller::PositionLoopParams& g, const LinearPlant& p) const override {
+  ControllerRealisation realise(const controller::PositionLoopParams& g, double Ts,
+                                const LinearPlant& p) const override {
     const controller::CascadeGains& c = g.cascade;
-    const double Ts = g.Ts_s, rg = p.rg_mm_per_rad;
+    const double rg = p.rg_mm_per_rad;
     const bool integral = c.Tn_s > 0.0, lag = c.tau_i_s > 0.0;
     int n = 0;
     const int iI = integral ? n++ : -1;
@@ -234,9 +235,10 @@ const LinearLaw& linear_law(controller::LoopLaw law) {
 }
 
 DiscreteLoopModel::DiscreteLoopModel(const LinearPlant& plant, const controller::PositionLoopParams& gains,
-                                     const std::string& where)
-    : plant_(plant), gains_(gains), law_(&linear_law(gains.law)), Ts_s_(gains.Ts_s) {
+                                     double Ts_s, const std::string& where)
+    : plant_(plant), gains_(gains), law_(&linear_law(gains.law)), Ts_s_(Ts_s) {
   plant_.validate(where);
+  controller::validate_sample_period(where, Ts_s_);
   gains_.validate(where);
   const double g = law_->torque_per_command(plant_);
   Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
@@ -246,8 +248,8 @@ DiscreteLoopModel::DiscreteLoopModel(const LinearPlant& plant, const controller:
   const Eigen::MatrixXd E = matrix_exponential(M * Ts_s_);
   Phi_ = E.topLeftCorner<2, 2>();
   Gamma_ = E.topRightCorner<2, 1>();
-  K_ = law_->realise(gains_, plant_);
-  K_fb_ = law_->realise(law_->feedback_only(gains_), plant_);
+  K_ = law_->realise(gains_, Ts_s_, plant_);
+  K_fb_ = law_->realise(law_->feedback_only(gains_), Ts_s_, plant_);
   same_states_ = K_fb_.Ac == K_.Ac;
 
   // The loop states of the controller with the plant, the reference held at 0.
@@ -487,7 +489,7 @@ void step_response(const DiscreteLoopModel& m, LoopAnalysis& a) {
     a.step_settling_time_s = std::numeric_limits<double>::infinity();
     return;
   }
-  const DiscreteLoopModel feedback(m.plant(), m.law().feedback_only(m.gains()));
+  const DiscreteLoopModel feedback(m.plant(), m.law().feedback_only(m.gains()), m.Ts_s());
   const double pmax = std::max(a.max_pole_magnitude, 1e-12);
   const double tau_ticks = pmax < 1.0 ? -1.0 / std::log(pmax) : 1e9;
   const auto n = static_cast<std::size_t>(std::clamp(8.0 * tau_ticks + 2000.0, 2000.0, 300000.0));

@@ -111,7 +111,8 @@ class LinearLaw {
   virtual double torque_per_command(const LinearPlant& plant) const = 0;
   /// The limit of the command (u_max, T_max).
   virtual double command_limit(const controller::PositionLoopParams& g) const = 0;
-  virtual ControllerRealisation realise(const controller::PositionLoopParams& g, const LinearPlant& plant) const = 0;
+  virtual ControllerRealisation realise(const controller::PositionLoopParams& g, double Ts_s,
+                                        const LinearPlant& plant) const = 0;
   /// The gains with every feedforward gain at 0.
   controller::PositionLoopParams feedback_only(const controller::PositionLoopParams& g) const;
   /// "Kp 500 V/mm, Ki 70 V/(s mm), ..." (all gains, with `units`).
@@ -129,8 +130,8 @@ struct FrequencyPoint {
 /// The discrete closed loop of one axis.
 class DiscreteLoopModel {
  public:
-  /// Throws ConfigError for a non-physical plant or gains (`where` names the axis).
-  DiscreteLoopModel(const LinearPlant& plant, const controller::PositionLoopParams& gains,
+  /// Throws ConfigError for a non-physical plant, gains or period (`where` names the axis).
+  DiscreteLoopModel(const LinearPlant& plant, const controller::PositionLoopParams& gains, double Ts_s,
                     const std::string& where = "axis");
 
   const LinearLaw& law() const noexcept { return *law_; }

@@ -42,9 +42,9 @@ double linear_violation(const ConstraintValues& v, const TuneConstraints& c) {
 }  // namespace
 
 ConstraintValues linear_constraints(const LinearPlant& plant, const controller::PositionLoopParams& gains,
-                                    const TuneConstraints& c, const std::string& where) {
+                                    double Ts_s, const TuneConstraints& c, const std::string& where) {
   ConstraintValues v;
-  const DiscreteLoopModel model(plant, gains, where);
+  const DiscreteLoopModel model(plant, gains, Ts_s, where);
   const LoopAnalysis a = analyse_loop(model, 0.01, 1500);
   v.stable = a.stable;
   v.phase_margin_deg = a.phase_margin_deg;
@@ -272,14 +272,15 @@ namespace {
 struct AxisScales {
   Axis axis{Axis::kX};
   LinearPlant plant;
+  double Ts_s;
   controller::PositionLoopParams start;
   const LinearLaw* law{nullptr};
   std::vector<const LawGain*> vars;  ///< feedback gains first
   std::vector<double> base;
   std::size_t feedback_vars{0};
 
-  AxisScales(Axis a, const LinearPlant& p, const controller::PositionLoopParams& g)
-      : axis(a), plant(p), start(g), law(&linear_law(g.law)) {
+  AxisScales(Axis a, const LinearPlant& p, double Ts, const controller::PositionLoopParams& g)
+      : axis(a), plant(p), Ts_s(Ts), start(g), law(&linear_law(g.law)) {
     for (const LawGain& lg : law->gains()) {
       if (!lg.searched) continue;
       vars.push_back(&lg);
@@ -369,7 +370,8 @@ double stage_a_constraint(unsigned n, const double* q, double*, void* data) {
   tight.sensitivity_peak_max -= 0.02;
   tight.step_overshoot_max -= 0.005;
   try {
-    const ConstraintValues v = linear_constraints(d->scales->plant, d->scales->gains(full.data()), tight, d->where);
+    const ConstraintValues v = linear_constraints(d->scales->plant, d->scales->gains(full.data()), d->scales->Ts_s, tight,
+                                                 d->where);
     return linear_violation(v, tight);
   } catch (const ConfigError&) {
     return 100.0;
@@ -422,7 +424,7 @@ double stage_b_objective(unsigned n, const double* q, double*, void* data) {
     const auto& s = d->scales[i];
     const controller::PositionLoopParams g = s.gains(q + d->offsets[i]);
     try {
-      lin += linear_violation(linear_constraints(s.plant, g, c, std::string(axis_name(s.axis))), c);
+      lin += linear_violation(linear_constraints(s.plant, g, s.Ts_s, c, std::string(axis_name(s.axis))), c);
     } catch (const ConfigError&) {
       lin += 100.0;
     }
@@ -466,10 +468,10 @@ AxisTuneResult axis_result(const AxisScales& s, const controller::PositionLoopPa
   ar.after = after;
   ar.model_feedforward = s.model_feedforward();
   const std::string name(axis_name(s.axis));
-  ar.analysis_before = analyse_loop(DiscreteLoopModel(s.plant, ar.before, name));
-  ar.analysis_after = analyse_loop(DiscreteLoopModel(s.plant, ar.after, name));
-  ar.constraints_before = linear_constraints(s.plant, ar.before, c, name);
-  ar.constraints_after = linear_constraints(s.plant, ar.after, c, name);
+  ar.analysis_before = analyse_loop(DiscreteLoopModel(s.plant, ar.before, s.Ts_s, name));
+  ar.analysis_after = analyse_loop(DiscreteLoopModel(s.plant, ar.after, s.Ts_s, name));
+  ar.constraints_before = linear_constraints(s.plant, ar.before, s.Ts_s, c, name);
+  ar.constraints_after = linear_constraints(s.plant, ar.after, s.Ts_s, c, name);
   for (auto* pair : {&ar.constraints_before, &ar.constraints_after}) {
     const ScenarioMetrics& fm = pair == &ar.constraints_before ? full_before : full_after;
     pair->command_peak = command_peak(fm, machine, s.axis);
@@ -562,7 +564,7 @@ class Tuner {
         throw ConfigError(fmt::format("tune: axis {} is not present in machine {}", axis_name(a), m0_.name));
       const LinearPlant plant = linear_plant(def.drive);
       plant.validate(fmt::format("{}: axis {}", m0_.source.empty() ? m0_.name : m0_.source, axis_name(a)));
-      requested.emplace_back(a, plant, def.loop);
+      requested.emplace_back(a, plant, m0_.Ts_s, def.loop);
     }
     return requested;
   }
@@ -598,7 +600,8 @@ class Tuner {
     }
     std::vector<double> full = s.origin();
     std::copy(x.begin(), x.end(), full.begin());
-    const ConstraintValues v = linear_constraints(s.plant, s.gains(full.data()), c_, std::string(axis_name(s.axis)));
+    const ConstraintValues v =
+        linear_constraints(s.plant, s.gains(full.data()), s.Ts_s, c_, std::string(axis_name(s.axis)));
     if (v.linear_ok) {
       scales_.push_back(s);
       q0_.push_back(full);
@@ -1073,7 +1076,8 @@ std::string bode_data(const TuneResult& r) {
   std::string text = "# f_Hz |L|_dB argL_deg |S|_dB |T|_dB |E/R|_dB\n";
   for (const auto& a : r.axes) {
     for (const auto* g : {&a.before, &a.after}) {
-      const DiscreteLoopModel m(linear_plant(r.machine_before.axes[index(a.axis)].drive), *g);
+      const DiscreteLoopModel m(linear_plant(r.machine_before.axes[index(a.axis)].drive), *g,
+                                r.machine_before.Ts_s);
       double unwrap = 0.0, prev = 0.0;
       bool first = true;
       for (const auto& p : frequency_response(m, 0.1, 600)) {

@@ -79,7 +79,7 @@ struct ConstraintValues {
 };
 /// Linear constraint values for an axis (command_peak is left at 0).
 ConstraintValues linear_constraints(const LinearPlant& plant, const controller::PositionLoopParams& gains,
-                                    const TuneConstraints& c, const std::string& where);
+                                    double Ts_s, const TuneConstraints& c, const std::string& where);
 
 /// A tick range of the scenario and the corners judged inside it.
 struct SimulationWindow {
