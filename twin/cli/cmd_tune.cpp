@@ -121,7 +121,7 @@ MetricsPair check_before_after(const io::Scenario& cs, const analysis::TuneResul
 
 /// "axis x: Kp 1 -> 2, ...; PM ..." for a tuned axis, "axis x: gains kept (...)" for another.
 void print_axis_result(const analysis::AxisTuneResult& a) {
-  const analysis::LinearLaw& law = analysis::linear_law(a.before.law);
+  const controller::Law& law = controller::law_of(a.before.law);
   std::string gains;
   for (const analysis::LawGain& g : law.gains()) {
     gains += gains.empty() ? "" : ", ";
