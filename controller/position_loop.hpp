@@ -1,21 +1,8 @@
 #pragma once
-/// The CNC's digital position loop per axis, at period Ts, with two laws
-/// (spec/measured-data.md):
-///
-/// FADAL (the shipped fadal2216), e[k] = x_ref[k] - x_meas[k]:
+/// The CNC's digital position loop per axis, at the machine's period Ts, e[k] = x_ref[k] - x_meas[k]:
 ///   v_ref[k] = (x_ref[k] - x_ref[k-1]) / Ts,  a_ref[k] = (v_ref[k] - v_ref[k-1]) / Ts
-///   I[k]     = I[k-1] + Ts e[k]
-///   u[k]     = Kp e + Ki I + Kd (e[k] - e[k-1]) / Ts + K1 a_ref + K2 v_ref, clamped to +-u_max
-///
-/// Cascade (most industrial CNCs): a P position loop, a PI velocity loop on the
-/// motor speed, a current loop as a first-order lag, a torque limit:
-///   vcmd[k]  = Kv e[k] + kff v_ref[k]                               (mm/s)
-///   ev[k]    = (vcmd[k] - v_meas[k]) / rg                           (rad/s at the motor)
-///   Iv[k]    = Iv[k-1] + Ts ev[k]   (frozen while the torque command is limited: anti-windup)
-///   Tc[k]    = Kvp (ev[k] + Iv[k] / Tn) + Jff a_ref[k] / rg, clamped to +-T_max
-///   Tf[k]    = a Tf[k-1] + (1 - a) Tc[k],  a = exp(-Ts / tau_i)     (current loop sampled at Ts)
-///   u[k]     = Tf[k] / (Ka Kt)   so that the drive's i = Ka u = Tf / Kt and Tm = Tf.
-/// Tn = 0 switches the integral off; tau_i = 0 makes the current loop ideal.
+/// and the command u[k] from the axis' law (controller/law.hpp; the laws in
+/// controller/laws/: FADAL fadal.hpp, cascade cascade.hpp, spec/measured-data.md).
 /// v_meas is the motor speed the drive's own sensor gives (rg w); where the
 /// caller has none, the encoder's backward difference.
 ///
@@ -27,9 +14,11 @@
 
 namespace twin::controller {
 
+/// The registered laws (controller/law.cpp registers each).
 enum class LoopLaw { kFadal, kCascade };
+class Law;
 std::string_view loop_law_name(LoopLaw law) noexcept;
-/// "fadal" or "cascade"; nullopt for anything else.
+/// A registered law's name ("fadal", "cascade"); nullopt for anything else.
 std::optional<LoopLaw> parse_loop_law(std::string_view name) noexcept;
 
 /// Gains of the cascade law. The torque unit is N m, or the log's own unit
@@ -51,6 +40,14 @@ struct DriveScale {
   double Kt_Nm_per_A{1.0};
 };
 
+/// What a loop computes once at construction for its law's step.
+struct LawSetup {
+  double Ts_s{1e-4};
+  DriveScale drive;
+  double lag_a{0.0};  ///< cascade: exp(-Ts / tau_i) of the current loop (0: ideal)
+};
+
+/// The gains of every law; an axis uses those of its `law`.
 struct PositionLoopParams {
   LoopLaw law{LoopLaw::kFadal};
   double Kp_V_per_mm{0.0};
@@ -60,9 +57,12 @@ struct PositionLoopParams {
   double K2_V_s_per_mm{0.0};
   double u_max_V{10.0};
   CascadeGains cascade;
-  double Ts_s{1e-4};
+  /// Its law's validation of the gains.
   void validate(std::string_view where) const;
 };
+
+/// Throws ConfigError "<where>: Ts = ... s must be in (0, 0.1]" (or "must be finite").
+void validate_sample_period(std::string_view where, double Ts_s);
 
 struct PositionLoopState {
   double I_mm_s{0.0};
@@ -90,7 +90,8 @@ struct PositionLoopOutput {
 
 class PositionLoop {
  public:
-  explicit PositionLoop(const PositionLoopParams& params, const DriveScale& drive = {});
+  /// `Ts_s` is the machine's sample period.
+  PositionLoop(const PositionLoopParams& params, double Ts_s, const DriveScale& drive = {});
   /// Starts from rest at x_ref0: v_ref and a_ref are 0 at the first tick and
   /// the derivative term sees e[-1] = e[0] (no kick at the first sample).
   void reset(double x_ref0_mm, double x_meas0_mm) noexcept;
@@ -101,6 +102,7 @@ class PositionLoop {
   PositionLoopOutput step(std::int64_t k, double x_ref_mm, double x_meas_mm,
                           double v_meas_mm_per_s = std::numeric_limits<double>::quiet_NaN());
   const PositionLoopParams& params() const noexcept { return params_; }
+  double Ts_s() const noexcept { return setup_.Ts_s; }
   const PositionLoopState& state() const noexcept { return state_; }
   void set_state(const PositionLoopState& s) noexcept {
     state_ = s;
@@ -108,10 +110,9 @@ class PositionLoop {
   }
 
  private:
-  void cascade_step(PositionLoopOutput& out, double x_meas_mm, double v_meas_mm_per_s);
   PositionLoopParams params_;
-  DriveScale drive_;
-  double lag_a_{0.0};
+  const Law* law_;
+  LawSetup setup_;
   PositionLoopState state_;
   bool primed_{false};
 };

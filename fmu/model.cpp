@@ -123,7 +123,6 @@ FmuModel model_from_json(const std::string& text_in, const std::string& where) {
         throw ConfigError(fmt::format("{}: machine.axes.{}: unknown parameter '{}'", where, axis_key, key));
       sim::set_axis_param(ax, *spec, number(v, fmt::format("{}: machine.axes.{}.{}", where, axis_key, key)));
     }
-    ax.loop.Ts_s = machine.Ts_s;
   }
   machine.validate();
   model.program_path = text(member(j, "program_name", where), where + ": program_name");

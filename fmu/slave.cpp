@@ -48,7 +48,6 @@ void Slave::set_experiment(double start_s, std::optional<double> stop_s) {
 }
 
 void Slave::build_cosim() {
-  for (Axis a : machine_.present_axes()) machine_.axes[index(a)].loop.Ts_s = machine_.Ts_s;
   machine_.validate();
   std::shared_ptr<const sim::ReferenceSource> reference;
   if (reference_mode_ == kModeProgram) {
@@ -326,7 +325,6 @@ void Slave::check_state(const SavedState& s) const {
     if (v.kind == VarKind::kMachineParam) v.machine_param->ref(machine) = value;
     else sim::set_axis_param(machine.axes[v.axis], *v.axis_param, value);
   }
-  for (Axis a : machine.present_axes()) machine.axes[index(a)].loop.Ts_s = machine.Ts_s;
   try {
     machine.validate();
   } catch (const Error& e) {

@@ -33,7 +33,6 @@ sim::MachineDefinition cascade_x(double Ts_s, const controller::CascadeGains& g)
   sim::AxisDefinition& x = m.axes[index(Axis::kX)];
   x.drive.Tc_pos_Nm = 0.0;
   x.drive.Tc_neg_Nm = 0.0;
-  x.loop.Ts_s = Ts_s;
   x.following_error_limit_mm = 50.0;  // a P loop lags v / Kv: several mm at these speeds
   x.loop.cascade = g;
   sim::set_machine_loop_law(m, controller::LoopLaw::kCascade);

@@ -13,6 +13,8 @@
 namespace twin {
 namespace {
 
+constexpr double kTs_s = 1e-4;
+
 controller::PositionLoopParams fadal_x() {
   controller::PositionLoopParams p;
   p.Kp_V_per_mm = 500;
@@ -21,13 +23,12 @@ controller::PositionLoopParams fadal_x() {
   p.K1_V_s2_per_mm = 1e-4;
   p.K2_V_s_per_mm = 0.01;
   p.u_max_V = 10;
-  p.Ts_s = 1e-4;
   return p;
 }
 
 TEST(PositionLoop, FollowsTheSpecifiedLaw) {
   const auto p = fadal_x();
-  controller::PositionLoop loop(p);
+  controller::PositionLoop loop(p, kTs_s);
   std::vector<double> ref, meas;
   for (int k = 0; k < 200; ++k) {
     ref.push_back(0.5 * std::sin(0.03 * k) + 1e-3 * k);
@@ -36,10 +37,10 @@ TEST(PositionLoop, FollowsTheSpecifiedLaw) {
   double I = 0.0, e_prev = ref[0] - meas[0], r_prev = ref[0], v_prev = 0.0;
   for (int k = 0; k < 200; ++k) {
     const double e = ref[k] - meas[k];
-    const double v = (ref[k] - r_prev) / p.Ts_s;
-    const double a = (v - v_prev) / p.Ts_s;
-    I += p.Ts_s * e;
-    double u = p.Kp_V_per_mm * e + p.Ki_V_per_s_mm * I + p.Kd_V_s_per_mm * (e - e_prev) / p.Ts_s +
+    const double v = (ref[k] - r_prev) / kTs_s;
+    const double a = (v - v_prev) / kTs_s;
+    I += kTs_s * e;
+    double u = p.Kp_V_per_mm * e + p.Ki_V_per_s_mm * I + p.Kd_V_s_per_mm * (e - e_prev) / kTs_s +
                p.K1_V_s2_per_mm * a + p.K2_V_s_per_mm * v;
     u = std::fmax(-10.0, std::fmin(10.0, u));
     const auto out = loop.step(k, ref[k], meas[k]);
@@ -51,7 +52,7 @@ TEST(PositionLoop, FollowsTheSpecifiedLaw) {
 }
 
 TEST(PositionLoop, ClampsAndReportsSaturation) {
-  controller::PositionLoop loop(fadal_x());
+  controller::PositionLoop loop(fadal_x(), kTs_s);
   loop.step(0, 0.0, 0.0);
   const auto out = loop.step(1, 1.0, 0.0);  // 1 mm step: Kd term alone is 3000 V
   EXPECT_EQ(out.u_V, 10.0);
@@ -60,7 +61,7 @@ TEST(PositionLoop, ClampsAndReportsSaturation) {
 }
 
 TEST(PositionLoop, RefusesOutOfOrderTicks) {
-  controller::PositionLoop loop(fadal_x());
+  controller::PositionLoop loop(fadal_x(), kTs_s);
   loop.step(5, 0.0, 0.0);
   EXPECT_THROW(loop.step(7, 0.0, 0.0), InternalError);
   EXPECT_THROW(loop.step(5, 0.0, 0.0), InternalError);
@@ -69,10 +70,9 @@ TEST(PositionLoop, RefusesOutOfOrderTicks) {
 TEST(PositionLoop, RejectsBadGains) {
   auto p = fadal_x();
   p.Kp_V_per_mm = std::nan("");
-  EXPECT_THROW(controller::PositionLoop{p}, ConfigError);
+  EXPECT_THROW((controller::PositionLoop{p, kTs_s}), ConfigError);
   p = fadal_x();
-  p.Ts_s = 0.0;
-  EXPECT_THROW(controller::PositionLoop{p}, ConfigError);
+  EXPECT_THROW((controller::PositionLoop{p, 0.0}), ConfigError);
 }
 
 TEST(Encoder, QuantisesToTheNearestCount) {

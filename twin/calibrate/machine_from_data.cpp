@@ -1654,7 +1654,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
 
 /// The axis of the machine: the cascade loop and the drive in the channel's
 /// unit (Kt = Ka = 1, rg = 1 mm/rad).
-void set_identified_axis(sim::AxisDefinition& def, const AxisFromData& ax, double Ts) {
+void set_identified_axis(sim::AxisDefinition& def, const AxisFromData& ax) {
   def.present = true;
   def.drive = feeddrive::DriveParams{};
   def.drive.Ka_A_per_V = 1.0;
@@ -1668,7 +1668,6 @@ void set_identified_axis(sim::AxisDefinition& def, const AxisFromData& ax, doubl
   def.drive.effects.constant_load.torque_Nm = ax.c;
   def.loop.law = controller::LoopLaw::kCascade;
   def.loop.cascade = ax.gains;
-  def.loop.Ts_s = Ts;
   def.following_error_limit_mm = 1e3;
 }
 
@@ -1682,7 +1681,7 @@ AxisFromData identify_axis_from_data(const AxisFit& f, Axis a, sim::MachineDefin
   identify_position_loop(f, ax, have_vcmd, have_x);
   if (!identify_drive_in_channel(f, ax, out)) return ax;
   identify_velocity_loop(f, ax, have_vcmd);
-  set_identified_axis(m.axes[index(a)], ax, f.Ts);
+  set_identified_axis(m.axes[index(a)], ax);
   return ax;
 }
 

@@ -91,9 +91,10 @@ void print_analysis(const io::Scenario& scenario, const std::vector<Axis>& axes)
   for (Axis a : axes) {
     const auto& def = scenario.machine.axes[index(a)];
     const analysis::LinearPlant plant = analysis::linear_plant(def.drive);
-    const analysis::DiscreteLoopModel model(plant, def.loop, fmt::format("axis {}", axis_name(a)));
+    const analysis::DiscreteLoopModel model(plant, def.loop, scenario.machine.Ts_s,
+                                            fmt::format("axis {}", axis_name(a)));
     std::printf("%s", analysis::format_analysis(fmt::format("axis {} of {} (Ts {:g} s):", axis_name(a),
-                                                            scenario.machine.name, def.loop.Ts_s),
+                                                            scenario.machine.name, scenario.machine.Ts_s),
                                                 model, analysis::analyse_loop(model))
                           .c_str());
     std::string ff;
@@ -120,7 +121,7 @@ MetricsPair check_before_after(const io::Scenario& cs, const analysis::TuneResul
 
 /// "axis x: Kp 1 -> 2, ...; PM ..." for a tuned axis, "axis x: gains kept (...)" for another.
 void print_axis_result(const analysis::AxisTuneResult& a) {
-  const analysis::LinearLaw& law = analysis::linear_law(a.before.law);
+  const controller::Law& law = controller::law_of(a.before.law);
   std::string gains;
   for (const analysis::LawGain& g : law.gains()) {
     gains += gains.empty() ? "" : ", ";

@@ -276,7 +276,6 @@ sim::MachineDefinition load_machine(const std::filesystem::path& path) {
     }
   }
   if (!have_axes) throw ConfigError(fmt::format("{}: missing key 'axes'", where));
-  for (auto& ax : m.axes) ax.loop.Ts_s = m.Ts_s;
   sim::set_machine_loop_law(m, law);
   if (m.structure) fold_structure(m, where);
   m.validate();

@@ -167,7 +167,6 @@ sim::MachineDefinition machine_for_run(const MeasuredRun& run, const std::string
       notes->push_back(fmt::format("controller period {} s from meta.json replaces the machine's Ts = {} s",
                                    *run.meta.controller_period_s, m.Ts_s));
     m.Ts_s = *run.meta.controller_period_s;
-    for (auto& ax : m.axes) ax.loop.Ts_s = m.Ts_s;
   }
   if (run.meta.encoder_resolution_mm) m.encoder_resolution_mm = *run.meta.encoder_resolution_mm;
   for (Axis a : run.axes)

@@ -32,10 +32,8 @@ CoSimulation::CoSimulation(MachineDefinition machine, std::shared_ptr<const Refe
   std::vector<double> x0;
   for (Axis a : axes_) {
     x0.push_back(x0_mm[index(a)]);
-    controller::PositionLoopParams lp = machine_.axes[index(a)].loop;
-    lp.Ts_s = machine_.Ts_s;
     const feeddrive::DriveParams& d = machine_.axes[index(a)].drive;
-    loops_.emplace_back(lp, controller::DriveScale{d.rg_mm_per_rad, d.Ka_A_per_V, d.Kt_Nm_per_A});
+    loops_.emplace_back(machine_.axes[index(a)].loop, machine_.Ts_s, controller::DriveScale{d.rg_mm_per_rad, d.Ka_A_per_V, d.Kt_Nm_per_A});
   }
   drives_.reset(x0);
   inputs_.assign(axes_.size(), feeddrive::DriveInput{});

@@ -145,9 +145,6 @@ void MachineDefinition::validate() const {
                                     ax.travel_min_mm, ax.travel_max_mm));
     if (ax.loop.law != machine_loop_law(*this))
       throw ConfigError(fmt::format("{}: the axes close different loop laws; a machine has one `controller`", w));
-    if (std::abs(ax.loop.Ts_s - Ts_s) > 1e-15)
-      throw ConfigError(fmt::format("{}: loop period {} s differs from the machine's Ts = {} s", w,
-                                    ax.loop.Ts_s, Ts_s));
   }
   if (!any) throw ConfigError(fmt::format("{}: no axis defined", where));
 }
@@ -192,7 +189,6 @@ void apply_set(MachineDefinition& machine, std::string_view assignment) {
   const double value = parse_number(assignment.substr(eq + 1), assignment);
   if (const auto* ms = find_machine_param(lhs)) {
     ms->ref(machine) = value;
-    for (auto& ax : machine.axes) ax.loop.Ts_s = machine.Ts_s;
     return;
   }
   const auto dot = lhs.find('.');

@@ -21,7 +21,7 @@ namespace twin::sim {
 struct AxisDefinition {
   bool present{false};
   feeddrive::DriveParams drive;
-  controller::PositionLoopParams loop;  ///< loop.Ts_s mirrors MachineDefinition::Ts_s
+  controller::PositionLoopParams loop;  ///< runs at MachineDefinition::Ts_s
   double v_max_mm_per_s{10160.0 / 60.0};
   double a_max_mm_per_s2{2000.0};
   double j_max_mm_per_s3{50000.0};

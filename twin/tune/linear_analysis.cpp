@@ -14,26 +14,8 @@ namespace twin::analysis {
 
 using cd = std::complex<double>;
 
-void LinearPlant::validate(const std::string& where) const {
-  auto positive = [&](const char* name, double v) {
-    if (!std::isfinite(v) || !(v > 0.0))
-      throw ConfigError(fmt::format("{}: {} = {} must be finite and > 0 for the linear analysis", where, name, v));
-  };
-  positive("Ka", Ka_A_per_V);
-  positive("Kt", Kt_Nm_per_A);
-  positive("J", J_kg_m2);
-  positive("rg", rg_mm_per_rad);
-  if (!std::isfinite(B_kg_m2_per_s) || B_kg_m2_per_s < 0.0)
-    throw ConfigError(fmt::format("{}: B = {} must be finite and >= 0 for the linear analysis", where, B_kg_m2_per_s));
-}
-
 LinearPlant linear_plant(const feeddrive::DriveParams& d) {
   return LinearPlant{d.Ka_A_per_V, d.Kt_Nm_per_A, d.J_kg_m2, d.B_kg_m2_per_s, d.rg_mm_per_rad};
-}
-
-FeedforwardGains model_feedforward(const LinearPlant& p) {
-  const double g = p.Ka_A_per_V * p.Kt_Nm_per_A * p.rg_mm_per_rad;
-  return FeedforwardGains{p.J_kg_m2 / g, p.B_kg_m2_per_s / g};
 }
 
 Eigen::MatrixXd matrix_exponential(const Eigen::MatrixXd& M) {
@@ -52,191 +34,11 @@ Eigen::MatrixXd matrix_exponential(const Eigen::MatrixXd& M) {
   return result;
 }
 
-namespace {
-
-/// A linear expression over [c (n states), w, x, r] while a law's step is written out.
-using Row = Eigen::RowVectorXd;
-
-/// Builds a ControllerRealisation from the law's step written as expressions.
-class RealisationBuilder {
- public:
-  explicit RealisationBuilder(int n) : n_(n), next_(n, n + 3) { next_.setZero(); }
-  Row zero() const { return Row::Zero(n_ + 3); }
-  Row state(int i) const { return unit(i); }
-  Row w() const { return unit(n_); }
-  Row x() const { return unit(n_ + 1); }
-  Row r() const { return unit(n_ + 2); }
-  void set_next(int i, const Row& e) { next_.row(i) = e; }
-  ControllerRealisation finish(const Row& command, const Eigen::VectorXd& start, int reference_states) const {
-    ControllerRealisation K;
-    K.Ac = next_.leftCols(n_);
-    K.By = next_.middleCols(n_, 2);
-    K.Br = next_.col(n_ + 2);
-    K.Cc = command.head(n_);
-    K.Dy = command.segment(n_, 2);
-    K.Dr = command(n_ + 2);
-    K.start = start;
-    K.reference_states = reference_states;
-    return K;
-  }
-
- private:
-  Row unit(int i) const {
-    Row e = zero();
-    e(i) = 1.0;
-    return e;
-  }
-  int n_;
-  Eigen::MatrixXd next_;
-};
-
-double& fadal_Kp(controller::PositionLoopParams& g) { return g.Kp_V_per_mm; }
-double& fadal_Ki(controller::PositionLoopParams& g) { return g.Ki_V_per_s_mm; }
-double& fadal_Kd(controller::PositionLoopParams& g) { return g.Kd_V_s_per_mm; }
-double& fadal_K1(controller::PositionLoopParams& g) { return g.K1_V_s2_per_mm; }
-double& fadal_K2(controller::PositionLoopParams& g) { return g.K2_V_s_per_mm; }
-double& cascade_Kv(controller::PositionLoopParams& g) { return g.cascade.Kv_per_s; }
-double& cascade_Kvp(controller::PositionLoopParams& g) { return g.cascade.Kvp_torque_s_per_rad; }
-double& cascade_Tn(controller::PositionLoopParams& g) { return g.cascade.Tn_s; }
-double& cascade_kff(controller::PositionLoopParams& g) { return g.cascade.kff; }
-double& cascade_Jff(controller::PositionLoopParams& g) { return g.cascade.Jff_torque_s2_per_rad; }
-
-/// The FADAL law of spec/measured-data.md (controller::PositionLoop, law kFadal).
-class FadalLaw final : public LinearLaw {
- public:
-  controller::LoopLaw id() const noexcept override { return controller::LoopLaw::kFadal; }
-  std::span<const LawGain> gains() const noexcept override { return kGains; }
-  std::string_view command_name() const noexcept override { return "u"; }
-  std::string_view command_unit() const noexcept override { return "V"; }
-  std::string_view command_limit_name() const noexcept override { return "u_max"; }
-  double torque_per_command(const LinearPlant& p) const override { return p.Ka_A_per_V * p.Kt_Nm_per_A; }
-  double command_limit(const controller::PositionLoopParams& g) const override { return g.u_max_V; }
-
-  /// State [I[k-1] (when Ki > 0), e[k-1], x_ref[k-1], v_ref[k-1]].
-  ControllerRealisation realise(const controller::PositionLoopParams& g, const LinearPlant&) const override {
-    const double Ts = g.Ts_s;
-    const bool integral = g.Ki_V_per_s_mm != 0.0;
-    const int iI = integral ? 0 : -1, ie = integral ? 1 : 0, ir = ie + 1, iv = ie + 2, n = ie + 3;
-    RealisationBuilder b(n);
-    const Row e = b.r() - b.x();
-    const Row v = (b.r() - b.state(ir)) / Ts;
-    const Row a = (v - b.state(iv)) / Ts;
-    Row command = g.Kp_V_per_mm * e + g.Kd_V_s_per_mm * (e - b.state(ie)) / Ts + g.K1_V_s2_per_mm * a +
-                  g.K2_V_s_per_mm * v;
-    if (integral) {
-      const Row I = b.state(iI) + Ts * e;
-      command += g.Ki_V_per_s_mm * I;
-      b.set_next(iI, I);
-    }
-    b.set_next(ie, e);
-    b.set_next(ir, b.r());
-    b.set_next(iv, v);
-    Eigen::VectorXd start = Eigen::VectorXd::Zero(n);
-    start(ie) = 1.0;  // e[-1] = e[0] = r0 - 0
-    start(ir) = 1.0;  // x_ref[-1] = r0
-    return b.finish(command, start, 2);
-  }
-
- private:
-  static constexpr LawGain kGains[] = {
-      {"Kp", "Kp_V_per_mm", "V/mm", false, true, &fadal_Kp, nullptr,
-       [](const controller::PositionLoopParams&) { return 100.0; }},
-      {"Ki", "Ki_V_per_s_mm", "V/(s mm)", false, true, &fadal_Ki, nullptr, nullptr},
-      {"Kd", "Kd_V_s_per_mm", "V s/mm", false, true, &fadal_Kd, nullptr,
-       [](const controller::PositionLoopParams& g) { return 1e-3 * (g.Kp_V_per_mm > 0.0 ? g.Kp_V_per_mm : 100.0); }},
-      {"K1", "K1_V_s2_per_mm", "V s^2/mm", true, true, &fadal_K1,
-       [](const LinearPlant& p) { return model_feedforward(p).K1_V_s2_per_mm; }, nullptr},
-      {"K2", "K2_V_s_per_mm", "V s/mm", true, true, &fadal_K2,
-       [](const LinearPlant& p) { return model_feedforward(p).K2_V_s_per_mm; }, nullptr},
-  };
-};
-
-/// The cascade of spec/measured-data.md (controller::PositionLoop, law kCascade), its
-/// speed feedback the drive's own speed (rg w at the tick, as the co-simulation gives it).
-/// `twin tune` searches the feedback gains Kv, Kvp, Tn and keeps the machine's
-/// feedforward kff, Jff (docs/tuning.md, "The cascade law").
-class CascadeLaw final : public LinearLaw {
- public:
-  controller::LoopLaw id() const noexcept override { return controller::LoopLaw::kCascade; }
-  std::span<const LawGain> gains() const noexcept override { return kGains; }
-  std::string_view command_name() const noexcept override { return "torque"; }
-  std::string_view command_unit() const noexcept override { return "torque unit"; }
-  std::string_view command_limit_name() const noexcept override { return "T_max"; }
-  double torque_per_command(const LinearPlant&) const override { return 1.0; }
-  double command_limit(const controller::PositionLoopParams& g) const override { return g.cascade.T_max; }
-
-  /// State [Iv[k-1] (when Tn > 0), Tf[k-1] (when tau_i > 0), x_ref[k-1], v_ref[k-1]].
-  ControllerRealisation realise(const controller::PositionLoopParams& g, const LinearPlant& p) const override {
-    const controller::CascadeGains& c = g.cascade;
-    const double Ts = g.Ts_s, rg = p.rg_mm_per_rad;
-    const bool integral = c.Tn_s > 0.0, lag = c.tau_i_s > 0.0;
-    int n = 0;
-    const int iI = integral ? n++ : -1;
-    const int iT = lag ? n++ : -1;
-    const int ir = n++, iv = n++;
-    RealisationBuilder b(n);
-    const Row e = b.r() - b.x();
-    const Row v = (b.r() - b.state(ir)) / Ts;
-    const Row a = (v - b.state(iv)) / Ts;
-    const Row ev = (c.Kv_per_s * e + c.kff * v) / rg - b.w();
-    Row Tc = c.Kvp_torque_s_per_rad * ev + c.Jff_torque_s2_per_rad * a / rg;
-    if (integral) {
-      const Row Iv = b.state(iI) + Ts * ev;
-      Tc += c.Kvp_torque_s_per_rad / c.Tn_s * Iv;
-      b.set_next(iI, Iv);
-    }
-    Row command = Tc;
-    if (lag) {
-      const double alpha = std::exp(-Ts / c.tau_i_s);
-      command = alpha * b.state(iT) + (1.0 - alpha) * Tc;
-      b.set_next(iT, command);
-    }
-    b.set_next(ir, b.r());
-    b.set_next(iv, v);
-    Eigen::VectorXd start = Eigen::VectorXd::Zero(n);
-    start(ir) = 1.0;
-    return b.finish(command, start, 2);
-  }
-
- private:
-  static constexpr LawGain kGains[] = {
-      {"Kv", "Kv_per_s", "1/s", false, true, &cascade_Kv, nullptr, nullptr},
-      {"Kvp", "Kvp_torque_s_per_rad", "torque unit s/rad", false, true, &cascade_Kvp, nullptr, nullptr},
-      {"Tn", "Tn_s", "s", false, true, &cascade_Tn, nullptr, nullptr},
-      {"kff", "kff", "1", true, false, &cascade_kff, [](const LinearPlant&) { return 1.0; }, nullptr},
-      {"Jff", "Jff_torque_s2_per_rad", "torque unit s^2/rad", true, false, &cascade_Jff,
-       [](const LinearPlant& p) { return p.J_kg_m2; }, nullptr},
-  };
-};
-
-}  // namespace
-
-controller::PositionLoopParams LinearLaw::feedback_only(const controller::PositionLoopParams& g) const {
-  controller::PositionLoopParams out = g;
-  for (const LawGain& lg : gains())
-    if (lg.feedforward) lg.ref(out) = 0.0;
-  return out;
-}
-
-std::string LinearLaw::gains_text(const controller::PositionLoopParams& g, bool units) const {
-  std::string s;
-  for (const LawGain& lg : gains())
-    s += fmt::format("{}{} {:.6g}{}{}", s.empty() ? "" : ", ", lg.name, lg.get(g), units ? " " : "",
-                     units ? lg.unit : "");
-  return s;
-}
-
-const LinearLaw& linear_law(controller::LoopLaw law) {
-  static const FadalLaw fadal;
-  static const CascadeLaw cascade;
-  if (law == controller::LoopLaw::kCascade) return cascade;
-  return fadal;
-}
-
 DiscreteLoopModel::DiscreteLoopModel(const LinearPlant& plant, const controller::PositionLoopParams& gains,
-                                     const std::string& where)
-    : plant_(plant), gains_(gains), law_(&linear_law(gains.law)), Ts_s_(gains.Ts_s) {
+                                     double Ts_s, const std::string& where)
+    : plant_(plant), gains_(gains), law_(&controller::law_of(gains.law)), Ts_s_(Ts_s) {
   plant_.validate(where);
+  controller::validate_sample_period(where, Ts_s_);
   gains_.validate(where);
   const double g = law_->torque_per_command(plant_);
   Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
@@ -246,8 +48,8 @@ DiscreteLoopModel::DiscreteLoopModel(const LinearPlant& plant, const controller:
   const Eigen::MatrixXd E = matrix_exponential(M * Ts_s_);
   Phi_ = E.topLeftCorner<2, 2>();
   Gamma_ = E.topRightCorner<2, 1>();
-  K_ = law_->realise(gains_, plant_);
-  K_fb_ = law_->realise(law_->feedback_only(gains_), plant_);
+  K_ = law_->realise(gains_, Ts_s_, plant_);
+  K_fb_ = law_->realise(law_->feedback_only(gains_), Ts_s_, plant_);
   same_states_ = K_fb_.Ac == K_.Ac;
 
   // The loop states of the controller with the plant, the reference held at 0.
@@ -487,7 +289,7 @@ void step_response(const DiscreteLoopModel& m, LoopAnalysis& a) {
     a.step_settling_time_s = std::numeric_limits<double>::infinity();
     return;
   }
-  const DiscreteLoopModel feedback(m.plant(), m.law().feedback_only(m.gains()));
+  const DiscreteLoopModel feedback(m.plant(), m.law().feedback_only(m.gains()), m.Ts_s());
   const double pmax = std::max(a.max_pole_magnitude, 1e-12);
   const double tau_ticks = pmax < 1.0 ? -1.0 / std::log(pmax) : 1e9;
   const auto n = static_cast<std::size_t>(std::clamp(8.0 * tau_ticks + 2000.0, 2000.0, 300000.0));

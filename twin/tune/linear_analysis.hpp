@@ -10,8 +10,8 @@
 ///   p[k+1] = Phi p[k] + Gamma m[k],  p = [w, x],  y[k] = p[k] (encoder and speed sensor as unity).
 /// Controller: the law exactly as controller::PositionLoop computes it (backward
 /// differences, the integrator updated before it acts, the cascade's current loop as
-/// its first-order filter sampled at Ts), written as a discrete state-space system
-/// (ControllerRealisation) from [p, x_ref] to m.
+/// its first-order filter sampled at Ts), written by the law itself
+/// (controller::Law::realise) as a discrete state-space system from [p, x_ref] to m.
 /// Loop broken at the command m: L(z) = -K_p(z) P(z), P(z) = (zI - Phi)^-1 Gamma,
 /// K_p the controller from p to m (for the FADAL law L = C P with
 /// C(z) = Kp + Ki Ts z/(z-1) + Kd (z-1)/(Ts z); for the cascade the position and speed
@@ -23,101 +23,31 @@
 /// gain margin = 1/|L| at the phase crossovers below the unit circle (upward gain
 /// margin), phase margin = 180 deg + arg L at the gain crossovers (the smallest).
 #include <complex>
-#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include <Eigen/Dense>
 
-#include "controller/position_loop.hpp"
+#include "controller/law.hpp"
+#include "controller/laws/fadal.hpp"
 #include "feeddrive/drive_params.hpp"
 
 namespace twin::analysis {
 
-/// The linearised drive: only the terms that survive linearisation.
-struct LinearPlant {
-  double Ka_A_per_V{0.0};
-  double Kt_Nm_per_A{0.0};
-  double J_kg_m2{0.0};
-  double B_kg_m2_per_s{0.0};
-  double rg_mm_per_rad{0.0};
-  /// Throws ConfigError naming `where` and the field when a value is not finite or not physical.
-  void validate(const std::string& where) const;
-};
+/// The linearised drive (controller/law.hpp) and the FADAL law's model feedforward.
+using controller::LinearPlant;
+using controller::laws::FeedforwardGains;
+using controller::laws::model_feedforward;
 LinearPlant linear_plant(const feeddrive::DriveParams& drive);
-
-/// The model-based feedforward gains of the FADAL law that cancel the linear plant:
-/// K1 = J / (Ka Kt rg) [V s^2/mm], K2 = B / (Ka Kt rg) [V s/mm].
-struct FeedforwardGains {
-  double K1_V_s2_per_mm{0.0};
-  double K2_V_s_per_mm{0.0};
-};
-FeedforwardGains model_feedforward(const LinearPlant& plant);
 
 /// Matrix exponential exp(M) by scaling and squaring of a Taylor series
 /// (for the small, well-scaled matrices of a drive over one period).
 Eigen::MatrixXd matrix_exponential(const Eigen::MatrixXd& M);
 
-/// One gain of a law, as the machine file, the report and the tuning name it.
-struct LawGain {
-  std::string_view name;      ///< machine-file name: Kp, Kv, ...
-  std::string_view json_key;  ///< report name with its unit: Kp_V_per_mm, Kv_per_s, ...
-  std::string_view unit;
-  /// A feedforward gain acts outside the loop: it moves neither poles nor margins.
-  bool feedforward{false};
-  /// Whether `twin tune` searches it (feedback: in log ratio to its start; feedforward:
-  /// as a fraction of its model value).
-  bool searched{false};
-  double& (*ref)(controller::PositionLoopParams&){nullptr};
-  /// Feedforward only: the value that cancels the linear plant.
-  double (*model)(const LinearPlant&){nullptr};
-  /// Feedback only: the base of the log search when the start is 0 (nullptr: a gain
-  /// that is 0 stays 0, e.g. no integral).
-  double (*base_when_zero)(const controller::PositionLoopParams&){nullptr};
-  double get(controller::PositionLoopParams g) const { return ref(g); }
-};
-
-/// A law's controller at Ts as a discrete linear system (limits out):
-///   c[k+1] = Ac c[k] + By p[k] + Br r[k],   m[k] = Cc c[k] + Dy p[k] + Dr r[k],
-/// p = [w, x] at tick k, r = x_ref[k], m the command held over the tick. The last
-/// `reference_states` states (x_ref[k-1], v_ref[k-1]) are driven by r only: they
-/// are not modes of the loop. A start at rest at x = 0 with x_ref[0] = r0 has
-/// c[0] = start r0 (the law's start-up convention: v_ref, a_ref 0, e[-1] = e[0]).
-struct ControllerRealisation {
-  Eigen::MatrixXd Ac;
-  Eigen::MatrixXd By;         ///< n x 2
-  Eigen::VectorXd Br;
-  Eigen::RowVectorXd Cc;
-  Eigen::RowVector2d Dy;
-  double Dr{0.0};
-  Eigen::VectorXd start;
-  int reference_states{0};
-};
-
-/// What the analysis and the tuning ask of a position-loop law.
-class LinearLaw {
- public:
-  virtual ~LinearLaw() = default;
-  virtual controller::LoopLaw id() const noexcept = 0;
-  /// Its gains, feedback first; `twin tune` changes those marked searched.
-  virtual std::span<const LawGain> gains() const noexcept = 0;
-  /// The command it gives the drive: "u" in "V" (FADAL) or "torque" in the torque unit.
-  virtual std::string_view command_name() const noexcept = 0;
-  virtual std::string_view command_unit() const noexcept = 0;
-  /// The machine-file name of its limit: u_max, T_max.
-  virtual std::string_view command_limit_name() const noexcept = 0;
-  /// Motor torque per unit of command (Ka Kt for V, 1 for a torque).
-  virtual double torque_per_command(const LinearPlant& plant) const = 0;
-  /// The limit of the command (u_max, T_max).
-  virtual double command_limit(const controller::PositionLoopParams& g) const = 0;
-  virtual ControllerRealisation realise(const controller::PositionLoopParams& g, const LinearPlant& plant) const = 0;
-  /// The gains with every feedforward gain at 0.
-  controller::PositionLoopParams feedback_only(const controller::PositionLoopParams& g) const;
-  /// "Kp 500 V/mm, Ki 70 V/(s mm), ..." (all gains, with `units`).
-  std::string gains_text(const controller::PositionLoopParams& g, bool units = false) const;
-};
-const LinearLaw& linear_law(controller::LoopLaw law);
+/// A law's gains and its controller at Ts (controller/law.hpp).
+using controller::ControllerRealisation;
+using controller::LawGain;
 
 /// One point of a frequency response, for plots and reports.
 struct FrequencyPoint {
@@ -129,11 +59,11 @@ struct FrequencyPoint {
 /// The discrete closed loop of one axis.
 class DiscreteLoopModel {
  public:
-  /// Throws ConfigError for a non-physical plant or gains (`where` names the axis).
-  DiscreteLoopModel(const LinearPlant& plant, const controller::PositionLoopParams& gains,
+  /// Throws ConfigError for a non-physical plant, gains or period (`where` names the axis).
+  DiscreteLoopModel(const LinearPlant& plant, const controller::PositionLoopParams& gains, double Ts_s,
                     const std::string& where = "axis");
 
-  const LinearLaw& law() const noexcept { return *law_; }
+  const controller::Law& law() const noexcept { return *law_; }
   const Eigen::Matrix2d& Phi() const noexcept { return Phi_; }
   /// Per unit of the law's command (mm/V, rad/s per V for the FADAL law).
   const Eigen::Vector2d& Gamma() const noexcept { return Gamma_; }
@@ -174,7 +104,7 @@ class DiscreteLoopModel {
   Responses responses(double f_Hz) const;
   LinearPlant plant_;
   controller::PositionLoopParams gains_;
-  const LinearLaw* law_;
+  const controller::Law* law_;
   double Ts_s_;
   Eigen::Matrix2d Phi_;
   Eigen::Vector2d Gamma_;

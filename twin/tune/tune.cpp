@@ -25,7 +25,7 @@ bool is_feed_move(const controller::Program& program, int block) {
          kind == controller::MotionKind::kArcCcw;
 }
 
-std::string gains_text(const controller::PositionLoopParams& g) { return linear_law(g.law).gains_text(g); }
+std::string gains_text(const controller::PositionLoopParams& g) { return controller::law_of(g.law).gains_text(g); }
 
 /// How far the linear constraints are broken (0 when all hold), in normalised units.
 double linear_violation(const ConstraintValues& v, const TuneConstraints& c) {
@@ -41,9 +41,9 @@ double linear_violation(const ConstraintValues& v, const TuneConstraints& c) {
 }  // namespace
 
 ConstraintValues linear_constraints(const LinearPlant& plant, const controller::PositionLoopParams& gains,
-                                    const TuneConstraints& c, const std::string& where) {
+                                    double Ts_s, const TuneConstraints& c, const std::string& where) {
   ConstraintValues v;
-  const DiscreteLoopModel model(plant, gains, where);
+  const DiscreteLoopModel model(plant, gains, Ts_s, where);
   const LoopAnalysis a = analyse_loop(model, 0.01, 1500);
   v.stable = a.stable;
   v.phase_margin_deg = a.phase_margin_deg;
@@ -113,10 +113,8 @@ namespace {
 
 /// Drive and loop state of axis `a` in steady motion at tick k0 (r0: the reference
 /// at k0, r1 and r2 at the two ticks before): the drive at the reference speed, the
-/// integrator holding what the feedforward does not give of B w + Tc. The FADAL law
-/// holds it with no error; the cascade's P position loop lags by the error whose Kv e
-/// gives the speed the velocity feedforward does not: e = (rg w + rg ev - kff v) / Kv,
-/// the velocity error ev = 0 with an integral, T / Kvp without one.
+/// integrators holding what the feedforward does not give of B w + Tc, the drive
+/// behind the reference by the error the law holds (controller::Law::steady_state).
 void steady_axis_state(const sim::AxisDefinition& def, std::size_t a, double Ts, std::int64_t k0,
                        const controller::ReferenceSample& r0, const controller::ReferenceSample& r1,
                        const controller::ReferenceSample& r2, feeddrive::DriveState& ds,
@@ -125,31 +123,18 @@ void steady_axis_state(const sim::AxisDefinition& def, std::size_t a, double Ts,
   const auto& g = def.loop;
   const double v = (r1.x_mm[a] - r2.x_mm[a]) / Ts;
   const double w = r0.v_mm_per_s[a] / d.rg_mm_per_rad;
-  ds.x_mm = r0.x_mm[a];
+  ls = controller::PositionLoopState{};
+  const double Tc = w > 0.0 ? d.Tc_pos_Nm : (w < 0.0 ? -d.Tc_neg_Nm : 0.0);
+  const controller::SteadyMotion motion{Ts, v, w, d.B_kg_m2_per_s * w + Tc,
+                                        controller::DriveScale{d.rg_mm_per_rad, d.Ka_A_per_V, d.Kt_Nm_per_A}};
+  const double e = controller::law_of(g.law).steady_state(g, motion, r0.x_mm[a], ls);
+  ds.x_mm = r0.x_mm[a] - e;
   ds.w_rad_per_s = w;
   ds.stuck = w == 0.0;
   ds.x_load_mm = ds.x_mm;
   ds.w_load_rad_per_s = w;
   ds.x_table_mm = ds.x_mm;
   ds.load_stuck = ds.stuck;
-  ls = controller::PositionLoopState{};
-  const double Tc = w > 0.0 ? d.Tc_pos_Nm : (w < 0.0 ? -d.Tc_neg_Nm : 0.0);
-  const double T_needed = d.B_kg_m2_per_s * w + Tc;
-  if (g.law == controller::LoopLaw::kCascade) {
-    const controller::CascadeGains& c = g.cascade;
-    const double ev = c.Tn_s > 0.0 ? 0.0 : T_needed / c.Kvp_torque_s_per_rad;
-    const double e = (d.rg_mm_per_rad * (w + ev) - c.kff * v) / c.Kv_per_s;
-    ds.x_mm -= e;
-    ds.x_load_mm = ds.x_table_mm = ds.x_mm;
-    ls.Iv_rad = c.Tn_s > 0.0 ? c.Tn_s * T_needed / c.Kvp_torque_s_per_rad : 0.0;
-    ls.T_filtered = T_needed;
-    ls.x_meas_prev_mm = ds.x_mm - d.rg_mm_per_rad * w * Ts;
-    ls.e_prev_mm = e;
-  } else {
-    const double u_needed = T_needed / (d.Ka_A_per_V * d.Kt_Nm_per_A);
-    ls.I_mm_s = g.Ki_V_per_s_mm > 0.0 ? (u_needed - g.K2_V_s_per_mm * v) / g.Ki_V_per_s_mm : 0.0;
-    ls.e_prev_mm = 0.0;
-  }
   ls.x_ref_prev_mm = r1.x_mm[a];
   ls.v_ref_prev_mm_per_s = v;
   ls.last_k = k0 - 1;
@@ -272,14 +257,15 @@ namespace {
 struct AxisScales {
   Axis axis{Axis::kX};
   LinearPlant plant;
+  double Ts_s;
   controller::PositionLoopParams start;
-  const LinearLaw* law{nullptr};
+  const controller::Law* law{nullptr};
   std::vector<const LawGain*> vars;  ///< feedback gains first
   std::vector<double> base;
   std::size_t feedback_vars{0};
 
-  AxisScales(Axis a, const LinearPlant& p, const controller::PositionLoopParams& g)
-      : axis(a), plant(p), start(g), law(&linear_law(g.law)) {
+  AxisScales(Axis a, const LinearPlant& p, double Ts, const controller::PositionLoopParams& g)
+      : axis(a), plant(p), Ts_s(Ts), start(g), law(&controller::law_of(g.law)) {
     for (const LawGain& lg : law->gains()) {
       if (!lg.searched) continue;
       vars.push_back(&lg);
@@ -330,18 +316,18 @@ struct AxisScales {
 /// the current loop's lag, whose output may stay just below it).
 double command_peak(const ScenarioMetrics& m, const sim::MachineDefinition& machine, Axis a) {
   const auto& def = machine.axes[index(a)];
-  const LinearLaw& law = linear_law(def.loop.law);
+  const controller::Law& law = controller::law_of(def.loop.law);
   const LinearPlant p = linear_plant(def.drive);
   const double peak = m.u_peak_V[index(a)] * p.Ka_A_per_V * p.Kt_Nm_per_A / law.torque_per_command(p);
   return m.saturated_ticks[index(a)] > 0 ? std::max(peak, law.command_limit(def.loop)) : peak;
 }
 double command_limit(const sim::MachineDefinition& machine, Axis a, const TuneConstraints& c) {
   const auto& loop = machine.axes[index(a)].loop;
-  return c.u_fraction_max * linear_law(loop.law).command_limit(loop);
+  return c.u_fraction_max * controller::law_of(loop.law).command_limit(loop);
 }
 /// "|u| 9.844 V > 9.500 V" or "|torque| 30.200 torque unit > 29.402 torque unit".
 std::string command_text(const sim::MachineDefinition& machine, Axis a, double value, double limit) {
-  const LinearLaw& law = linear_law(machine.axes[index(a)].loop.law);
+  const controller::Law& law = controller::law_of(machine.axes[index(a)].loop.law);
   return fmt::format("|{}| {:.3f} {} > {:.3f} {}", law.command_name(), value, law.command_unit(), limit,
                      law.command_unit());
 }
@@ -369,7 +355,8 @@ double stage_a_constraint(unsigned n, const double* q, double*, void* data) {
   tight.sensitivity_peak_max -= 0.02;
   tight.step_overshoot_max -= 0.005;
   try {
-    const ConstraintValues v = linear_constraints(d->scales->plant, d->scales->gains(full.data()), tight, d->where);
+    const ConstraintValues v = linear_constraints(d->scales->plant, d->scales->gains(full.data()), d->scales->Ts_s, tight,
+                                                 d->where);
     return linear_violation(v, tight);
   } catch (const ConfigError&) {
     return 100.0;
@@ -422,7 +409,7 @@ double stage_b_objective(unsigned n, const double* q, double*, void* data) {
     const auto& s = d->scales[i];
     const controller::PositionLoopParams g = s.gains(q + d->offsets[i]);
     try {
-      lin += linear_violation(linear_constraints(s.plant, g, c, std::string(axis_name(s.axis))), c);
+      lin += linear_violation(linear_constraints(s.plant, g, s.Ts_s, c, std::string(axis_name(s.axis))), c);
     } catch (const ConfigError&) {
       lin += 100.0;
     }
@@ -466,10 +453,10 @@ AxisTuneResult axis_result(const AxisScales& s, const controller::PositionLoopPa
   ar.after = after;
   ar.model_feedforward = s.model_feedforward();
   const std::string name(axis_name(s.axis));
-  ar.analysis_before = analyse_loop(DiscreteLoopModel(s.plant, ar.before, name));
-  ar.analysis_after = analyse_loop(DiscreteLoopModel(s.plant, ar.after, name));
-  ar.constraints_before = linear_constraints(s.plant, ar.before, c, name);
-  ar.constraints_after = linear_constraints(s.plant, ar.after, c, name);
+  ar.analysis_before = analyse_loop(DiscreteLoopModel(s.plant, ar.before, s.Ts_s, name));
+  ar.analysis_after = analyse_loop(DiscreteLoopModel(s.plant, ar.after, s.Ts_s, name));
+  ar.constraints_before = linear_constraints(s.plant, ar.before, s.Ts_s, c, name);
+  ar.constraints_after = linear_constraints(s.plant, ar.after, s.Ts_s, c, name);
   for (auto* pair : {&ar.constraints_before, &ar.constraints_after}) {
     const ScenarioMetrics& fm = pair == &ar.constraints_before ? full_before : full_after;
     pair->command_peak = command_peak(fm, machine, s.axis);
@@ -562,7 +549,7 @@ class Tuner {
         throw ConfigError(fmt::format("tune: axis {} is not present in machine {}", axis_name(a), m0_.name));
       const LinearPlant plant = linear_plant(def.drive);
       plant.validate(fmt::format("{}: axis {}", m0_.source.empty() ? m0_.name : m0_.source, axis_name(a)));
-      requested.emplace_back(a, plant, def.loop);
+      requested.emplace_back(a, plant, m0_.Ts_s, def.loop);
     }
     return requested;
   }
@@ -598,7 +585,8 @@ class Tuner {
     }
     std::vector<double> full = s.origin();
     std::copy(x.begin(), x.end(), full.begin());
-    const ConstraintValues v = linear_constraints(s.plant, s.gains(full.data()), c_, std::string(axis_name(s.axis)));
+    const ConstraintValues v =
+        linear_constraints(s.plant, s.gains(full.data()), s.Ts_s, c_, std::string(axis_name(s.axis)));
     if (v.linear_ok) {
       scales_.push_back(s);
       q0_.push_back(full);
@@ -671,7 +659,7 @@ class Tuner {
                       "limit; axis {} is left as it is (tune it on a scenario without that move, or raise "
                       "--u-fraction)",
                       command_text(m0_, a, peak, limit), c_.u_fraction_max,
-                      linear_law(m0_.axes[index(a)].loop.law).command_limit_name(), fb.u_peak_t_s[index(a)],
+                      controller::law_of(m0_.axes[index(a)].loop.law).command_limit_name(), fb.u_peak_t_s[index(a)],
                       motion_text(*planned_, fb.u_peak_block[index(a)]), fb.saturated_ticks[index(a)], axis_name(a)));
       return false;
     });
@@ -938,7 +926,7 @@ namespace {
 /// The law's gains under their report names (`feedforward_only`: only its feedforward gains).
 nlohmann::json gains_json(const controller::PositionLoopParams& g, bool feedforward_only = false) {
   nlohmann::json j = nlohmann::json::object();
-  for (const LawGain& lg : linear_law(g.law).gains())
+  for (const LawGain& lg : controller::law_of(g.law).gains())
     if (lg.feedforward || !feedforward_only) j[std::string(lg.json_key)] = lg.get(g);
   return j;
 }
@@ -1018,7 +1006,7 @@ nlohmann::json tune_report(const io::Scenario& scenario, const TuneOptions& opti
   nlohmann::json searched = nlohmann::json::object();
   for (const auto& a : r.axes) {
     nlohmann::json names = nlohmann::json::array();
-    for (const LawGain& lg : linear_law(a.before.law).gains())
+    for (const LawGain& lg : controller::law_of(a.before.law).gains())
       if (lg.searched) names.push_back(lg.name);
     searched[std::string(axis_name(a.axis))] = names;
   }
@@ -1073,7 +1061,8 @@ std::string bode_data(const TuneResult& r) {
   std::string text = "# f_Hz |L|_dB argL_deg |S|_dB |T|_dB |E/R|_dB\n";
   for (const auto& a : r.axes) {
     for (const auto* g : {&a.before, &a.after}) {
-      const DiscreteLoopModel m(linear_plant(r.machine_before.axes[index(a.axis)].drive), *g);
+      const DiscreteLoopModel m(linear_plant(r.machine_before.axes[index(a.axis)].drive), *g,
+                                r.machine_before.Ts_s);
       double unwrap = 0.0, prev = 0.0;
       bool first = true;
       for (const auto& p : frequency_response(m, 0.1, 600)) {

@@ -1,6 +1,6 @@
 #pragma once
 /// Gain tuning of the position loops (`twin tune`): the gains each axis's law
-/// searches (linear_analysis.hpp, LinearLaw: FADAL Kp, Ki, Kd, K1, K2; cascade
+/// searches (controller/law.hpp, controller::Law: FADAL Kp, Ki, Kd, K1, K2; cascade
 /// Kv, Kvp, Tn with the machine's feedforward kff, Jff kept) are searched to minimise
 /// the tracking and contour error through the corners of a scenario in the coupled
 /// nonlinear simulation (friction, saturation, encoder, cutting load in), subject to
@@ -79,7 +79,7 @@ struct ConstraintValues {
 };
 /// Linear constraint values for an axis (command_peak is left at 0).
 ConstraintValues linear_constraints(const LinearPlant& plant, const controller::PositionLoopParams& gains,
-                                    const TuneConstraints& c, const std::string& where);
+                                    double Ts_s, const TuneConstraints& c, const std::string& where);
 
 /// A tick range of the scenario and the corners judged inside it.
 struct SimulationWindow {

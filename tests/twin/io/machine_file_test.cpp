@@ -110,7 +110,7 @@ TEST(MachineFile, SetOverridesAndRejectsUnknowns) {
   sim::apply_set(m, "x.J=0.008");
   EXPECT_EQ(m.axes[0].drive.J_kg_m2, 0.008);
   sim::apply_set(m, "Ts=2e-4");
-  EXPECT_EQ(m.axes[1].loop.Ts_s, 2e-4);
+  EXPECT_EQ(m.Ts_s, 2e-4);
   EXPECT_THROW(sim::apply_set(m, "q.J=1"), ConfigError);
   EXPECT_THROW(sim::apply_set(m, "x.Jay=1"), ConfigError);
   EXPECT_THROW(sim::apply_set(m, "x.J=abc"), ConfigError);

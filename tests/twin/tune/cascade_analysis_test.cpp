@@ -53,7 +53,7 @@ std::vector<double> cosim_x(const sim::MachineDefinition& machine, const std::ve
 }
 
 DiscreteLoopModel model_of(const sim::MachineDefinition& m, Axis a = Axis::kX) {
-  return DiscreteLoopModel(linear_plant(m.axes[index(a)].drive), m.axes[index(a)].loop);
+  return DiscreteLoopModel(linear_plant(m.axes[index(a)].drive), m.axes[index(a)].loop, m.Ts_s);
 }
 
 /// A 2 mm move, raised-cosine in 40 ms (peak speed 79 mm/s, acceleration 6.2 m/s^2),

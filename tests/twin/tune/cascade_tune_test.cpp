@@ -66,7 +66,7 @@ TEST(CascadeTune, TunedGainsMeetConstraintsAndLowerTheObjectiveInSimulation) {
   for (const auto& a : r.axes) {
     const auto& def = sc.machine.axes[index(a.axis)];
     ASSERT_TRUE(a.tuned) << a.note;
-    const ConstraintValues v = linear_constraints(linear_plant(def.drive), a.after, opt.constraints, "t");
+    const ConstraintValues v = linear_constraints(linear_plant(def.drive), a.after, sc.machine.Ts_s, opt.constraints, "t");
     EXPECT_TRUE(v.linear_ok) << v.violation;
     EXPECT_TRUE(a.analysis_after.stable);
     EXPECT_GE(a.analysis_after.phase_margin_deg, opt.constraints.phase_margin_min_deg);

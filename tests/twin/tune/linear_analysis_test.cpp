@@ -14,6 +14,8 @@
 namespace twin::analysis {
 namespace {
 
+constexpr double kTs_s = 1e-4;
+
 // FADAL 2216 X drive, Ozcan 2017 Table 1, and the Table 3 gains.
 LinearPlant fadal_x() { return LinearPlant{6.4898, 0.4769, 0.0077736, 0.019811, 1.5915}; }
 controller::PositionLoopParams table3_x() {
@@ -23,7 +25,6 @@ controller::PositionLoopParams table3_x() {
   g.Kd_V_s_per_mm = 0.3;
   g.K1_V_s2_per_mm = 0.0;
   g.K2_V_s_per_mm = -2.37e-6;
-  g.Ts_s = 1e-4;
   return g;
 }
 
@@ -34,9 +35,9 @@ std::vector<double> reference_closed_loop(const LinearPlant& p, const controller
                                           const std::vector<double>& x_ref) {
   controller::PositionLoopParams unclamped = g;
   unclamped.u_max_V = 1e12;
-  controller::PositionLoop loop(unclamped);
+  controller::PositionLoop loop(unclamped, kTs_s);
   double w = 0.0, x = 0.0;
-  const double a = p.B_kg_m2_per_s / p.J_kg_m2, Ts = g.Ts_s;
+  const double a = p.B_kg_m2_per_s / p.J_kg_m2, Ts = kTs_s;
   std::vector<double> out;
   for (std::size_t k = 0; k < x_ref.size(); ++k) {
     out.push_back(x);
@@ -59,7 +60,7 @@ std::vector<double> reference_closed_loop(const LinearPlant& p, const controller
 // closed form. Tolerance 1e-12 relative: the Taylor series is truncated below 1e-16.
 TEST(LinearAnalysis, ZohDiscretisationMatchesClosedForm) {
   const LinearPlant p = fadal_x();
-  const DiscreteLoopModel m(p, table3_x());
+  const DiscreteLoopModel m(p, table3_x(), kTs_s);
   const double a = p.B_kg_m2_per_s / p.J_kg_m2, Ts = 1e-4, E = std::exp(-a * Ts);
   const double G = p.Ka_A_per_V * p.Kt_Nm_per_A / p.J_kg_m2;
   EXPECT_NEAR(m.Phi()(0, 0), E, 1e-14);
@@ -81,8 +82,8 @@ TEST(LinearAnalysis, PureInertiaUnderPdMatchesContinuousClosedForms) {
   controller::PositionLoopParams g;
   g.Kp_V_per_mm = 500.0;
   g.Kd_V_s_per_mm = 1.0;
-  g.Ts_s = 1e-6;
-  const DiscreteLoopModel m(p, g);
+  const double Ts_s = 1e-6;
+  const DiscreteLoopModel m(p, g, Ts_s);
   const LoopAnalysis a = analyse_loop(m, 0.1, 6000);
   const double K = p.Ka_A_per_V * p.Kt_Nm_per_A * p.rg_mm_per_rad / p.J_kg_m2;
   const double Kp = g.Kp_V_per_mm, Kd = g.Kd_V_s_per_mm;
@@ -116,18 +117,17 @@ TEST(LinearAnalysis, PhaseMarginAtRealTsLosesAtMostTheSampleLag) {
   controller::PositionLoopParams g;
   g.Kp_V_per_mm = 500.0;
   g.Kd_V_s_per_mm = 0.3;
-  g.Ts_s = 1e-4;
-  const LoopAnalysis a = analyse_loop(DiscreteLoopModel(p, g));
+  const LoopAnalysis a = analyse_loop(DiscreteLoopModel(p, g, kTs_s));
   const double K = p.Ka_A_per_V * p.Kt_Nm_per_A * p.rg_mm_per_rad / p.J_kg_m2;
   const double Kp = g.Kp_V_per_mm, Kd = g.Kd_V_s_per_mm;
   const double wc = std::sqrt(0.5 * (K * K * Kd * Kd + std::sqrt(std::pow(K * K * Kd * Kd, 2) + 4.0 * K * K * Kp * Kp)));
   const double pm = std::atan(Kd * wc / Kp) * kDegPerRad;
-  const double lag = wc * g.Ts_s * kDegPerRad;
+  const double lag = wc * kTs_s * kDegPerRad;
   EXPECT_LT(a.phase_margin_deg, pm);
   EXPECT_GT(a.phase_margin_deg, pm - lag - 0.2);
   // The ZOH makes the gain margin finite: read at Nyquist or below it.
   EXPECT_TRUE(std::isfinite(a.gain_margin_dB));
-  EXPECT_LE(a.phase_crossover_Hz, 0.5 / g.Ts_s + 1e-9);
+  EXPECT_LE(a.phase_crossover_Hz, 0.5 / kTs_s + 1e-9);
 }
 
 // Oracle: an independent closed-loop simulation (closed-form drive per tick and
@@ -137,7 +137,7 @@ TEST(LinearAnalysis, PhaseMarginAtRealTsLosesAtMostTheSampleLag) {
 TEST(LinearAnalysis, PolesMatchAnIndependentStepResponse) {
   const LinearPlant p = fadal_x();
   const controller::PositionLoopParams g = table3_x();
-  const DiscreteLoopModel m(p, g);
+  const DiscreteLoopModel m(p, g, kTs_s);
   const auto poles = m.poles();
   ASSERT_EQ(poles.size(), 4u);
   std::vector<std::complex<double>> c{1.0};  // c[0] z^n + c[1] z^{n-1} + ...
@@ -171,7 +171,7 @@ TEST(LinearAnalysis, SimulationMatchesIndependentClosedLoopWithFeedforward) {
   g.K2_V_s_per_mm = ff.K2_V_s_per_mm;
   std::vector<double> r(4000);
   for (std::size_t k = 0; k < r.size(); ++k) r[k] = 2.5 * (1.0 - std::cos(2.0 * kPi * 3.0 * 1e-4 * static_cast<double>(k)));
-  const auto x1 = DiscreteLoopModel(p, g).simulate(r);
+  const auto x1 = DiscreteLoopModel(p, g, kTs_s).simulate(r);
   const auto x2 = reference_closed_loop(p, g, r);
   for (std::size_t k = 0; k < r.size(); ++k) ASSERT_NEAR(x1[k], x2[k], 1e-9) << "k=" << k;
 }
@@ -188,7 +188,7 @@ TEST(LinearAnalysis, TrackingErrorTransferFunctionMatchesSinusoidalResponse) {
       g.K1_V_s2_per_mm = 0.8 * model_feedforward(p).K1_V_s2_per_mm;
       g.K2_V_s_per_mm = model_feedforward(p).K2_V_s_per_mm;
     }
-    const double f = 20.0, Ts = g.Ts_s;
+    const double f = 20.0, Ts = kTs_s;
     std::vector<double> r(10000);
     for (std::size_t k = 0; k < r.size(); ++k) r[k] = std::sin(2.0 * kPi * f * Ts * static_cast<double>(k));
     const auto x = reference_closed_loop(p, g, r);
@@ -202,7 +202,7 @@ TEST(LinearAnalysis, TrackingErrorTransferFunctionMatchesSinusoidalResponse) {
     }
     const Eigen::Vector4d c = A.colPivHouseholderQr().solve(y);
     const double amp = std::hypot(c(0), c(1));
-    const DiscreteLoopModel m(p, g);
+    const DiscreteLoopModel m(p, g, kTs_s);
     EXPECT_NEAR(amp, std::abs(m.error_response(f)), 0.01 * std::abs(m.error_response(f))) << with_ff;
     EXPECT_NEAR(std::abs(1.0 - m.error_response(f) - m.position_response(f)), 0.0, 1e-12);
   }
@@ -217,10 +217,10 @@ TEST(LinearAnalysis, ModelFeedforwardCancelsThePlant) {
   EXPECT_NEAR(ff.K1_V_s2_per_mm, 0.0077736 / (6.4898 * 0.4769 * 1.5915), 1e-15);
   EXPECT_NEAR(ff.K2_V_s_per_mm, 0.019811 / (6.4898 * 0.4769 * 1.5915), 1e-15);
   controller::PositionLoopParams g = table3_x();
-  const double without = analyse_loop(DiscreteLoopModel(p, g)).error_gain_10Hz;
+  const double without = analyse_loop(DiscreteLoopModel(p, g, kTs_s)).error_gain_10Hz;
   g.K1_V_s2_per_mm = ff.K1_V_s2_per_mm;
   g.K2_V_s_per_mm = ff.K2_V_s_per_mm;
-  const double with = analyse_loop(DiscreteLoopModel(p, g)).error_gain_10Hz;
+  const double with = analyse_loop(DiscreteLoopModel(p, g, kTs_s)).error_gain_10Hz;
   EXPECT_LT(with, without / 20.0);
 }
 
@@ -229,7 +229,7 @@ TEST(LinearAnalysis, ModelFeedforwardCancelsThePlant) {
 TEST(LinearAnalysis, UnstableGainsAreReportedUnstable) {
   controller::PositionLoopParams g = table3_x();
   g.Kd_V_s_per_mm = 60.0;
-  const LoopAnalysis a = analyse_loop(DiscreteLoopModel(fadal_x(), g));
+  const LoopAnalysis a = analyse_loop(DiscreteLoopModel(fadal_x(), g, kTs_s));
   EXPECT_FALSE(a.stable);
   EXPECT_GT(a.max_pole_magnitude, 1.0);
 }
@@ -237,7 +237,7 @@ TEST(LinearAnalysis, UnstableGainsAreReportedUnstable) {
 TEST(LinearAnalysis, NonPhysicalPlantIsAConfigError) {
   LinearPlant p = fadal_x();
   p.J_kg_m2 = -1.0;
-  EXPECT_THROW(DiscreteLoopModel(p, table3_x(), "x"), ConfigError);
+  EXPECT_THROW(DiscreteLoopModel(p, table3_x(), kTs_s, "x"), ConfigError);
 }
 
 }  // namespace

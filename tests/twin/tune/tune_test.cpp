@@ -94,7 +94,7 @@ TEST(Tune, TunedGainsMeetConstraintsAndGeneraliseToAnUnseenScenario) {
   EXPECT_LE(r.evaluations, opt.max_evaluations);
   for (const auto& a : r.axes) {
     const auto& d = sc.machine.axes[index(a.axis)];
-    const ConstraintValues v = linear_constraints(linear_plant(d.drive), a.after, opt.constraints, "t");
+    const ConstraintValues v = linear_constraints(linear_plant(d.drive), a.after, sc.machine.Ts_s, opt.constraints, "t");
     EXPECT_TRUE(v.linear_ok) << v.violation;
     EXPECT_GE(v.phase_margin_deg, opt.constraints.phase_margin_min_deg);
     EXPECT_GE(v.gain_margin_dB, opt.constraints.gain_margin_min_dB);
@@ -119,7 +119,7 @@ TEST(Tune, TunedGainsMeetConstraintsAndGeneraliseToAnUnseenScenario) {
     controller::PositionLoopParams fb = a.after;
     fb.K1_V_s2_per_mm = 0.0;
     fb.K2_V_s_per_mm = 0.0;
-    const auto x = DiscreteLoopModel(linear_plant(sc.machine.axes[index(a.axis)].drive), fb)
+    const auto x = DiscreteLoopModel(linear_plant(sc.machine.axes[index(a.axis)].drive), fb, sc.machine.Ts_s)
                        .simulate(smooth_step(3000, sc.machine.Ts_s));
     const double linear = *std::max_element(x.begin(), x.end()) / 0.02 - 1.0;
     EXPECT_LT(u_peak, sc.machine.axes[index(a.axis)].loop.u_max_V) << axis_name(a.axis);

@@ -1,0 +1,131 @@
+#include "controller/laws/cascade.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "controller/laws/realisation_builder.hpp"
+#include "twin/core/error.hpp"
+
+namespace twin::controller::laws {
+
+void CascadeLaw::validate(const PositionLoopParams& g, std::string_view where) const {
+  const CascadeGains& c = g.cascade;
+  require_finite(where, {{"Kv", c.Kv_per_s},
+                         {"kff", c.kff},
+                         {"Kvp", c.Kvp_torque_s_per_rad},
+                         {"Tn", c.Tn_s},
+                         {"tau_i", c.tau_i_s},
+                         {"T_max", c.T_max},
+                         {"Jff", c.Jff_torque_s2_per_rad}});
+  if (!(c.Kv_per_s > 0.0)) throw ConfigError(fmt::format("{}: Kv = {} 1/s must be > 0", where, c.Kv_per_s));
+  if (c.kff < 0.0 || c.kff > 1.5) throw ConfigError(fmt::format("{}: kff = {} must be in [0, 1.5]", where, c.kff));
+  if (!(c.Kvp_torque_s_per_rad > 0.0))
+    throw ConfigError(fmt::format("{}: Kvp = {} must be > 0", where, c.Kvp_torque_s_per_rad));
+  if (c.Tn_s < 0.0 || c.tau_i_s < 0.0 || c.Jff_torque_s2_per_rad < 0.0)
+    throw ConfigError(fmt::format("{}: Tn, tau_i, Jff = {}, {}, {} must be >= 0", where, c.Tn_s, c.tau_i_s,
+                                  c.Jff_torque_s2_per_rad));
+  if (!(c.T_max > 0.0)) throw ConfigError(fmt::format("{}: T_max = {} must be > 0", where, c.T_max));
+}
+
+LawSetup CascadeLaw::setup(const PositionLoopParams& g, double Ts_s, const DriveScale& drive) const {
+  if (!(drive.rg_mm_per_rad > 0.0) || !(drive.Ka_A_per_V > 0.0) || !(drive.Kt_Nm_per_A > 0.0))
+    throw ConfigError(fmt::format("position loop: the cascade needs rg, Ka, Kt > 0 (got {}, {}, {})",
+                                  drive.rg_mm_per_rad, drive.Ka_A_per_V, drive.Kt_Nm_per_A));
+  LawSetup s{Ts_s, drive, 0.0};
+  s.lag_a = g.cascade.tau_i_s > 0.0 ? std::exp(-Ts_s / g.cascade.tau_i_s) : 0.0;
+  return s;
+}
+
+void CascadeLaw::step(const PositionLoopParams& p, const LawSetup& setup, double x_meas_mm, double v_meas_mm_per_s,
+                      PositionLoopState& s, PositionLoopOutput& out) const {
+  const CascadeGains& g = p.cascade;
+  const double Ts = setup.Ts_s;
+  const double rg = setup.drive.rg_mm_per_rad;
+  const double v_meas = std::isfinite(v_meas_mm_per_s) ? v_meas_mm_per_s : (x_meas_mm - s.x_meas_prev_mm) / Ts;
+  out.vcmd_mm_per_s = g.Kv_per_s * out.e_mm + g.kff * out.v_ref_mm_per_s;
+  const double ev = (out.vcmd_mm_per_s - v_meas) / rg;
+  const double Iv = s.Iv_rad + Ts * ev;
+  const double integral = g.Tn_s > 0.0 ? Iv / g.Tn_s : 0.0;
+  const double T_unclamped = g.Kvp_torque_s_per_rad * (ev + integral) + g.Jff_torque_s2_per_rad * out.a_ref_mm_per_s2 / rg;
+  const double T = std::clamp(T_unclamped, -g.T_max, g.T_max);
+  out.saturated = T != T_unclamped;
+  // Anti-windup: the integral is frozen while the limit holds the command.
+  if (!out.saturated) s.Iv_rad = Iv;
+  s.T_filtered = setup.lag_a * s.T_filtered + (1.0 - setup.lag_a) * T;
+  out.torque_cmd = s.T_filtered;
+  const double per_V = setup.drive.Ka_A_per_V * setup.drive.Kt_Nm_per_A;
+  out.u_V = s.T_filtered / per_V;
+  out.u_unclamped_V = T_unclamped / per_V;
+  s.x_meas_prev_mm = x_meas_mm;
+}
+
+/// The P position loop lags by the error whose Kv e gives the speed the velocity
+/// feedforward does not: e = (rg w + rg ev - kff v) / Kv, the velocity error ev = 0
+/// with an integral, T / Kvp without one.
+double CascadeLaw::steady_state(const PositionLoopParams& p, const SteadyMotion& m, double x_ref_mm,
+                                PositionLoopState& s) const {
+  const CascadeGains& c = p.cascade;
+  const double rg = m.drive.rg_mm_per_rad, w = m.w_rad_per_s, T_needed = m.torque_needed;
+  const double ev = c.Tn_s > 0.0 ? 0.0 : T_needed / c.Kvp_torque_s_per_rad;
+  const double e = (rg * (w + ev) - c.kff * m.v_ref_mm_per_s) / c.Kv_per_s;
+  s.Iv_rad = c.Tn_s > 0.0 ? c.Tn_s * T_needed / c.Kvp_torque_s_per_rad : 0.0;
+  s.T_filtered = T_needed;
+  s.x_meas_prev_mm = (x_ref_mm - e) - rg * w * m.Ts_s;
+  s.e_prev_mm = e;
+  return e;
+}
+
+ControllerRealisation CascadeLaw::realise(const PositionLoopParams& g, double Ts, const LinearPlant& p) const {
+  const CascadeGains& c = g.cascade;
+  const double rg = p.rg_mm_per_rad;
+  const bool integral = c.Tn_s > 0.0, lag = c.tau_i_s > 0.0;
+  int n = 0;
+  const int iI = integral ? n++ : -1;
+  const int iT = lag ? n++ : -1;
+  const int ir = n++, iv = n++;
+  RealisationBuilder b(n);
+  const Row e = b.r() - b.x();
+  const Row v = (b.r() - b.state(ir)) / Ts;
+  const Row a = (v - b.state(iv)) / Ts;
+  const Row ev = (c.Kv_per_s * e + c.kff * v) / rg - b.w();
+  Row Tc = c.Kvp_torque_s_per_rad * ev + c.Jff_torque_s2_per_rad * a / rg;
+  if (integral) {
+    const Row Iv = b.state(iI) + Ts * ev;
+    Tc += c.Kvp_torque_s_per_rad / c.Tn_s * Iv;
+    b.set_next(iI, Iv);
+  }
+  Row command = Tc;
+  if (lag) {
+    const double alpha = std::exp(-Ts / c.tau_i_s);
+    command = alpha * b.state(iT) + (1.0 - alpha) * Tc;
+    b.set_next(iT, command);
+  }
+  b.set_next(ir, b.r());
+  b.set_next(iv, v);
+  Eigen::VectorXd start = Eigen::VectorXd::Zero(n);
+  start(ir) = 1.0;
+  return b.finish(command, start, 2);
+}
+
+namespace {
+double& Kv(PositionLoopParams& g) { return g.cascade.Kv_per_s; }
+double& Kvp(PositionLoopParams& g) { return g.cascade.Kvp_torque_s_per_rad; }
+double& Tn(PositionLoopParams& g) { return g.cascade.Tn_s; }
+double& kff(PositionLoopParams& g) { return g.cascade.kff; }
+double& Jff(PositionLoopParams& g) { return g.cascade.Jff_torque_s2_per_rad; }
+
+constexpr LawGain kGains[] = {
+    {"Kv", "Kv_per_s", "1/s", false, true, &Kv, nullptr, nullptr},
+    {"Kvp", "Kvp_torque_s_per_rad", "torque unit s/rad", false, true, &Kvp, nullptr, nullptr},
+    {"Tn", "Tn_s", "s", false, true, &Tn, nullptr, nullptr},
+    {"kff", "kff", "1", true, false, &kff, [](const LinearPlant&) { return 1.0; }, nullptr},
+    {"Jff", "Jff_torque_s2_per_rad", "torque unit s^2/rad", true, false, &Jff,
+     [](const LinearPlant& p) { return p.J_kg_m2; }, nullptr},
+};
+}  // namespace
+
+std::span<const LawGain> CascadeLaw::gains() const noexcept { return kGains; }
+
+}  // namespace twin::controller::laws
