@@ -137,9 +137,10 @@ bool is_tunable_axis_param(const sim::AxisParamSpec& spec) {
   return n == "Kp" || n == "Ki" || n == "Kd" || n == "K1" || n == "K2";
 }
 
-std::vector<Variable> make_variables(const sim::MachineDefinition& machine, bool vibrating_tool) {
-  std::vector<Variable> v;
-  const std::vector<Axis> axes = machine.present_axes();
+namespace {
+
+/// The mode switch and the machine's and the present axes' parameters.
+void add_parameters(std::vector<Variable>& v, const sim::MachineDefinition& machine, const std::vector<Axis>& axes) {
   {
     Variable m;
     m.name = "mode";
@@ -176,6 +177,10 @@ std::vector<Variable> make_variables(const sim::MachineDefinition& machine, bool
       v.push_back(p);
     }
   }
+}
+
+/// The references, the spindle override and the external forces.
+void add_inputs(std::vector<Variable>& v, const std::vector<Axis>& axes) {
   for (Axis a : axes) {
     Variable in;
     in.name = std::string(axis_name(a)) + "_ref_mm";
@@ -213,6 +218,10 @@ std::vector<Variable> make_variables(const sim::MachineDefinition& machine, bool
     in.axis = i;
     v.push_back(in);
   }
+}
+
+/// The axes' and the process's outputs, the tool's when it vibrates, the block and the end of the program.
+void add_outputs(std::vector<Variable>& v, const std::vector<Axis>& axes, bool vibrating_tool) {
   for (Axis a : axes) {
     for (const auto& o : kAxisOutputs) {
       Variable out;
@@ -254,6 +263,16 @@ std::vector<Variable> make_variables(const sim::MachineDefinition& machine, bool
     out.kind = VarKind::kDoneOutput;
     v.push_back(out);
   }
+}
+
+}  // namespace
+
+std::vector<Variable> make_variables(const sim::MachineDefinition& machine, bool vibrating_tool) {
+  std::vector<Variable> v;
+  const std::vector<Axis> axes = machine.present_axes();
+  add_parameters(v, machine, axes);
+  add_inputs(v, axes);
+  add_outputs(v, axes, vibrating_tool);
   return v;
 }
 
