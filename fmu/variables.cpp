@@ -139,6 +139,17 @@ bool is_tunable_axis_param(const sim::AxisParamSpec& spec) {
 
 namespace {
 
+/// A Real variable of `kind` (type, variability and the rest set by the caller where they differ).
+Variable variable(std::string name, Causality causality, std::string unit, std::string description, VarKind kind) {
+  Variable v;
+  v.name = std::move(name);
+  v.causality = causality;
+  v.unit = std::move(unit);
+  v.description = std::move(description);
+  v.kind = kind;
+  return v;
+}
+
 /// The mode switch and the machine's and the present axes' parameters.
 void add_parameters(std::vector<Variable>& v, const sim::MachineDefinition& machine, const std::vector<Axis>& axes) {
   {
@@ -152,26 +163,18 @@ void add_parameters(std::vector<Variable>& v, const sim::MachineDefinition& mach
     v.push_back(m);
   }
   for (const auto& spec : sim::machine_param_specs()) {
-    Variable p;
-    p.name = std::string(spec.name);
-    p.causality = Causality::kParameter;
+    Variable p = variable(std::string(spec.name), Causality::kParameter, fmi_unit(spec.unit), std::string(spec.doc),
+                          VarKind::kMachineParam);
     p.variability = Variability::kFixed;
-    p.unit = fmi_unit(spec.unit);
-    p.description = std::string(spec.doc);
-    p.kind = VarKind::kMachineParam;
     p.machine_param = &spec;
     v.push_back(p);
   }
   for (Axis a : axes) {
     for (const auto& spec : sim::axis_param_specs()) {
       if (spec.law && *spec.law != machine.axes[index(a)].loop.law) continue;  // the other loop law's gains
-      Variable p;
-      p.name = std::string(axis_name(a)) + "." + std::string(spec.name);
-      p.causality = Causality::kParameter;
+      Variable p = variable(std::string(axis_name(a)) + "." + std::string(spec.name), Causality::kParameter,
+                            fmi_unit(spec.unit), std::string(spec.doc), VarKind::kAxisParam);
       p.variability = is_tunable_axis_param(spec) ? Variability::kTunable : Variability::kFixed;
-      p.unit = fmi_unit(spec.unit);
-      p.description = std::string(spec.doc);
-      p.kind = VarKind::kAxisParam;
       p.axis = index(a);
       p.axis_param = &spec;
       v.push_back(p);
@@ -182,12 +185,9 @@ void add_parameters(std::vector<Variable>& v, const sim::MachineDefinition& mach
 /// The references, the spindle override and the external forces.
 void add_inputs(std::vector<Variable>& v, const std::vector<Axis>& axes) {
   for (Axis a : axes) {
-    Variable in;
-    in.name = std::string(axis_name(a)) + "_ref_mm";
-    in.causality = Causality::kInput;
-    in.unit = "mm";
-    in.description = "position reference of the axis (mode 1), held over each communication step";
-    in.kind = VarKind::kRefInput;
+    Variable in = variable(std::string(axis_name(a)) + "_ref_mm", Causality::kInput, "mm",
+                           "position reference of the axis (mode 1), held over each communication step",
+                           VarKind::kRefInput);
     in.axis = index(a);
     v.push_back(in);
   }
@@ -200,21 +200,12 @@ void add_inputs(std::vector<Variable>& v, const std::vector<Axis>& axes) {
     in.description = "true: the spindle turns at spindle_rpm instead of the program's speed";
     in.kind = VarKind::kSpindleOverride;
     v.push_back(in);
-    in = Variable{};
-    in.name = "spindle_rpm";
-    in.causality = Causality::kInput;
-    in.unit = fmi_unit("rpm");
-    in.description = "spindle speed used when spindle_override is true (> 0 clockwise)";
-    in.kind = VarKind::kSpindleInput;
-    v.push_back(in);
+    v.push_back(variable("spindle_rpm", Causality::kInput, fmi_unit("rpm"),
+                         "spindle speed used when spindle_override is true (> 0 clockwise)", VarKind::kSpindleInput));
   }
   for (std::size_t i = 0; i < 3; ++i) {
-    Variable in;
-    in.name = "f" + std::string(axis_name(i)) + "_ext_N";
-    in.causality = Causality::kInput;
-    in.unit = "N";
-    in.description = "external force on the workpiece, added to the cutting force";
-    in.kind = VarKind::kForceInput;
+    Variable in = variable("f" + std::string(axis_name(i)) + "_ext_N", Causality::kInput, "N",
+                           "external force on the workpiece, added to the cutting force", VarKind::kForceInput);
     in.axis = i;
     v.push_back(in);
   }
@@ -224,11 +215,8 @@ void add_inputs(std::vector<Variable>& v, const std::vector<Axis>& axes) {
 void add_outputs(std::vector<Variable>& v, const std::vector<Axis>& axes, bool vibrating_tool) {
   for (Axis a : axes) {
     for (const auto& o : kAxisOutputs) {
-      Variable out;
-      out.name = std::string(axis_name(a)) + o.suffix;
-      out.unit = fmi_unit(o.unit);
-      out.description = o.doc;
-      out.kind = VarKind::kAxisOutput;
+      Variable out = variable(std::string(axis_name(a)) + o.suffix, Causality::kOutput, fmi_unit(o.unit), o.doc,
+                              VarKind::kAxisOutput);
       out.axis = index(a);
       out.axis_output = o.get;
       out.measured = o.measured;
@@ -236,11 +224,7 @@ void add_outputs(std::vector<Variable>& v, const std::vector<Axis>& axes, bool v
     }
   }
   const auto add_output = [&v](const OutputSpec& o) {
-    Variable out;
-    out.name = o.name;
-    out.unit = fmi_unit(o.unit);
-    out.description = o.doc;
-    out.kind = VarKind::kOutput;
+    Variable out = variable(o.name, Causality::kOutput, fmi_unit(o.unit), o.doc, VarKind::kOutput);
     out.output = o.get;
     v.push_back(out);
   };

@@ -678,6 +678,15 @@ AxisRows axis_rows(const std::vector<RunData>& runs, const AxisFromData& ax) {
 struct DriveRefit {
   double J{0.0}, B{0.0}, Tc_pos{0.0}, Tc_neg{0.0}, c{0.0};
 };
+/// The rigid-body drive (and its constant load) of a refit, set on `drive`.
+void set_drive(feeddrive::DriveParams& drive, const DriveRefit& d) {
+  drive.J_kg_m2 = d.J;
+  drive.B_kg_m2_per_s = d.B;
+  drive.Tc_pos_Nm = d.Tc_pos;
+  drive.Tc_neg_Nm = d.Tc_neg;
+  drive.effects.constant_load.enabled = d.c != 0.0;
+  drive.effects.constant_load.torque_Nm = d.c;
+}
 DriveRefit drive_moved(const feeddrive::DriveParams& cur, const LsqResult& joint, const LsqResult& without) {
   const double c0 = cur.effects.constant_load.enabled ? cur.effects.constant_load.torque_Nm : 0.0;
   return {cur.J_kg_m2, cur.B_kg_m2_per_s, std::max(cur.Tc_pos_Nm + joint.theta[2] - without.theta[2], 0.0),
@@ -701,15 +710,7 @@ struct Trial {
 sim::MachineDefinition with_trial(const sim::MachineDefinition& base, Axis a, const Trial& t, std::size_t set) {
   sim::MachineDefinition m = base;
   sim::AxisDefinition& def = m.axes[index(a)];
-  if (!t.drives.empty()) {
-    const DriveRefit& d = t.drives[set];
-    def.drive.J_kg_m2 = d.J;
-    def.drive.B_kg_m2_per_s = d.B;
-    def.drive.Tc_pos_Nm = d.Tc_pos;
-    def.drive.Tc_neg_Nm = d.Tc_neg;
-    def.drive.effects.constant_load.enabled = d.c != 0.0;
-    def.drive.effects.constant_load.torque_Nm = d.c;
-  }
+  if (!t.drives.empty()) set_drive(def.drive, t.drives[set]);
   if (t.gains) def.loop.cascade = *t.gains;
   // Two effects that describe the same thing: the drive holds one.
   if (const auto replaced = registry_entry(t.kind).replaces)
@@ -1660,12 +1661,7 @@ void set_identified_axis(sim::AxisDefinition& def, const AxisFromData& ax) {
   def.drive.Ka_A_per_V = 1.0;
   def.drive.Kt_Nm_per_A = 1.0;
   def.drive.rg_mm_per_rad = 1.0;
-  def.drive.J_kg_m2 = ax.J;
-  def.drive.B_kg_m2_per_s = ax.B;
-  def.drive.Tc_pos_Nm = ax.Tc_pos;
-  def.drive.Tc_neg_Nm = ax.Tc_neg;
-  def.drive.effects.constant_load.enabled = ax.c != 0.0;
-  def.drive.effects.constant_load.torque_Nm = ax.c;
+  set_drive(def.drive, DriveRefit{ax.J, ax.B, ax.Tc_pos, ax.Tc_neg, ax.c});
   def.loop.law = controller::LoopLaw::kCascade;
   def.loop.cascade = ax.gains;
   def.following_error_limit_mm = 1e3;
