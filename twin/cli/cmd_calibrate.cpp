@@ -149,48 +149,13 @@ std::vector<std::filesystem::path> make_data_plots(io::ResultSet& results, const
     }
     w.commit();
   }
-  const std::string d = analysis::gnuplot_file("overlay.csv");
   const auto& t = run.trace.at("t_s");
-  const double t_split = t[static_cast<std::size_t>(r.fit_fraction * static_cast<double>(t.size()))];
-  std::string script = "set datafile separator ','\nset key autotitle columnhead\nset grid\n";
-  script += fmt::format("set terminal pngcairo size 1400,{} noenhanced\nset output {}\nset multiplot layout {},1\n",
-                        380 * 2 * axes.size(), analysis::gnuplot_output("overlay.png"), 2 * axes.size());
-  script += fmt::format("set arrow 1 from {0},graph 0 to {0},graph 1 nohead dt 2 lc rgb 'black'\n", t_split);
-  for (std::size_t j = 0; j < axes.size(); ++j) {
-    const std::size_t c0 = 2 + 5 * j;
-    const std::string an(axis_name(axes[j].axis));
-    const std::string unit = axes[j].channel.unit == "raw" ? "log's unit" : axes[j].channel.unit;
-    script += fmt::format("set title {}\nset xlabel 't s'\nset ylabel {}\n"
-                          "plot {} using 1:{} with lines lc rgb '#999999' title 'measured', '' using 1:{} with lines "
-                          "lc rgb 'blue' title 'twin'\n",
-                          analysis::gnuplot_text(fmt::format("{} {}: measured (grey) and twin (blue); fitted left of "
-                                                             "the dashed line, held out right of it",
-                                                             an, axes[j].channel.column)),
-                          analysis::gnuplot_text(unit), d, c0, c0 + 1);
-    script += fmt::format("set title {}\nset ylabel 'mm'\n"
-                          "plot {} using 1:{} with lines lc rgb '#999999' title 'measured', '' using 1:{} with "
-                          "lines lc rgb 'blue' title 'twin'\n",
-                          analysis::gnuplot_text(an + " following error: measured (grey) and twin (blue)"), d, c0 + 2,
-                          c0 + 3);
-  }
-  script += "unset multiplot\nunset arrow 1\n";
-  script += fmt::format("set terminal pngcairo size 1200,{} noenhanced\nset output {}\nset multiplot layout {},1\n",
-                        420 * axes.size(), analysis::gnuplot_output("evidence.png"), axes.size());
-  for (std::size_t j = 0; j < axes.size(); ++j) {
-    const std::size_t c0 = 2 + 5 * j;
-    const std::string unit = axes[j].channel.unit == "raw" ? "log's unit" : axes[j].channel.unit;
-    script += fmt::format("set title {}\nset xlabel 'commanded speed mm/s'\nset ylabel {}\n"
-                          "plot {} using {}:{} with points pt 7 ps 0.3 lc rgb '#999999' title 'measured', '' using "
-                          "{}:{} with points pt 7 ps 0.3 lc rgb 'blue' title 'twin'\n",
-                          analysis::gnuplot_text(fmt::format(
-                              "{}: {} against the commanded speed, both directions: measured (grey) and twin (blue); "
-                              "friction levels and the constant load show as the two bands",
-                              axis_name(axes[j].axis), axes[j].channel.column)),
-                          analysis::gnuplot_text(unit), d, c0 + 4, c0, c0 + 4, c0 + 1);
-  }
-  script += "unset multiplot\n";
-  analysis::run_gnuplot(results.staging_dir(), script, {"overlay.png", "evidence.png"});
-  return {results.path("overlay.png"), results.path("evidence.png")};
+  analysis::DataCalibrationPlots plots;
+  plots.t_split_s = t[static_cast<std::size_t>(r.fit_fraction * static_cast<double>(t.size()))];
+  for (const auto& ax : axes)
+    plots.axes.push_back({std::string(axis_name(ax.axis)), ax.channel.column,
+                          ax.channel.unit == "raw" ? "log's unit" : ax.channel.unit});
+  return analysis::plot_data_calibration(results, plots);
 }
 
 struct CalibrateCommand {

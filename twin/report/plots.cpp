@@ -536,4 +536,47 @@ std::vector<std::filesystem::path> plot_tuning(io::ResultSet& results, const Tun
   return written;
 }
 
+std::vector<std::filesystem::path> plot_data_calibration(io::ResultSet& results, const DataCalibrationPlots& plots) {
+  const std::string d = gnuplot_file(plots.overlay_name);
+  const std::size_t n = plots.axes.size();
+  std::string script = "set datafile separator ','\nset key autotitle columnhead\nset grid\n";
+  script += fmt::format("set terminal pngcairo size 1400,{} noenhanced\nset output {}\nset multiplot layout {},1\n",
+                        380 * 2 * n, gnuplot_output("overlay.png"), 2 * n);
+  script += fmt::format("set arrow 1 from {0},graph 0 to {0},graph 1 nohead dt 2 lc rgb 'black'\n", plots.t_split_s);
+  for (std::size_t j = 0; j < n; ++j) {
+    const std::size_t c0 = 2 + 5 * j;
+    const auto& ax = plots.axes[j];
+    script += fmt::format("set title {}\nset xlabel 't s'\nset ylabel {}\n"
+                          "plot {} using 1:{} with lines lc rgb '#999999' title 'measured', '' using 1:{} with lines "
+                          "lc rgb 'blue' title 'twin'\n",
+                          gnuplot_text(fmt::format("{} {}: measured (grey) and twin (blue); fitted left of "
+                                                   "the dashed line, held out right of it",
+                                                   ax.name, ax.channel)),
+                          gnuplot_text(ax.unit), d, c0, c0 + 1);
+    script += fmt::format("set title {}\nset ylabel 'mm'\n"
+                          "plot {} using 1:{} with lines lc rgb '#999999' title 'measured', '' using 1:{} with "
+                          "lines lc rgb 'blue' title 'twin'\n",
+                          gnuplot_text(ax.name + " following error: measured (grey) and twin (blue)"), d, c0 + 2,
+                          c0 + 3);
+  }
+  script += "unset multiplot\nunset arrow 1\n";
+  script += fmt::format("set terminal pngcairo size 1200,{} noenhanced\nset output {}\nset multiplot layout {},1\n",
+                        420 * n, gnuplot_output("evidence.png"), n);
+  for (std::size_t j = 0; j < n; ++j) {
+    const std::size_t c0 = 2 + 5 * j;
+    const auto& ax = plots.axes[j];
+    script += fmt::format("set title {}\nset xlabel 'commanded speed mm/s'\nset ylabel {}\n"
+                          "plot {} using {}:{} with points pt 7 ps 0.3 lc rgb '#999999' title 'measured', '' using "
+                          "{}:{} with points pt 7 ps 0.3 lc rgb 'blue' title 'twin'\n",
+                          gnuplot_text(fmt::format(
+                              "{}: {} against the commanded speed, both directions: measured (grey) and twin (blue); "
+                              "friction levels and the constant load show as the two bands",
+                              ax.name, ax.channel)),
+                          gnuplot_text(ax.unit), d, c0 + 4, c0, c0 + 4, c0 + 1);
+  }
+  script += "unset multiplot\n";
+  run_gnuplot(results.staging_dir(), script, {"overlay.png", "evidence.png"});
+  return {results.path("overlay.png"), results.path("evidence.png")};
+}
+
 }  // namespace twin::analysis

@@ -82,6 +82,25 @@ struct TunePlots {
   std::string corner_title;  ///< empty: no corner_error.png
 };
 
+/// What the plots of a machine identified from data draw, from `overlay_name` in
+/// the result set: columns t_s, then per axis its torque channel measured and
+/// modelled, its following error measured and modelled (mm) and the commanded speed.
+struct DataCalibrationPlots {
+  struct Axis {
+    std::string name;     ///< "x"
+    std::string channel;  ///< the torque channel's column
+    std::string unit;     ///< its unit as the plot says it
+  };
+  std::string overlay_name{"overlay.csv"};
+  double t_split_s{0.0};  ///< fitted before it, held out after it
+  std::vector<Axis> axes;
+};
+
+/// overlay.png (per axis the channel and the following error, measured and twin,
+/// over time, the fitting part marked) and evidence.png (the channel against the
+/// commanded speed). Returns the plots written (staged paths of `results`).
+std::vector<std::filesystem::path> plot_data_calibration(io::ResultSet& results, const DataCalibrationPlots& plots);
+
 /// bode.png (|L| and |S|, then arg L) and with a corner corner_error.png (tracking
 /// and contour error through it). Returns the plots written (staged paths of `results`).
 std::vector<std::filesystem::path> plot_tuning(io::ResultSet& results, const TunePlots& plots);
