@@ -36,8 +36,6 @@ struct FmuModel : sim::Scenario {
 
   bool has_program() const noexcept { return !program_text.empty(); }
   bool has_process() const noexcept { return process_setup.has_value(); }
-  /// The process cuts with the tool's modes (a machine with `structure:` and `tool_tip:`).
-  bool vibrating_tool() const noexcept { return process_setup && !process_setup->tool_tip.empty(); }
   /// Cycle time of the program plus settle_s, s (0 without a program).
   double program_duration_s() const;
   /// The program parsed for `machine` (its rapid rate, travel, limits and

@@ -175,7 +175,7 @@ std::size_t encoder_row(const std::vector<Variable>& vars) {
 
 /// FMI 2.0: ScalarVariable elements, ModelStructure by index (row + 1).
 std::string xml_template_fmi2(const FmuModel& model) {
-  const std::vector<Variable> vars = make_variables(model.machine, model.vibrating_tool());
+  const std::vector<Variable> vars = make_variables(model.machine, sim::vibrating_tool(model));
   std::string x = xml_head(model, "2.0", "guid", "communication steps may end between its ticks",
                            " numberOfEventIndicators=\"0\"");
   x += fmt::format(
@@ -220,7 +220,7 @@ std::string xml_template_fmi2(const FmuModel& model) {
 /// reference order, the independent variable `time` after the table, and
 /// ModelStructure by value reference.
 std::string xml_template_fmi3(const FmuModel& model) {
-  const std::vector<Variable> vars = make_variables(model.machine, model.vibrating_tool());
+  const std::vector<Variable> vars = make_variables(model.machine, sim::vibrating_tool(model));
   const double Ts = model.machine.Ts_s;
   std::string x =
       xml_head(model, "3.0", "instantiationToken", "every communication step is a whole number of its ticks", "");
@@ -270,7 +270,7 @@ std::string guid_of(const std::string& xml_template_text, const FmuModel& model)
 }  // namespace
 
 std::size_t time_value_reference(const FmuModel& model) {
-  return make_variables(model.machine, model.vibrating_tool()).size();
+  return make_variables(model.machine, sim::vibrating_tool(model)).size();
 }
 
 std::string model_guid(const FmuModel& model) { return guid_of(xml_template(model, FmiVersion::k2), model); }

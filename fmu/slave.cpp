@@ -14,7 +14,7 @@
 namespace twin::fmu {
 
 Slave::Slave(FmuModel model, std::string identity) : model_(std::move(model)), identity_(std::move(identity)) {
-  vars_ = make_variables(model_.machine, model_.vibrating_tool());
+  vars_ = make_variables(model_.machine, sim::vibrating_tool(model_));
   reset();
 }
 

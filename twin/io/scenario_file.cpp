@@ -82,15 +82,9 @@ Scenario load_scenario(const std::filesystem::path& path, const std::string& mac
     s.process_setup = parse_process_setup(process_node, where + ": process", dir);
     // A machine with a structure cuts with its tool-tip modes (the tool
     // vibrates, the chip regenerates); without `structure:` the tool is rigid.
-    if (s.machine.structure && !s.machine.tool_tip.empty()) set_tool_modes(s, s.machine.tool_tip);
+    if (s.machine.structure) s.process_setup->tool_tip = s.machine.tool_tip;
   }
   return s;
 }
-
-void set_tool_modes(Scenario& s, const process::ToolTipFrf& tool_tip) {
-  if (s.process_setup) s.process_setup->tool_tip = tool_tip;
-}
-
-bool vibrating_tool(const Scenario& s) { return s.process_setup && !s.process_setup->tool_tip.empty(); }
 
 }  // namespace twin::io

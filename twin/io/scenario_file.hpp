@@ -11,6 +11,7 @@ namespace twin::io {
 /// The scenario as data (twin/sim/scenario.hpp); this file reads it from YAML.
 using Scenario = sim::Scenario;
 using sim::parse_program;
+using sim::vibrating_tool;
 
 /// The built-in default: the FADAL 2216 pocket-corner scenario.
 std::filesystem::path default_scenario_path();
@@ -18,11 +19,5 @@ std::filesystem::path default_scenario_path();
 std::filesystem::path resolve_scenario_path(const std::string& name_or_path);
 /// Loads the scenario; `machine_override` (a name or path) replaces its machine.
 Scenario load_scenario(const std::filesystem::path& path, const std::string& machine_override = {});
-/// Makes the scenario's process cut with these tool-tip modes (empty: a rigid
-/// tool); nothing for an air cut. load_scenario does this with the machine's
-/// modes when the machine file has a `structure:`.
-void set_tool_modes(Scenario& scenario, const process::ToolTipFrf& tool_tip);
-/// True when the scenario cuts with a vibrating tool (its process has tool-tip modes).
-bool vibrating_tool(const Scenario& scenario);
 
 }  // namespace twin::io

@@ -536,6 +536,18 @@ std::vector<std::filesystem::path> plot_tuning(io::ResultSet& results, const Tun
   return written;
 }
 
+namespace {
+
+/// One plot of `d`: column `measured` (grey) and `twin` (blue) against column `x`, drawn `with` (lines or points).
+std::string measured_and_twin(const std::string& d, std::size_t x, std::size_t measured, std::size_t twin,
+                              const char* with) {
+  return fmt::format("plot {0} using {1}:{2} with {4} lc rgb '#999999' title 'measured', '' using {1}:{3} with {4} "
+                     "lc rgb 'blue' title 'twin'\n",
+                     d, x, measured, twin, with);
+}
+
+}  // namespace
+
 std::vector<std::filesystem::path> plot_data_calibration(io::ResultSet& results, const DataCalibrationPlots& plots) {
   const std::string d = gnuplot_file(plots.overlay_name);
   const std::size_t n = plots.axes.size();
@@ -546,18 +558,15 @@ std::vector<std::filesystem::path> plot_data_calibration(io::ResultSet& results,
   for (std::size_t j = 0; j < n; ++j) {
     const std::size_t c0 = 2 + 5 * j;
     const auto& ax = plots.axes[j];
-    script += fmt::format("set title {}\nset xlabel 't s'\nset ylabel {}\n"
-                          "plot {} using 1:{} with lines lc rgb '#999999' title 'measured', '' using 1:{} with lines "
-                          "lc rgb 'blue' title 'twin'\n",
+    script += fmt::format("set title {}\nset xlabel 't s'\nset ylabel {}\n",
                           gnuplot_text(fmt::format("{} {}: measured (grey) and twin (blue); fitted left of "
                                                    "the dashed line, held out right of it",
                                                    ax.name, ax.channel)),
-                          gnuplot_text(ax.unit), d, c0, c0 + 1);
-    script += fmt::format("set title {}\nset ylabel 'mm'\n"
-                          "plot {} using 1:{} with lines lc rgb '#999999' title 'measured', '' using 1:{} with "
-                          "lines lc rgb 'blue' title 'twin'\n",
-                          gnuplot_text(ax.name + " following error: measured (grey) and twin (blue)"), d, c0 + 2,
-                          c0 + 3);
+                          gnuplot_text(ax.unit));
+    script += measured_and_twin(d, 1, c0, c0 + 1, "lines");
+    script += fmt::format("set title {}\nset ylabel 'mm'\n",
+                          gnuplot_text(ax.name + " following error: measured (grey) and twin (blue)"));
+    script += measured_and_twin(d, 1, c0 + 2, c0 + 3, "lines");
   }
   script += "unset multiplot\nunset arrow 1\n";
   script += fmt::format("set terminal pngcairo size 1200,{} noenhanced\nset output {}\nset multiplot layout {},1\n",
@@ -565,14 +574,13 @@ std::vector<std::filesystem::path> plot_data_calibration(io::ResultSet& results,
   for (std::size_t j = 0; j < n; ++j) {
     const std::size_t c0 = 2 + 5 * j;
     const auto& ax = plots.axes[j];
-    script += fmt::format("set title {}\nset xlabel 'commanded speed mm/s'\nset ylabel {}\n"
-                          "plot {} using {}:{} with points pt 7 ps 0.3 lc rgb '#999999' title 'measured', '' using "
-                          "{}:{} with points pt 7 ps 0.3 lc rgb 'blue' title 'twin'\n",
+    script += fmt::format("set title {}\nset xlabel 'commanded speed mm/s'\nset ylabel {}\n",
                           gnuplot_text(fmt::format(
                               "{}: {} against the commanded speed, both directions: measured (grey) and twin (blue); "
                               "friction levels and the constant load show as the two bands",
                               ax.name, ax.channel)),
-                          gnuplot_text(ax.unit), d, c0 + 4, c0, c0 + 4, c0 + 1);
+                          gnuplot_text(ax.unit));
+    script += measured_and_twin(d, c0 + 4, c0, c0 + 1, "points pt 7 ps 0.3");
   }
   script += "unset multiplot\n";
   run_gnuplot(results.staging_dir(), script, {"overlay.png", "evidence.png"});

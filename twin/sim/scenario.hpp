@@ -35,6 +35,10 @@ struct Scenario {
 
 /// "air cut", or the process setup in one line (tool, material, conditions).
 std::string process_summary(const Scenario& scenario);
+/// True when the scenario cuts with a vibrating tool (its process has tool-tip modes).
+inline bool vibrating_tool(const Scenario& scenario) {
+  return scenario.process_setup && !scenario.process_setup->tool_tip.empty();
+}
 
 /// The scenario's part program parsed for `machine` (its rapid rate) and
 /// planned at its Ts, with the reference that follows the plan.
