@@ -47,6 +47,10 @@ class JsonSetupNode final : public sim::SetupNode {
       throw ConfigError(fmt::format("{} = {} must be a non-empty string", where, j_.dump()));
     return j_.get<std::string>();
   }
+  std::string text(const std::string& where) const override {
+    if (!j_.is_string()) throw ConfigError(fmt::format("{} = {} must be a string", where, j_.dump()));
+    return j_.get<std::string>();
+  }
   std::string locate(const std::string& where, const std::string& key) const override {
     return fmt::format("{}: {}", where, key);
   }
@@ -119,47 +123,25 @@ json stock_to_json(const process::StockSpec& stock) {
 
 /// The tool's modes when it vibrates in the cut (a machine with `structure:`
 /// and `tool_tip:`): set by the scenario from its machine, not by the process
-/// section of a scenario file, so they are read here beside the reader.
-constexpr const char* kToolTip = "tool_tip";
+/// section of a scenario file, so they are kept out of what read_process_setup
+/// reads and read by sim::read_tool_tip, as a machine file's are.
+constexpr const char* kToolTip = sim::setup_keys::kToolTip;
 constexpr const char* kSubsteps = "substeps_per_mode_period";
 
 json modes_to_json(const std::vector<process::ToolTipMode>& modes) {
+  namespace k = sim::setup_keys;
   json out = json::array();
-  for (const auto& m : modes) out.push_back({{"fn_Hz", m.fn_Hz}, {"zeta", m.zeta}, {"k_N_per_m", m.k_N_per_m}});
+  for (const auto& m : modes)
+    out.push_back({{k::kModeFn, m.fn_Hz}, {k::kModeZeta, m.zeta}, {k::kModeStiffness, m.k_N_per_m}});
   return out;
 }
 
-std::vector<process::ToolTipMode> modes_from_json(const json& j, const std::string& where) {
-  if (!j.is_array()) throw ConfigError(fmt::format("{} must be a list of modes", where));
-  std::vector<process::ToolTipMode> out;
-  for (std::size_t i = 0; i < j.size(); ++i) {
-    const std::string w = fmt::format("{}[{}]", where, i);
-    const json& m = j[i];
-    if (!m.is_object() || m.size() != 3 || !m.contains("fn_Hz") || !m.contains("zeta") || !m.contains("k_N_per_m"))
-      throw ConfigError(fmt::format("{} must be a map of fn_Hz, zeta and k_N_per_m", w));
-    process::ToolTipMode mode;
-    mode.fn_Hz = JsonSetupNode(m.at("fn_Hz")).number(w + ".fn_Hz");
-    mode.zeta = JsonSetupNode(m.at("zeta")).number(w + ".zeta");
-    mode.k_N_per_m = JsonSetupNode(m.at("k_N_per_m")).number(w + ".k_N_per_m");
-    out.push_back(mode);
-  }
-  return out;
-}
-
-/// Reads the tool's modes from `j`'s tool_tip and substeps entries into `setup`.
+/// Reads the tool's modes (the one reader, sim::read_tool_tip) and the
+/// substeps from `j`'s tool_tip and substeps entries into `setup`.
 void read_tool_modes(const json& j, process::ProcessSetup& setup) {
   if (j.contains(kToolTip)) {
-    const json& t = j.at(kToolTip);
-    if (!t.is_object()) throw ConfigError("process: tool_tip must be a map of x and y modes");
-    for (const auto& [key, v] : t.items()) {
-      if (key == "x")
-        setup.tool_tip.x = modes_from_json(v, "process: tool_tip.x");
-      else if (key == "y")
-        setup.tool_tip.y = modes_from_json(v, "process: tool_tip.y");
-      else
-        throw ConfigError(fmt::format("process: tool_tip: unknown key '{}' (x, y)", key));
-    }
-    setup.tool_tip.validate("process: tool_tip");
+    setup.tool_tip = sim::read_tool_tip(JsonSetupNode(j.at(kToolTip)), std::string("process: ") + kToolTip);
+    setup.tool_tip.validate(std::string("process: ") + kToolTip);
   }
   if (j.contains(kSubsteps))
     setup.substeps_per_mode_period = JsonSetupNode(j.at(kSubsteps)).number(std::string("process: ") + kSubsteps);

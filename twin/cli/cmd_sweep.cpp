@@ -78,20 +78,7 @@ std::vector<std::string> plotted_columns(const std::vector<sweep::Row>& rows, co
 }
 
 void plot_summary(io::ResultSet& results, const std::vector<sweep::Row>& rows, const std::string& command) {
-  const auto columns = plotted_columns(rows, command);
-  if (columns.empty()) return;  // every case failed: nothing to draw
-  std::string g = "set datafile separator ','\n"
-                  "set terminal pngcairo size 1200,900 font 'DejaVu Sans,11' noenhanced\n"
-                  "set grid\nset xlabel 'case'\n"
-                  "set output " + analysis::gnuplot_output("summary.png") + "\n";
-  g += fmt::format("set multiplot layout {},1\n", columns.size());
-  for (const auto& c : columns)
-    g += "set title " + analysis::gnuplot_text(c + " per case (failed cases left out)") + "\nplot " +
-         analysis::gnuplot_file("results.csv") + " using 'case':(column(" + analysis::gnuplot_text(c) +
-         ")) with linespoints pt 7 lc rgb '#1f77b4' notitle\n";
-  g += "unset multiplot\nunset output\n";
-  results.path("summary.png");
-  analysis::run_gnuplot(results.staging_dir(), g, {"summary.png"});
+  analysis::plot_sweep(results, {.columns = plotted_columns(rows, command)});
 }
 
 }  // namespace

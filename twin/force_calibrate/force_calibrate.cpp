@@ -1888,10 +1888,10 @@ std::string tool_yaml(const ForceCalibration& r, const ForceCut& cut, const std:
 
 namespace {
 
-std::vector<std::filesystem::path> force_plots(const std::filesystem::path& out, const ForceCalibration& r) {
-  std::vector<std::filesystem::path> outputs;
+// The figures' data files in `out`, drawn by analysis::plot_force_calibration.
+void force_plots(const std::filesystem::path& out, const ForceCalibration& r) {
+  ForceCalibrationPlots plots;
   // One revolution per feed.
-  const auto rev_csv = out / "revolution.csv";
   {
     std::string csv = "feed,theta_deg,fx_meas_N,fx_model_N,fy_meas_N,fy_model_N,fz_meas_N,fz_model_N\n";
     for (std::size_t i = 0; i < r.feeds.size(); ++i) {
@@ -1901,58 +1901,23 @@ std::vector<std::filesystem::path> force_plots(const std::filesystem::path& out,
                            f.rev_measured_N[0][b], f.rev_model_N[0][b], f.rev_measured_N[1][b], f.rev_model_N[1][b],
                            f.rev_measured_N[2][b], f.rev_model_N[2][b]);
       csv += "\n\n";   // gnuplot data blocks, one per feed (index i)
+      plots.feed_fz_mm.push_back(f.fz_mm);
     }
-    io::write_file_atomic(rev_csv, csv);
+    io::write_file_atomic(out / plots.revolution_name, csv);
   }
-  const auto spec_csv = out / "residual_spectrum.csv";
   {
     std::string csv = "f_hz,fx_before_N,fy_before_N,fz_before_N,fx_after_N,fy_after_N,fz_after_N\n";
     for (std::size_t k = 0; k < r.spectrum_f_hz.size(); ++k)
       csv += fmt::format("{:.4f},{:.5g},{:.5g},{:.5g},{:.5g},{:.5g},{:.5g}\n", r.spectrum_f_hz[k], r.spectrum_before_N[0][k],
                          r.spectrum_before_N[1][k], r.spectrum_before_N[2][k], r.spectrum_after_N[0][k],
                          r.spectrum_after_N[1][k], r.spectrum_after_N[2][k]);
-    io::write_file_atomic(spec_csv, csv);
+    io::write_file_atomic(out / plots.spectrum_name, csv);
   }
-  // Files by plain names in `out`, gnuplot's working folder (plots.hpp).
-  auto tmp = [](const std::filesystem::path& p) { return gnuplot_output(p.filename().string()); };
-  std::vector<std::string> output_names;
-  std::string g = "set datafile separator ','\nset grid\n";
-  const auto rev_png = out / "revolution.png";
-  outputs.push_back(rev_png);
-  const std::size_t nf = std::max<std::size_t>(1, r.feeds.size());
-  g += fmt::format("set terminal pngcairo size 1500,{} noenhanced\nset output {}\nset multiplot layout {},3\n",
-                   260 * nf, tmp(rev_png), nf);
-  for (std::size_t i = 0; i < r.feeds.size(); ++i)
-    for (int a = 0; a < 3; ++a)
-      g += fmt::format("set title 'feed {} (fz {:.4f} mm): {} over one revolution'\nset xlabel 'spindle angle deg'\n"
-                       "set ylabel 'N'\nplot {} index {} every ::1 using 2:{} with points pt 7 ps 0.4 title 'measured', "
-                       "'' index {} every ::1 using 2:{} with lines lw 2 title 'model'\n",
-                       i, r.feeds[i].fz_mm, kAxisNames[a], gnuplot_file(rev_csv.filename().string()), i, 3 + 2 * a, i,
-                       4 + 2 * a);
-  g += "unset multiplot\n";
-  if (!r.spectrum_f_hz.empty()) {
-    const auto spec_png = out / "residual_spectrum.png";
-    outputs.push_back(spec_png);
-    g += fmt::format("set terminal pngcairo size 1200,900 noenhanced\nset output {}\nset multiplot layout 3,1\n",
-                     tmp(spec_png));
-    for (int a = 0; a < 3; ++a) {
-      g += "unset arrow\n";
-      for (double f = r.spindle_hz; f < r.spectrum_f_hz.back(); f += r.spindle_hz) {
-        const bool tooth = std::abs(std::fmod(f / r.tooth_hz + 0.5, 1.0) - 0.5) < 1e-6;
-        if (!tooth && f > 5.5 * r.spindle_hz) continue;
-        g += fmt::format("set arrow from {:.3f}, graph 0 to {:.3f}, graph 1 nohead lc rgb '{}' dt 2\n", f, f,
-                         tooth ? "#2060c0" : "#c02020");
-      }
-      g += fmt::format("set title 'residual spectrum {} (red dashed: spindle harmonics, blue: tooth harmonics)'\n"
-                       "set xlabel 'Hz'\nset ylabel 'N'\nset logscale y\nplot {} every ::1 using 1:{} with lines "
-                       "title 'before', '' every ::1 using 1:{} with lines title 'after'\nunset logscale y\n",
-                       kAxisNames[a], gnuplot_file(spec_csv.filename().string()), 2 + a, 5 + a);
-    }
-    g += "unset multiplot\n";
-  }
-  for (const auto& o : outputs) output_names.push_back(o.filename().string());
-  run_gnuplot(out, g, output_names);
-  return outputs;
+  plots.spectrum = !r.spectrum_f_hz.empty();
+  if (plots.spectrum) plots.spectrum_max_Hz = r.spectrum_f_hz.back();
+  plots.spindle_Hz = r.spindle_hz;
+  plots.tooth_Hz = r.tooth_hz;
+  plot_force_calibration(out, plots);
 }
 
 }  // namespace

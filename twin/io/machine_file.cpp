@@ -9,6 +9,7 @@
 
 #include "twin/core/error.hpp"
 #include "twin/io/atomic_file.hpp"
+#include "twin/io/process_yaml.hpp"
 #include "twin/io/yaml_util.hpp"
 #include "twin/structure/machine_structure.hpp"
 
@@ -69,38 +70,6 @@ void parse_effects(const YAML::Node& node, sim::AxisDefinition& axis, const std:
       any = true;
     }
     if (!any) throw ConfigError(fmt::format("{}: no parameters", w));
-  }
-}
-
-/// `tool_tip:` {source: text, x: [modes], y: [modes]}, a mode {fn_Hz, zeta, k_N_per_m}.
-void parse_tool_tip(const YAML::Node& node, sim::MachineDefinition& m, const std::string& where) {
-  const std::string w = where + ": tool_tip";
-  if (!node.IsMap()) throw ConfigError(fmt::format("{} must be a map with x and/or y mode lists", w));
-  for (const auto& kv : node) {
-    const std::string key = kv.first.as<std::string>();
-    if (key == "source") {
-      m.tool_tip_source = yaml_string(kv.second, w + ".source");
-      continue;
-    }
-    if (key != "x" && key != "y") throw ConfigError(fmt::format("{}: unknown key '{}' (x, y, source)", w, key));
-    if (!kv.second.IsSequence()) throw ConfigError(fmt::format("{}.{} must be a list of modes", w, key));
-    auto& modes = key == "x" ? m.tool_tip.x : m.tool_tip.y;
-    std::size_t i = 0;
-    for (const auto& mode : kv.second) {
-      const std::string mw = fmt::format("{}.{}[{}]", w, key, i++);
-      if (!mode.IsMap()) throw ConfigError(fmt::format("{} must be a map fn_Hz, zeta, k_N_per_m", mw));
-      process::ToolTipMode tm;
-      bool fn = false, z = false, k = false;
-      for (const auto& f : mode) {
-        const std::string fk = f.first.as<std::string>();
-        if (fk == "fn_Hz") tm.fn_Hz = yaml_number(f.second, mw + ".fn_Hz"), fn = true;
-        else if (fk == "zeta") tm.zeta = yaml_number(f.second, mw + ".zeta"), z = true;
-        else if (fk == "k_N_per_m") tm.k_N_per_m = yaml_number(f.second, mw + ".k_N_per_m"), k = true;
-        else throw ConfigError(fmt::format("{}: unknown key '{}' (fn_Hz, zeta, k_N_per_m)", mw, fk));
-      }
-      if (!fn || !z || !k) throw ConfigError(fmt::format("{}: needs fn_Hz, zeta and k_N_per_m", mw));
-      modes.push_back(tm);
-    }
   }
 }
 
@@ -238,7 +207,7 @@ sim::MachineDefinition load_machine(const std::filesystem::path& path) {
     if (key == "name") {
       m.name = yaml_string(kv.second, where + ": name");
     } else if (key == "tool_tip") {
-      parse_tool_tip(kv.second, m, where);
+      m.tool_tip = parse_tool_tip(kv.second, where + ": tool_tip", m.tool_tip_source);
     } else if (key == "structure") {
       parse_structure(kv.second, m, where);
     } else if (key == "description") {

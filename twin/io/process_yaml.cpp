@@ -33,6 +33,7 @@ class YamlSetupNode final : public sim::SetupNode {
   std::unique_ptr<sim::SetupNode> item(std::size_t i) const override { return wrap(node_[i]); }
   double number(const std::string& where) const override { return yaml_number(node_, where); }
   std::string name(const std::string& where) const override { return yaml_name(node_, where); }
+  std::string text(const std::string& where) const override { return yaml_string(node_, where); }
   std::string locate(const std::string& where, const std::string& key) const override { return at(where, node_, key); }
   std::string locate_key(const std::string& where, const std::string& key, const std::string& label) const override {
     for (const auto& kv : node_)
@@ -75,6 +76,10 @@ process::CuttingCoefficients parse_material(const YAML::Node& node, const std::s
 process::CuttingCoefficients load_material_file(const std::filesystem::path& path, double lead_deg, double tilt_deg) {
   return sim::read_material_document(YamlSetupNode(load_yaml_file(path), path.parent_path()), path.string(), lead_deg,
                                      tilt_deg);
+}
+
+process::ToolTipFrf parse_tool_tip(const YAML::Node& node, const std::string& where, std::string& source) {
+  return sim::read_tool_tip(YamlSetupNode(node, {}), where, &source);
 }
 
 process::ProcessSetup parse_process_setup(const YAML::Node& node, const std::string& where,

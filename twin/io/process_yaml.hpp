@@ -20,6 +20,9 @@ process::ToolGeometry load_tool_file(const std::filesystem::path& path);
 process::CuttingCoefficients parse_material(const YAML::Node& node, const std::string& where, double lead_deg,
                                             double tilt_deg);
 process::CuttingCoefficients load_material_file(const std::filesystem::path& path, double lead_deg, double tilt_deg);
+/// A machine file's `tool_tip:` map (x and y mode lists and its `source`, into
+/// `source` when present); `where` names it ("machine.yaml: tool_tip").
+process::ToolTipFrf parse_tool_tip(const YAML::Node& node, const std::string& where, std::string& source);
 /// The whole `process:` section; relative file names are taken from `dir`.
 process::ProcessSetup parse_process_setup(const YAML::Node& node, const std::string& where,
                                           const std::filesystem::path& dir);

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <array>
 #include <cerrno>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
@@ -585,6 +586,91 @@ std::vector<std::filesystem::path> plot_data_calibration(io::ResultSet& results,
   script += "unset multiplot\n";
   run_gnuplot(results.staging_dir(), script, {"overlay.png", "evidence.png"});
   return {results.path("overlay.png"), results.path("evidence.png")};
+}
+
+
+namespace {
+/// The force components of the force calibration's files, in their order.
+constexpr std::array<const char*, 3> kForceNames{"fx_N", "fy_N", "fz_N"};
+}  // namespace
+
+std::vector<std::filesystem::path> plot_force_calibration(const std::filesystem::path& dir,
+                                                          const ForceCalibrationPlots& plots) {
+  std::vector<std::string> outputs{"revolution.png"};
+  const std::string rev = gnuplot_file(plots.revolution_name);
+  std::string g = "set datafile separator ','\nset grid\n";
+  const std::size_t nf = std::max<std::size_t>(1, plots.feed_fz_mm.size());
+  g += fmt::format("set terminal pngcairo size 1500,{} noenhanced\nset output {}\nset multiplot layout {},3\n",
+                   260 * nf, gnuplot_output("revolution.png"), nf);
+  for (std::size_t i = 0; i < plots.feed_fz_mm.size(); ++i)
+    for (int a = 0; a < 3; ++a)
+      g += fmt::format("set title 'feed {} (fz {:.4f} mm): {} over one revolution'\nset xlabel 'spindle angle deg'\n"
+                       "set ylabel 'N'\nplot {} index {} every ::1 using 2:{} with points pt 7 ps 0.4 title 'measured', "
+                       "'' index {} every ::1 using 2:{} with lines lw 2 title 'model'\n",
+                       i, plots.feed_fz_mm[i], kForceNames[a], rev, i, 3 + 2 * a, i, 4 + 2 * a);
+  g += "unset multiplot\n";
+  if (plots.spectrum) {
+    outputs.push_back("residual_spectrum.png");
+    g += fmt::format("set terminal pngcairo size 1200,900 noenhanced\nset output {}\nset multiplot layout 3,1\n",
+                     gnuplot_output("residual_spectrum.png"));
+    for (int a = 0; a < 3; ++a) {
+      g += "unset arrow\n";
+      for (double f = plots.spindle_Hz; f < plots.spectrum_max_Hz; f += plots.spindle_Hz) {
+        const bool tooth = std::abs(std::fmod(f / plots.tooth_Hz + 0.5, 1.0) - 0.5) < 1e-6;
+        if (!tooth && f > 5.5 * plots.spindle_Hz) continue;
+        g += fmt::format("set arrow from {:.3f}, graph 0 to {:.3f}, graph 1 nohead lc rgb '{}' dt 2\n", f, f,
+                         tooth ? "#2060c0" : "#c02020");
+      }
+      g += fmt::format("set title 'residual spectrum {} (red dashed: spindle harmonics, blue: tooth harmonics)'\n"
+                       "set xlabel 'Hz'\nset ylabel 'N'\nset logscale y\nplot {} every ::1 using 1:{} with lines "
+                       "title 'before', '' every ::1 using 1:{} with lines title 'after'\nunset logscale y\n",
+                       kForceNames[a], gnuplot_file(plots.spectrum_name), 2 + a, 5 + a);
+    }
+    g += "unset multiplot\n";
+  }
+  run_gnuplot(dir, g, outputs);
+  std::vector<std::filesystem::path> written;
+  for (const auto& o : outputs) written.push_back(dir / o);
+  return written;
+}
+
+std::vector<std::filesystem::path> plot_sweep(io::ResultSet& results, const SweepPlots& plots) {
+  if (plots.columns.empty()) return {};
+  std::string g = "set datafile separator ','\n"
+                  "set terminal pngcairo size 1200,900 font 'DejaVu Sans,11' noenhanced\n"
+                  "set grid\nset xlabel 'case'\n"
+                  "set output " + gnuplot_output("summary.png") + "\n";
+  g += fmt::format("set multiplot layout {},1\n", plots.columns.size());
+  for (const auto& c : plots.columns)
+    g += "set title " + gnuplot_text(c + " per case (failed cases left out)") + "\nplot " +
+         gnuplot_file(plots.results_name) + " using 'case':(column(" + gnuplot_text(c) +
+         ")) with linespoints pt 7 lc rgb '#1f77b4' notitle\n";
+  g += "unset multiplot\nunset output\n";
+  std::vector<std::filesystem::path> written{results.path("summary.png")};
+  run_gnuplot(results.staging_dir(), g, {"summary.png"});
+  return written;
+}
+
+std::vector<std::filesystem::path> plot_lobes(io::ResultSet& results, const LobesPlot& p) {
+  // Depths up to the boundary's highest, but at least the scenario's and at
+  // most what shows the lowest lobes and the scenario's point well.
+  const double a_top =
+      std::min(std::max(3.0 * p.lobe_min_mm, 1.5 * p.ap_mm), std::max(p.boundary_max_mm, p.ap_mm));
+  const std::string title = fmt::format("{}: zero-order stability lobes, {} teeth, immersion {:.0f}-{:.0f} deg",
+                                        p.scenario, p.teeth, p.entry_deg, p.exit_deg);
+  const std::string script = fmt::format(
+      "set terminal pngcairo size 1100,650 noenhanced\nset output {}\nset datafile separator ','\n"
+      "set title {}\nset xlabel 'spindle speed, rev/min'\nset ylabel 'axial depth of cut, mm'\n"
+      "set logscale x\nset xrange [{}:{}]\nset yrange [0:{}]\nset grid\nset key top left\n"
+      "plot {} skip 1 using 1:2 with lines lw 2 lc rgb '#1f4e99' title 'stability boundary (chatter above)', "
+      "'-' using 1:2 with points pt 7 ps 2 lc rgb '{}' title {}\n{},{}\ne\n",
+      gnuplot_output("lobes.png"), gnuplot_text(title), p.rpm_min, p.rpm_max, a_top, gnuplot_file(p.boundary_name),
+      p.stable ? "#2a9d3a" : "#c0392b",
+      gnuplot_text(fmt::format("scenario: {:.0f} rpm, ap {:.3g} mm ({})", p.rpm, p.ap_mm,
+                               p.stable ? "stable" : "chatter")),
+      p.rpm, p.ap_mm);
+  run_gnuplot(results.staging_dir(), script, {"lobes.png"});
+  return {results.path("lobes.png")};
 }
 
 }  // namespace twin::analysis

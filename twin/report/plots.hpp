@@ -105,4 +105,55 @@ std::vector<std::filesystem::path> plot_data_calibration(io::ResultSet& results,
 /// and contour error through it). Returns the plots written (staged paths of `results`).
 std::vector<std::filesystem::path> plot_tuning(io::ResultSet& results, const TunePlots& plots);
 
+/// What `twin calibrate`'s force figures draw, from two files in the folder:
+/// `revolution_name` (one gnuplot index per feed: feed, theta_deg, then fx, fy
+/// and fz measured and model in N) and `spectrum_name` (f_hz, then fx, fy and
+/// fz before, then after, in N).
+struct ForceCalibrationPlots {
+  std::string revolution_name{"revolution.csv"};
+  std::vector<double> feed_fz_mm;  ///< the feed per tooth of each index of the revolution file
+  std::string spectrum_name{"residual_spectrum.csv"};
+  bool spectrum{false};            ///< the spectrum file is there: residual_spectrum.png
+  double spectrum_max_Hz{0.0};     ///< the spectrum's last frequency
+  double spindle_Hz{0.0};          ///< harmonics of the spindle marked (red) ...
+  double tooth_Hz{0.0};            ///< ... and of the tooth passing (blue)
+};
+
+/// revolution.png (per feed and force component, measured and model over one
+/// revolution) and with a spectrum residual_spectrum.png (before and after, the
+/// harmonics marked), drawn in `dir` (not a result set: the force calibration
+/// writes its files in place). Returns the paths written.
+std::vector<std::filesystem::path> plot_force_calibration(const std::filesystem::path& dir,
+                                                          const ForceCalibrationPlots& plots);
+
+/// What `twin sweep`'s figure draws: `columns` (one or two) of `results_name`
+/// in the result set, per case.
+struct SweepPlots {
+  std::string results_name{"results.csv"};
+  std::vector<std::string> columns;  ///< empty: nothing to draw
+};
+
+/// summary.png: each column per case, failed cases left out. Returns the plots
+/// written (staged paths of `results`; none without columns).
+std::vector<std::filesystem::path> plot_sweep(io::ResultSet& results, const SweepPlots& plots);
+
+/// What `twin lobes`' figure draws: the stability boundary from `boundary_name`
+/// in the result set (a header, then spindle_rpm, a_crit_mm) and the
+/// scenario's own speed and depth.
+struct LobesPlot {
+  std::string boundary_name{"boundary.csv"};
+  std::string scenario;
+  int teeth{0};
+  double entry_deg{0.0}, exit_deg{0.0};  ///< the cut's immersion
+  double rpm_min{0.0}, rpm_max{0.0};     ///< the speed axis
+  double boundary_max_mm{0.0};           ///< the boundary's highest finite depth (0: none)
+  double lobe_min_mm{0.0};               ///< the lowest depth of any lobe
+  double rpm{0.0}, ap_mm{0.0};           ///< the scenario's cut
+  bool stable{true};
+};
+
+/// lobes.png: the boundary over speed (log) with the scenario's point, green
+/// when stable, red when it chatters. Returns the plots written (staged paths of `results`).
+std::vector<std::filesystem::path> plot_lobes(io::ResultSet& results, const LobesPlot& plot);
+
 }  // namespace twin::analysis

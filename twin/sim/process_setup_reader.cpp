@@ -1,5 +1,7 @@
 #include "twin/sim/process_setup_reader.hpp"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <set>
 
@@ -242,6 +244,49 @@ std::string material_name(const process::CuttingCoefficients& k, double lead_deg
   if (n.size() > suffix.size() && n.compare(n.size() - suffix.size(), suffix.size(), suffix) == 0)
     return n.substr(0, n.size() - suffix.size());
   return n;
+}
+
+process::ToolTipFrf read_tool_tip(const SetupNode& node, const std::string& where, std::string* source) {
+  namespace k = setup_keys;
+  if (!node.is_map()) throw ConfigError(fmt::format("{} must be a map with x and/or y mode lists", where));
+  process::ToolTipFrf frf;
+  for (const std::string& key : node.keys()) {
+    const Node value = node.get(key);
+    if (source != nullptr && key == k::kToolTipSource) {
+      *source = value->text(where + "." + key);
+      continue;
+    }
+    if (key != "x" && key != "y")
+      throw ConfigError(
+          fmt::format("{}: unknown key '{}' ({})", where, key, source != nullptr ? "x, y, source" : "x, y"));
+    if (!value->is_list()) throw ConfigError(fmt::format("{}.{} must be a list of modes", where, key));
+    auto& modes = key == "x" ? frf.x : frf.y;
+    for (std::size_t i = 0; i < value->size(); ++i) {
+      const std::string mw = fmt::format("{}.{}[{}]", where, key, i);
+      const Node mode = value->item(i);
+      if (!mode->is_map()) throw ConfigError(fmt::format("{} must be a map fn_Hz, zeta, k_N_per_m", mw));
+      process::ToolTipMode tm;
+      struct Field {
+        const char* key;
+        double* value;
+        bool seen;
+      };
+      std::array<Field, 3> fields{{{k::kModeFn, &tm.fn_Hz, false},
+                                   {k::kModeZeta, &tm.zeta, false},
+                                   {k::kModeStiffness, &tm.k_N_per_m, false}}};
+      for (const std::string& fk : mode->keys()) {
+        const auto f = std::find_if(fields.begin(), fields.end(), [&](const Field& x) { return fk == x.key; });
+        if (f == fields.end())
+          throw ConfigError(fmt::format("{}: unknown key '{}' (fn_Hz, zeta, k_N_per_m)", mw, fk));
+        *f->value = mode->get(fk)->number(mw + "." + fk);
+        f->seen = true;
+      }
+      if (!std::all_of(fields.begin(), fields.end(), [](const Field& x) { return x.seen; }))
+        throw ConfigError(fmt::format("{}: needs fn_Hz, zeta and k_N_per_m", mw));
+      modes.push_back(tm);
+    }
+  }
+  return frf;
 }
 
 process::ProcessSetup read_process_setup(const SetupNode& n, const std::string& where) {

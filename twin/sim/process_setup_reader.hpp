@@ -32,6 +32,8 @@ class SetupNode {
   virtual double number(const std::string& where) const = 0;
   /// The scalar as a name: non-empty, one line, no control characters.
   virtual std::string name(const std::string& where) const = 0;
+  /// The scalar as free text (may be empty).
+  virtual std::string text(const std::string& where) const = 0;
   /// "where:line: key" when the document knows the node's line, else "where: key".
   virtual std::string locate(const std::string& where, const std::string& key) const = 0;
   /// As locate, at the line of this map's key `key`; `label` names it.
@@ -51,6 +53,12 @@ inline constexpr const char* kSets = "sets";
 inline constexpr const char* kStock = "stock";
 inline constexpr const char* kModel = "model";
 inline constexpr const char* kRunout = "runout";
+/// The tool tip's modes (read_tool_tip).
+inline constexpr const char* kToolTip = "tool_tip";
+inline constexpr const char* kToolTipSource = "source";
+inline constexpr const char* kModeFn = "fn_Hz";
+inline constexpr const char* kModeZeta = "zeta";
+inline constexpr const char* kModeStiffness = "k_N_per_m";
 }  // namespace setup_keys
 
 /// A tool map (keys of process::ToolGeometry, `type` flat|bull_nose|ball).
@@ -63,6 +71,13 @@ process::CuttingCoefficients read_material(const SetupNode& node, const std::str
 /// A document holding `material:` (a material file).
 process::CuttingCoefficients read_material_document(const SetupNode& root, const std::string& where,
                                                     double lead_deg, double tilt_deg);
+/// The tool tip's modes: a map of `x` and `y`, each a list of modes
+/// {fn_Hz, zeta, k_N_per_m} (`tool_tip:` of a machine file, `process.tool_tip`
+/// of the FMU's resources). With `source` (a machine file) the map may also hold
+/// `source:`, the text saying where the modes come from. `where` names the map
+/// ("machine.yaml: tool_tip"). The modes' values are checked by
+/// process::ToolTipFrf::validate, which the caller runs.
+process::ToolTipFrf read_tool_tip(const SetupNode& node, const std::string& where, std::string* source = nullptr);
 /// The whole `process:` section.
 process::ProcessSetup read_process_setup(const SetupNode& node, const std::string& where);
 /// The material's own name, as read_material was given it (it names the

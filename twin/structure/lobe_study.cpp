@@ -186,26 +186,20 @@ std::vector<std::filesystem::path> write_lobe_study(io::ResultSet& results, cons
     written.push_back(results.path("report.json"));
   }
   {
-    double a_top = 0.0;
+    analysis::LobesPlot plot;
+    plot.scenario = s.scenario;
+    plot.teeth = s.settings.teeth;
+    plot.entry_deg = s.cut.immersion.phi_st_rad * 180.0 / kPi;
+    plot.exit_deg = s.cut.immersion.phi_ex_rad * 180.0 / kPi;
+    plot.rpm_min = s.rpm_min;
+    plot.rpm_max = s.rpm_max;
     for (const auto& [n, a, f] : s.boundary)
-      if (std::isfinite(a)) a_top = std::max(a_top, a);
-    a_top = std::min(std::max(3.0 * s.lobes.a_lim_min_mm, 1.5 * s.cut.ap_mm), std::max(a_top, s.cut.ap_mm));
-    const std::string title = fmt::format("{}: zero-order stability lobes, {} teeth, immersion {:.0f}-{:.0f} deg",
-                                          s.scenario, s.settings.teeth, s.cut.immersion.phi_st_rad * 180.0 / kPi,
-                                          s.cut.immersion.phi_ex_rad * 180.0 / kPi);
-    std::string script = fmt::format(
-        "set terminal pngcairo size 1100,650 noenhanced\nset output {}\nset datafile separator ','\n"
-        "set title {}\nset xlabel 'spindle speed, rev/min'\nset ylabel 'axial depth of cut, mm'\n"
-        "set logscale x\nset xrange [{}:{}]\nset yrange [0:{}]\nset grid\nset key top left\n"
-        "plot {} skip 1 using 1:2 with lines lw 2 lc rgb '#1f4e99' title 'stability boundary (chatter above)', "
-        "'-' using 1:2 with points pt 7 ps 2 lc rgb '{}' title {}\n{},{}\ne\n",
-        analysis::gnuplot_output("lobes.png"), analysis::gnuplot_text(title), s.rpm_min, s.rpm_max, a_top,
-        analysis::gnuplot_file("boundary.csv"), s.stable ? "#2a9d3a" : "#c0392b",
-        analysis::gnuplot_text(fmt::format("scenario: {:.0f} rpm, ap {:.3g} mm ({})", s.rpm, s.cut.ap_mm,
-                                           s.stable ? "stable" : "chatter")),
-        s.rpm, s.cut.ap_mm);
-    analysis::run_gnuplot(results.staging_dir(), script, {"lobes.png"});
-    written.push_back(results.path("lobes.png"));
+      if (std::isfinite(a)) plot.boundary_max_mm = std::max(plot.boundary_max_mm, a);
+    plot.lobe_min_mm = s.lobes.a_lim_min_mm;
+    plot.rpm = s.rpm;
+    plot.ap_mm = s.cut.ap_mm;
+    plot.stable = s.stable;
+    for (const auto& p : analysis::plot_lobes(results, plot)) written.push_back(p);
   }
   return written;
 }
