@@ -20,11 +20,8 @@
 namespace twin::feeddrive {
 namespace {
 
-using testing::fadal_x;
-using testing::fadal_y;
-using testing::HandPid;
-
-constexpr double kTs_s = 1e-4;
+// The FADAL fixture: its drives, gains, hand-written loop, period and encoder count.
+using namespace testing;
 
 struct Variant {
   std::string name;
@@ -36,32 +33,21 @@ std::vector<Variant> variants() {
   v.push_back({"default", IntegratorOptions{}});
   // The other variants test SUNDIALS itself: every tick integrated, no
   // closed-form shortcut for the ordinary ticks (closed_form_test compares the two).
-  IntegratorOptions d;
-  d.exact_linear_ticks = false;
+  IntegratorOptions d{.exact_linear_ticks = false};
   v.push_back({"default_sundials_every_tick", d});
-  IntegratorOptions a;
-  a.exact_linear_ticks = false;
-  a.one_instance_for_all_axes = false;
-  a.method = IntegratorOptions::Method::kCvodeAdams;
-  a.rtol = 1e-10;
-  a.reinit_every_tick = true;
+  IntegratorOptions a{.method = IntegratorOptions::Method::kCvodeAdams, .rtol = 1e-10, .reinit_every_tick = true,
+                      .one_instance_for_all_axes = false, .exact_linear_ticks = false};
   v.push_back({"cvode_adams_reinit", a});
   a.one_instance_for_all_axes = true;
   v.push_back({"cvode_adams_reinit_shared", a});
   a.one_instance_for_all_axes = false;
   a.reinit_every_tick = false;
   v.push_back({"cvode_adams_no_reinit", a});
-  IntegratorOptions b;
-  b.exact_linear_ticks = false;
-  b.one_instance_for_all_axes = false;
-  b.method = IntegratorOptions::Method::kCvodeBdf;
-  b.rtol = 1e-10;
+  IntegratorOptions b{.method = IntegratorOptions::Method::kCvodeBdf, .rtol = 1e-10, .one_instance_for_all_axes = false,
+                      .exact_linear_ticks = false};
   v.push_back({"cvode_bdf_reinit", b});
-  IntegratorOptions e;
-  e.exact_linear_ticks = false;
-  e.method = IntegratorOptions::Method::kArkodeErk;
-  e.erk_fixed_steps_per_tick = 1;
-  e.one_instance_for_all_axes = false;
+  IntegratorOptions e{.method = IntegratorOptions::Method::kArkodeErk, .one_instance_for_all_axes = false,
+                      .erk_fixed_steps_per_tick = 1, .exact_linear_ticks = false};
   v.push_back({"arkode_erk_fixed_Ts_per_axis", e});
   e.erk_fixed_steps_per_tick = 0;
   e.rtol = 1e-10;
