@@ -54,8 +54,7 @@ TEST(ConstantLoad, ShiftsSteadyCommandByLoadOverKaKt) {
 // speed follows w = (Kt i_max - Tc)/B (1 - exp(-B t/J)). Tolerance 1e-7 relative.
 TEST(CurrentSaturation, CapsCurrentAndAcceleration) {
   DriveParams p = fadal_x();
-  p.effects.current_saturation.enabled = true;
-  p.effects.current_saturation.i_max_A = 5.0;
+  p.effects.current_saturation = {.enabled = true, .i_max_A = 5.0};
   DriveBank bank = axis_at_rest(p);
   run_constant(bank, 10.0, 2000);
   EXPECT_DOUBLE_EQ(bank.output(0).i_A, 5.0);
@@ -103,10 +102,7 @@ TEST(Compliance, FreeResponseResonanceFrequency) {
   DriveParams p = fadal_x();
   p.Tc_pos_Nm = p.Tc_neg_Nm = 0.0;
   p.B_kg_m2_per_s = 0.0;
-  p.effects.compliance.enabled = true;
-  p.effects.compliance.K_Nm_per_rad = 7000.0;
-  p.effects.compliance.C_Nm_s_per_rad = 0.0;
-  p.effects.compliance.load_fraction = 0.6;
+  p.effects.compliance = {.enabled = true, .K_Nm_per_rad = 7000.0, .C_Nm_s_per_rad = 0.0, .load_fraction = 0.6};
   const double Jl = p.J_kg_m2 * 0.6;
   const double Jm = p.J_kg_m2 - Jl;
   const double omega = std::sqrt(7000.0 * (1.0 / Jm + 1.0 / Jl));
@@ -137,8 +133,7 @@ TEST(Compliance, FreeResponseResonanceFrequency) {
 // leads by gap/2. Tolerance 1e-12 mm where both sides are the same state.
 TEST(Backlash, LostMotionAtReversalEqualsGap) {
   DriveParams p = fadal_y();
-  p.effects.backlash.enabled = true;
-  p.effects.backlash.gap_mm = 0.02;
+  p.effects.backlash = {.enabled = true, .gap_mm = 0.02};
   DriveBank bank = axis_at_rest(p);
   run_constant(bank, 1.0, 1000);
   EXPECT_NEAR(bank.output(0).x_mm, bank.state(0).x_mm - 0.01, 1e-12);
@@ -171,12 +166,8 @@ TEST(Backlash, LostMotionAtReversalEqualsGap) {
 TEST(Backlash, InTheCouplingTheMotorCrossesTheGapFree) {
   DriveParams p = fadal_x();
   p.B_kg_m2_per_s = 0.0;
-  p.effects.compliance.enabled = true;
-  p.effects.compliance.K_Nm_per_rad = 5000.0;
-  p.effects.compliance.C_Nm_s_per_rad = 0.5;
-  p.effects.compliance.load_fraction = 0.5;
-  p.effects.backlash.enabled = true;
-  p.effects.backlash.gap_mm = 0.02;
+  p.effects.compliance = {.enabled = true, .K_Nm_per_rad = 5000.0, .C_Nm_s_per_rad = 0.5, .load_fraction = 0.5};
+  p.effects.backlash = {.enabled = true, .gap_mm = 0.02};
   const double Jm = 0.5 * p.J_kg_m2;
   const double u_V = 0.02;  // Tm = 0.062 N m, below the load's friction 0.2 N m
   const double Tm = p.Ka_A_per_V * p.Kt_Nm_per_A * u_V;
