@@ -7,20 +7,20 @@
 // positions at every tick, for every integrator arrangement.
 #include <gtest/gtest.h>
 
-#include <Eigen/Dense>
-#include <unsupported/Eigen/MatrixFunctions>
 #include <cmath>
 #include <functional>
 #include <string>
 #include <vector>
 
+#include "exact_loop.hpp"
 #include "fadal_fixture.hpp"
 #include "feeddrive/drive_bank.hpp"
 
 namespace twin::feeddrive {
 namespace {
 
-// The FADAL fixture: its drives, gains, hand-written loop, period and encoder count.
+// The FADAL fixture (its drives, gains, hand-written loop, period and encoder
+// count) and the exact discrete loop.
 using namespace testing;
 
 struct Variant {
@@ -55,21 +55,6 @@ std::vector<Variant> variants() {
   return v;
 }
 
-// Exact ZOH step of one frictionless axis.
-struct ExactAxis {
-  Eigen::Matrix2d Ad;
-  Eigen::Vector2d Bd;
-  explicit ExactAxis(const DriveParams& p) {
-    Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
-    M(0, 1) = p.rg_mm_per_rad;
-    M(1, 1) = -p.B_kg_m2_per_s / p.J_kg_m2;
-    M(1, 2) = p.Ka_A_per_V * p.Kt_Nm_per_A / p.J_kg_m2;
-    const Eigen::Matrix3d E = (M * kTs_s).exp();
-    Ad = E.topLeftCorner<2, 2>();
-    Bd = E.topRightCorner<2, 1>();
-  }
-};
-
 DriveParams frictionless(DriveParams p) {
   p.Tc_pos_Nm = 0.0;
   p.Tc_neg_Nm = 0.0;
@@ -83,23 +68,7 @@ double max_error_mm(const IntegratorOptions& options, const std::function<double
   const std::vector<DriveParams> params{frictionless(fadal_x()), frictionless(fadal_y())};
   DriveBank bank(params, kTs_s, options);
   bank.reset({x0_mm, x0_mm});
-  std::vector<HandPid> pid_bank{HandPid(testing::fadal_x_gains(), kTs_s), HandPid(testing::fadal_y_gains(), kTs_s)};
-  std::vector<HandPid> pid_exact = pid_bank;
-  std::vector<ExactAxis> exact{ExactAxis(params[0]), ExactAxis(params[1])};
-  std::vector<Eigen::Vector2d> z(2, Eigen::Vector2d(x0_mm, 0.0));
-  std::vector<DriveInput> in(2);
-  double worst = 0.0;
-  for (int k = 0; k < n; ++k) {
-    for (int a = 0; a < 2; ++a) {
-      const double r = ref_mm(a, k);
-      in[a].u_V = pid_bank[a].step(r, bank.output(a).x_meas_mm);
-      const double u_exact = pid_exact[a].step(r, z[a](0));
-      z[a] = exact[a].Ad * z[a] + exact[a].Bd * u_exact;
-    }
-    bank.advance(k * kTs_s, (k + 1) * kTs_s, in);
-    for (int a = 0; a < 2; ++a) worst = std::max(worst, std::abs(bank.output(a).x_mm - z[a](0)));
-  }
-  return worst;
+  return max_deviation_from_exact(bank, params, {fadal_x_gains(), fadal_y_gains()}, ref_mm, n, x0_mm);
 }
 
 class LinearResponse : public ::testing::TestWithParam<Variant> {};
