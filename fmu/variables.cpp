@@ -150,18 +150,19 @@ Variable variable(std::string name, Causality causality, std::string unit, std::
   return v;
 }
 
+/// A variable without a unit of `type` (Integer or Boolean) and `variability`.
+Variable unitless(std::string name, VarType type, Causality causality, Variability variability, std::string description,
+                  VarKind kind) {
+  Variable v = variable(std::move(name), causality, "", std::move(description), kind);
+  v.type = type;
+  v.variability = variability;
+  return v;
+}
+
 /// The mode switch and the machine's and the present axes' parameters.
 void add_parameters(std::vector<Variable>& v, const sim::MachineDefinition& machine, const std::vector<Axis>& axes) {
-  {
-    Variable m;
-    m.name = "mode";
-    m.type = VarType::kInteger;
-    m.causality = Causality::kParameter;
-    m.variability = Variability::kFixed;
-    m.description = "1: follow the x_ref_mm inputs; 2: run the built-in part program";
-    m.kind = VarKind::kMode;
-    v.push_back(m);
-  }
+  v.push_back(unitless("mode", VarType::kInteger, Causality::kParameter, Variability::kFixed,
+                       "1: follow the x_ref_mm inputs; 2: run the built-in part program", VarKind::kMode));
   for (const auto& spec : sim::machine_param_specs()) {
     Variable p = variable(std::string(spec.name), Causality::kParameter, fmi_unit(spec.unit), std::string(spec.doc),
                           VarKind::kMachineParam);
@@ -191,18 +192,11 @@ void add_inputs(std::vector<Variable>& v, const std::vector<Axis>& axes) {
     in.axis = index(a);
     v.push_back(in);
   }
-  {
-    Variable in;
-    in.name = "spindle_override";
-    in.type = VarType::kBoolean;
-    in.causality = Causality::kInput;
-    in.variability = Variability::kDiscrete;
-    in.description = "true: the spindle turns at spindle_rpm instead of the program's speed";
-    in.kind = VarKind::kSpindleOverride;
-    v.push_back(in);
-    v.push_back(variable("spindle_rpm", Causality::kInput, fmi_unit("rpm"),
-                         "spindle speed used when spindle_override is true (> 0 clockwise)", VarKind::kSpindleInput));
-  }
+  v.push_back(unitless("spindle_override", VarType::kBoolean, Causality::kInput, Variability::kDiscrete,
+                       "true: the spindle turns at spindle_rpm instead of the program's speed",
+                       VarKind::kSpindleOverride));
+  v.push_back(variable("spindle_rpm", Causality::kInput, fmi_unit("rpm"),
+                       "spindle speed used when spindle_override is true (> 0 clockwise)", VarKind::kSpindleInput));
   for (std::size_t i = 0; i < 3; ++i) {
     Variable in = variable("f" + std::string(axis_name(i)) + "_ext_N", Causality::kInput, "N",
                            "external force on the workpiece, added to the cutting force", VarKind::kForceInput);
@@ -231,22 +225,10 @@ void add_outputs(std::vector<Variable>& v, const std::vector<Axis>& axes, bool v
   for (const auto& o : kOutputs) add_output(o);
   if (vibrating_tool)
     for (const auto& o : kToolOutputs) add_output(o);
-  {
-    Variable out;
-    out.name = "block";
-    out.type = VarType::kInteger;
-    out.variability = Variability::kDiscrete;
-    out.description = "index of the program block in progress (-1 none)";
-    out.kind = VarKind::kBlockOutput;
-    v.push_back(out);
-    out = Variable{};
-    out.name = "reference_done";
-    out.type = VarType::kBoolean;
-    out.variability = Variability::kDiscrete;
-    out.description = "true once the program's motion has finished";
-    out.kind = VarKind::kDoneOutput;
-    v.push_back(out);
-  }
+  v.push_back(unitless("block", VarType::kInteger, Causality::kOutput, Variability::kDiscrete,
+                       "index of the program block in progress (-1 none)", VarKind::kBlockOutput));
+  v.push_back(unitless("reference_done", VarType::kBoolean, Causality::kOutput, Variability::kDiscrete,
+                       "true once the program's motion has finished", VarKind::kDoneOutput));
 }
 
 }  // namespace

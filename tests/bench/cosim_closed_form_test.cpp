@@ -45,20 +45,21 @@ Deviation run_side_by_side(bool coupled) {
   return d;
 }
 
-TEST(CosimClosedForm, DefaultAirCutPositionsWithin1e9mmOfSundials) {
-  const Deviation d = run_side_by_side(false);
+/// Both runs' positions and contour errors within 1e-9 mm of each other (printed for the record).
+void expect_within_1e9_mm_of_sundials(bool coupled, const char* what) {
+  const Deviation d = run_side_by_side(coupled);
   EXPECT_LT(d.max_x_mm, 1e-9);
   EXPECT_LT(d.max_contour_mm, 1e-9);
-  std::printf("air cut: max |x_closed_form - x_sundials| = %.3g mm, contour error %.3g mm\n", d.max_x_mm,
+  std::printf("%s: max |x_closed_form - x_sundials| = %.3g mm, contour error %.3g mm\n", what, d.max_x_mm,
               d.max_contour_mm);
 }
 
+TEST(CosimClosedForm, DefaultAirCutPositionsWithin1e9mmOfSundials) {
+  expect_within_1e9_mm_of_sundials(false, "air cut");
+}
+
 TEST(CosimClosedForm, DefaultCoupledPositionsWithin1e9mmOfSundials) {
-  const Deviation d = run_side_by_side(true);
-  EXPECT_LT(d.max_x_mm, 1e-9);
-  EXPECT_LT(d.max_contour_mm, 1e-9);
-  std::printf("coupled: max |x_closed_form - x_sundials| = %.3g mm, contour error %.3g mm\n", d.max_x_mm,
-              d.max_contour_mm);
+  expect_within_1e9_mm_of_sundials(true, "coupled");
 }
 
 }  // namespace

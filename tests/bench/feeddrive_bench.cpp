@@ -7,11 +7,10 @@
 // same loop without quantisation against the exact discrete loop, 1 s).
 #include <benchmark/benchmark.h>
 
-#include <Eigen/Dense>
-#include <unsupported/Eigen/MatrixFunctions>
 #include <cmath>
 #include <vector>
 
+#include "../feeddrive/exact_loop.hpp"
 #include "../feeddrive/fadal_fixture.hpp"
 #include "feeddrive/drive_bank.hpp"
 
@@ -140,32 +139,9 @@ void BM_Drives3Axes(benchmark::State& st) {
   const auto lin = axes3(false);
   DriveBank bank(lin, kTs_s, variant(id));
   bank.reset({100.0, 100.0, 100.0});
-  std::vector<testing::HandPid> pid_b{testing::HandPid(testing::fadal_x_gains(), kTs_s),
-                                      testing::HandPid(testing::fadal_y_gains(), kTs_s),
-                                      testing::HandPid(testing::fadal_y_gains(), kTs_s)};
-  auto pid_e = pid_b;
-  std::vector<Eigen::Matrix2d> Ad(3);
-  std::vector<Eigen::Vector2d> Bd(3), z(3, Eigen::Vector2d(100.0, 0.0));
-  for (int a = 0; a < 3; ++a) {
-    Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
-    M(0, 1) = lin[a].rg_mm_per_rad;
-    M(1, 1) = -lin[a].B_kg_m2_per_s / lin[a].J_kg_m2;
-    M(1, 2) = lin[a].Ka_A_per_V * lin[a].Kt_Nm_per_A / lin[a].J_kg_m2;
-    const Eigen::Matrix3d E = (M * kTs_s).exp();
-    Ad[a] = E.topLeftCorner<2, 2>();
-    Bd[a] = E.topRightCorner<2, 1>();
-  }
-  std::vector<DriveInput> in(3);
-  double worst = 0.0;
-  for (long k = 0; k < ticks; ++k) {
-    for (int a = 0; a < 3; ++a) {
-      const double r = reference_mm(a, k);
-      in[a].u_V = pid_b[a].step(r, bank.output(a).x_meas_mm);
-      z[a] = Ad[a] * z[a] + Bd[a] * pid_e[a].step(r, z[a](0));
-    }
-    bank.advance(k * kTs_s, (k + 1) * kTs_s, in);
-    for (int a = 0; a < 3; ++a) worst = std::max(worst, std::abs(bank.output(a).x_mm - z[a](0)));
-  }
+  const double worst = testing::max_deviation_from_exact(
+      bank, lin, {testing::fadal_x_gains(), testing::fadal_y_gains(), testing::fadal_y_gains()}, reference_mm, ticks,
+      100.0);
   st.counters["max_err_mm"] = worst;
 }
 BENCHMARK(BM_Drives3Axes)->DenseRange(0, 9)->Unit(benchmark::kMillisecond);

@@ -16,13 +16,13 @@ using twin::process::ToolShape;
 // Duan 2025 tool and Al 2024-T6 set 4 coefficients, wall cut ae 2 mm, ap 1 mm.
 ProcessSetup duan_setup() {
   ProcessSetup s;
-  s.tool.name = "duan";
-  s.tool.shape = ToolShape::kBullNose;
-  s.tool.diameter_mm = 10;
-  s.tool.flutes = 2;
-  s.tool.helix_deg = 30;
-  s.tool.corner_radius_mm = 1.5;
-  s.tool.flute_length_mm = 22;
+  s.tool = {.name = "duan",
+            .shape = ToolShape::kBullNose,
+            .diameter_mm = 10,
+            .flutes = 2,
+            .helix_deg = 30,
+            .corner_radius_mm = 1.5,
+            .flute_length_mm = 22};
   s.coefficients.Kt = {816.935, 1913.93, 41.7956};
   s.coefficients.Kr = {166.518, 686.391, 25.2867};
   s.coefficients.Ka = {868.228, -884.065, 0.17887};
@@ -35,12 +35,8 @@ ProcessSetup duan_setup() {
 
 ProcessSetup hsm_setup() {
   ProcessSetup s = duan_setup();
-  s.tool.shape = ToolShape::kFlat;
-  s.tool.diameter_mm = 12;
-  s.tool.flutes = 3;
-  s.tool.helix_deg = 40;
-  s.tool.corner_radius_mm = 0;
-  s.tool.flute_length_mm = 26;
+  s.tool = {.name = "duan", .shape = ToolShape::kFlat, .diameter_mm = 12, .flutes = 3, .helix_deg = 40,
+            .corner_radius_mm = 0, .flute_length_mm = 26};
   s.coefficients = twin::process::CuttingCoefficients::linear(796.1, 168.8, 222.0, 27.7, 30.8, 1.8);
   s.stock.cell_mm = 0.03;
   s.options.dz_mm = 0.2;

@@ -107,21 +107,13 @@ void expect_matches_exact(const controller::CascadeGains& g, double Ts_s) {
 }
 
 TEST(CascadeLoop, PIVelocityLoopMatchesTheExactDiscreteResponse) {
-  controller::CascadeGains g;
-  g.Kv_per_s = 60.0;
-  g.Kvp_torque_s_per_rad = 0.4;
-  g.Tn_s = 0.01;
+  controller::CascadeGains g{.Kv_per_s = 60.0, .Kvp_torque_s_per_rad = 0.4, .Tn_s = 0.01};
   expect_matches_exact(g, 1e-4);
 }
 
 TEST(CascadeLoop, FeedforwardAndCurrentLagMatchTheExactDiscreteResponse) {
-  controller::CascadeGains g;
-  g.Kv_per_s = 40.0;
-  g.kff = 0.9;
-  g.Kvp_torque_s_per_rad = 0.3;
-  g.Tn_s = 0.02;
-  g.tau_i_s = 5e-4;
-  g.Jff_torque_s2_per_rad = 0.005;
+  controller::CascadeGains g{.Kv_per_s = 40.0, .kff = 0.9, .Kvp_torque_s_per_rad = 0.3, .Tn_s = 0.02, .tau_i_s = 5e-4,
+                             .Jff_torque_s2_per_rad = 0.005};
   expect_matches_exact(g, 1e-4);
   expect_matches_exact(g, 1e-3);
 }
@@ -129,11 +121,7 @@ TEST(CascadeLoop, FeedforwardAndCurrentLagMatchTheExactDiscreteResponse) {
 TEST(CascadeLoop, HoldsTheFollowingErrorOfAPLoopAtConstantSpeed) {
   // At constant speed v with an integral velocity loop, the position loop's
   // following error settles to v (1 - kff) / Kv (the P loop's steady state).
-  controller::CascadeGains g;
-  g.Kv_per_s = 50.0;
-  g.kff = 0.5;
-  g.Kvp_torque_s_per_rad = 0.5;
-  g.Tn_s = 0.01;
+  controller::CascadeGains g{.Kv_per_s = 50.0, .kff = 0.5, .Kvp_torque_s_per_rad = 0.5, .Tn_s = 0.01};
   const double Ts = 1e-4, v = 100.0;
   sim::MachineDefinition m = cascade_x(Ts, g);
   m.axes[index(Axis::kX)].drive.Tc_pos_Nm = 0.2;  // friction: the integral must carry it

@@ -29,13 +29,9 @@
 namespace twin::feeddrive {
 namespace {
 
-using testing::fadal_x;
-using testing::fadal_y;
-using testing::HandPid;
-using testing::quantize_mm;
+// The FADAL fixture: its drives, gains, hand-written loop, period and encoder count.
+using namespace testing;
 
-constexpr double kTs_s = 1e-4;
-constexpr double kCount_mm = 1e-3;
 constexpr double kTol_mm = 1e-9;
 
 IntegratorOptions sundials_only() {

@@ -13,11 +13,15 @@
 namespace twin::feeddrive {
 namespace {
 
-using testing::fadal_x;
-using testing::fadal_y;
-using testing::HandPid;
+// The FADAL fixture: its drives, gains, hand-written loop, period and encoder count.
+using namespace testing;
 
-constexpr double kTs_s = 1e-4;
+/// A bank of the one axis `p`, at rest at x = 0.
+DriveBank axis_at_rest(const DriveParams& p, const IntegratorOptions& o = {}) {
+  DriveBank bank({p}, kTs_s, o);
+  bank.reset({0.0});
+  return bank;
+}
 
 void run_constant(DriveBank& bank, double u_V, int n, int k0 = 0) {
   for (int k = k0; k < k0 + n; ++k) bank.advance(k * kTs_s, (k + 1) * kTs_s, {{u_V, 0.0}});
@@ -33,8 +37,7 @@ TEST(ConstantLoad, ShiftsSteadyCommandByLoadOverKaKt) {
     DriveParams p = fadal_y();
     p.effects.constant_load.enabled = load_on;
     p.effects.constant_load.torque_Nm = 0.4;
-    DriveBank bank({p}, kTs_s);
-    bank.reset({0.0});
+    DriveBank bank = axis_at_rest(p);
     HandPid pid(testing::fadal_y_gains(), kTs_s);
     double u = 0.0;
     for (int k = 0; k < 15000; ++k) {
@@ -51,10 +54,8 @@ TEST(ConstantLoad, ShiftsSteadyCommandByLoadOverKaKt) {
 // speed follows w = (Kt i_max - Tc)/B (1 - exp(-B t/J)). Tolerance 1e-7 relative.
 TEST(CurrentSaturation, CapsCurrentAndAcceleration) {
   DriveParams p = fadal_x();
-  p.effects.current_saturation.enabled = true;
-  p.effects.current_saturation.i_max_A = 5.0;
-  DriveBank bank({p}, kTs_s);
-  bank.reset({0.0});
+  p.effects.current_saturation = {.enabled = true, .i_max_A = 5.0};
+  DriveBank bank = axis_at_rest(p);
   run_constant(bank, 10.0, 2000);
   EXPECT_DOUBLE_EQ(bank.output(0).i_A, 5.0);
   EXPECT_DOUBLE_EQ(bank.output(0).Tm_Nm, 5.0 * p.Kt_Nm_per_A);
@@ -101,18 +102,14 @@ TEST(Compliance, FreeResponseResonanceFrequency) {
   DriveParams p = fadal_x();
   p.Tc_pos_Nm = p.Tc_neg_Nm = 0.0;
   p.B_kg_m2_per_s = 0.0;
-  p.effects.compliance.enabled = true;
-  p.effects.compliance.K_Nm_per_rad = 7000.0;
-  p.effects.compliance.C_Nm_s_per_rad = 0.0;
-  p.effects.compliance.load_fraction = 0.6;
+  p.effects.compliance = {.enabled = true, .K_Nm_per_rad = 7000.0, .C_Nm_s_per_rad = 0.0, .load_fraction = 0.6};
   const double Jl = p.J_kg_m2 * 0.6;
   const double Jm = p.J_kg_m2 - Jl;
   const double omega = std::sqrt(7000.0 * (1.0 / Jm + 1.0 / Jl));
   for (int method = 0; method < 2; ++method) {
     IntegratorOptions o;
     o.method = method == 0 ? IntegratorOptions::Method::kCvodeAdams : IntegratorOptions::Method::kArkodeErk;
-    DriveBank bank({p}, kTs_s, o);
-    bank.reset({0.0});
+    DriveBank bank = axis_at_rest(p, o);
     DriveState s = bank.state(0);
     s.x_mm = 0.002;
     bank.set_states({s});
@@ -136,10 +133,8 @@ TEST(Compliance, FreeResponseResonanceFrequency) {
 // leads by gap/2. Tolerance 1e-12 mm where both sides are the same state.
 TEST(Backlash, LostMotionAtReversalEqualsGap) {
   DriveParams p = fadal_y();
-  p.effects.backlash.enabled = true;
-  p.effects.backlash.gap_mm = 0.02;
-  DriveBank bank({p}, kTs_s);
-  bank.reset({0.0});
+  p.effects.backlash = {.enabled = true, .gap_mm = 0.02};
+  DriveBank bank = axis_at_rest(p);
   run_constant(bank, 1.0, 1000);
   EXPECT_NEAR(bank.output(0).x_mm, bank.state(0).x_mm - 0.01, 1e-12);
   EXPECT_NEAR(bank.output(0).x_meas_mm, bank.state(0).x_mm - 0.01, 1e-12);
@@ -171,19 +166,14 @@ TEST(Backlash, LostMotionAtReversalEqualsGap) {
 TEST(Backlash, InTheCouplingTheMotorCrossesTheGapFree) {
   DriveParams p = fadal_x();
   p.B_kg_m2_per_s = 0.0;
-  p.effects.compliance.enabled = true;
-  p.effects.compliance.K_Nm_per_rad = 5000.0;
-  p.effects.compliance.C_Nm_s_per_rad = 0.5;
-  p.effects.compliance.load_fraction = 0.5;
-  p.effects.backlash.enabled = true;
-  p.effects.backlash.gap_mm = 0.02;
+  p.effects.compliance = {.enabled = true, .K_Nm_per_rad = 5000.0, .C_Nm_s_per_rad = 0.5, .load_fraction = 0.5};
+  p.effects.backlash = {.enabled = true, .gap_mm = 0.02};
   const double Jm = 0.5 * p.J_kg_m2;
   const double u_V = 0.02;  // Tm = 0.062 N m, below the load's friction 0.2 N m
   const double Tm = p.Ka_A_per_V * p.Kt_Nm_per_A * u_V;
   ASSERT_LT(Tm, p.Tc_pos_Nm);
   const double t_contact_s = std::sqrt(0.02 / p.rg_mm_per_rad * Jm / Tm);
-  DriveBank bank({p}, kTs_s);
-  bank.reset({0.0});
+  DriveBank bank = axis_at_rest(p);
   int k = 0;
   for (; (k + 1) * kTs_s < t_contact_s; ++k) {
     run_constant(bank, u_V, 1, k);
@@ -235,8 +225,7 @@ TEST(Cogging, SpeedFollowsEnergyIntegral) {
   p.Tc_pos_Nm = p.Tc_neg_Nm = 0.0;
   p.B_kg_m2_per_s = 0.0;
   p.effects.cogging = {true, 0.15, 6.0, 0.3};
-  DriveBank bank({p}, kTs_s);
-  bank.reset({0.0});
+  DriveBank bank = axis_at_rest(p);
   const double u = 0.3;
   const double Tm = p.Ka_A_per_V * p.Kt_Nm_per_A * u;
   for (int k = 0; k < 3000; ++k) {
@@ -256,8 +245,7 @@ TEST(Cogging, HoldsAgainstBreakawayAtRest) {
   DriveParams p = fadal_x();
   p.effects.cogging = {true, 0.1, 8.0, std::numbers::pi / 2.0};
   const double u = (p.Tc_pos_Nm + 0.05) / (p.Ka_A_per_V * p.Kt_Nm_per_A);
-  DriveBank bank({p}, kTs_s);
-  bank.reset({0.0});
+  DriveBank bank = axis_at_rest(p);
   run_constant(bank, u, 1000);
   EXPECT_EQ(bank.output(0).x_mm, 0.0);
   p.effects.cogging.enabled = false;
@@ -298,8 +286,7 @@ TEST(PositionDependentFriction, SteadySpeedInsideAndOutsideBand) {
   p.effects.position_dependent_friction = {true, 0.1, 20.0, 1000.0};
   const double KaKt = p.Ka_A_per_V * p.Kt_Nm_per_A;
   const double u = 1.0;
-  DriveBank bank({p}, kTs_s);
-  bank.reset({0.0});
+  DriveBank bank = axis_at_rest(p);
   int k = 0;
   const double w_out = (KaKt * u - p.Tc_pos_Nm) / p.B_kg_m2_per_s;
   while (bank.state(0).x_mm < 19.0) run_constant(bank, u, 1, k++);
@@ -317,8 +304,7 @@ TEST(Energy, BalanceClosesWithComplianceCoggingAndLoad) {
   p.effects.compliance = {true, 3000.0, 0.05, 0.5};
   p.effects.cogging = {true, 0.05, 4.0, 0.0};
   p.effects.constant_load = {true, 0.1};
-  DriveBank bank({p}, kTs_s);
-  bank.reset({0.0});
+  DriveBank bank = axis_at_rest(p);
   for (int k = 0; k < 10000; ++k) {
     const double u = 2.0 * std::sin(2.0 * std::numbers::pi * 3.0 * k * kTs_s);
     bank.advance(k * kTs_s, (k + 1) * kTs_s, {{u, 0.0}});
@@ -352,8 +338,7 @@ TEST(SmoothFriction, TorqueBelowCoulombCreepsAtTheBalanceSpeed) {
     }
     DriveParams smooth = p;
     smooth.effects.smooth_friction.enabled = true;
-    DriveBank bank({smooth}, kTs_s);
-    bank.reset({0.0});
+    DriveBank bank = axis_at_rest(smooth);
     run_constant(bank, u_V, 20000);
     EXPECT_NEAR(bank.output(0).w_rad_per_s, lo, 1e-7 * std::abs(lo)) << "u = " << u_V;
     EXPECT_GT(std::abs(bank.output(0).w_rad_per_s), 0.1 * p.effects.smooth_friction.ws_rad_per_s);

@@ -11,26 +11,20 @@
 
 namespace twin::feeddrive::testing {
 
+/// The FADAL controller's period and its encoders' count (design.md section 4).
+inline constexpr double kTs_s = 1e-4;
+inline constexpr double kCount_mm = 1e-3;
+
 inline DriveParams fadal_x() {
-  DriveParams p;
-  p.Ka_A_per_V = 6.4898;
-  p.Kt_Nm_per_A = 0.4769;
-  p.J_kg_m2 = 0.0077736;
-  p.B_kg_m2_per_s = 0.019811;
-  p.rg_mm_per_rad = 1.5915;
-  p.Tc_pos_Nm = 0.20;
-  p.Tc_neg_Nm = 0.18;
-  return p;
+  return {.Ka_A_per_V = 6.4898, .Kt_Nm_per_A = 0.4769, .J_kg_m2 = 0.0077736, .B_kg_m2_per_s = 0.019811,
+          .rg_mm_per_rad = 1.5915, .Tc_pos_Nm = 0.20, .Tc_neg_Nm = 0.18, .effects = {}};
 }
 
+/// Y has X's motor and screw (Kt, rg).
 inline DriveParams fadal_y() {
-  DriveParams p = fadal_x();
-  p.Ka_A_per_V = 7.5768;
-  p.J_kg_m2 = 0.0098109;
-  p.B_kg_m2_per_s = 0.28438;
-  p.Tc_pos_Nm = 0.30;
-  p.Tc_neg_Nm = 0.28;
-  return p;
+  const DriveParams x = fadal_x();
+  return {.Ka_A_per_V = 7.5768, .Kt_Nm_per_A = x.Kt_Nm_per_A, .J_kg_m2 = 0.0098109, .B_kg_m2_per_s = 0.28438,
+          .rg_mm_per_rad = x.rg_mm_per_rad, .Tc_pos_Nm = 0.30, .Tc_neg_Nm = 0.28, .effects = {}};
 }
 
 struct PidGains {

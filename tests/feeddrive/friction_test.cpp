@@ -15,13 +15,8 @@
 namespace twin::feeddrive {
 namespace {
 
-using testing::fadal_x;
-using testing::fadal_y;
-using testing::HandPid;
-using testing::quantize_mm;
-
-constexpr double kTs_s = 1e-4;
-constexpr double kCount_mm = 1e-3;
+// The FADAL fixture: its drives, gains, hand-written loop, period and encoder count.
+using namespace testing;
 
 std::vector<IntegratorOptions> all_methods() {
   // The default (ordinary ticks in closed form), then SUNDIALS on every tick.

@@ -7,24 +7,21 @@
 // positions at every tick, for every integrator arrangement.
 #include <gtest/gtest.h>
 
-#include <Eigen/Dense>
-#include <unsupported/Eigen/MatrixFunctions>
 #include <cmath>
 #include <functional>
 #include <string>
 #include <vector>
 
+#include "exact_loop.hpp"
 #include "fadal_fixture.hpp"
 #include "feeddrive/drive_bank.hpp"
 
 namespace twin::feeddrive {
 namespace {
 
-using testing::fadal_x;
-using testing::fadal_y;
-using testing::HandPid;
-
-constexpr double kTs_s = 1e-4;
+// The FADAL fixture (its drives, gains, hand-written loop, period and encoder
+// count) and the exact discrete loop.
+using namespace testing;
 
 struct Variant {
   std::string name;
@@ -36,53 +33,27 @@ std::vector<Variant> variants() {
   v.push_back({"default", IntegratorOptions{}});
   // The other variants test SUNDIALS itself: every tick integrated, no
   // closed-form shortcut for the ordinary ticks (closed_form_test compares the two).
-  IntegratorOptions d;
-  d.exact_linear_ticks = false;
+  IntegratorOptions d{.exact_linear_ticks = false};
   v.push_back({"default_sundials_every_tick", d});
-  IntegratorOptions a;
-  a.exact_linear_ticks = false;
-  a.one_instance_for_all_axes = false;
-  a.method = IntegratorOptions::Method::kCvodeAdams;
-  a.rtol = 1e-10;
-  a.reinit_every_tick = true;
+  IntegratorOptions a{.method = IntegratorOptions::Method::kCvodeAdams, .rtol = 1e-10, .reinit_every_tick = true,
+                      .one_instance_for_all_axes = false, .exact_linear_ticks = false};
   v.push_back({"cvode_adams_reinit", a});
   a.one_instance_for_all_axes = true;
   v.push_back({"cvode_adams_reinit_shared", a});
   a.one_instance_for_all_axes = false;
   a.reinit_every_tick = false;
   v.push_back({"cvode_adams_no_reinit", a});
-  IntegratorOptions b;
-  b.exact_linear_ticks = false;
-  b.one_instance_for_all_axes = false;
-  b.method = IntegratorOptions::Method::kCvodeBdf;
-  b.rtol = 1e-10;
+  IntegratorOptions b{.method = IntegratorOptions::Method::kCvodeBdf, .rtol = 1e-10, .one_instance_for_all_axes = false,
+                      .exact_linear_ticks = false};
   v.push_back({"cvode_bdf_reinit", b});
-  IntegratorOptions e;
-  e.exact_linear_ticks = false;
-  e.method = IntegratorOptions::Method::kArkodeErk;
-  e.erk_fixed_steps_per_tick = 1;
-  e.one_instance_for_all_axes = false;
+  IntegratorOptions e{.method = IntegratorOptions::Method::kArkodeErk, .one_instance_for_all_axes = false,
+                      .erk_fixed_steps_per_tick = 1, .exact_linear_ticks = false};
   v.push_back({"arkode_erk_fixed_Ts_per_axis", e});
   e.erk_fixed_steps_per_tick = 0;
   e.rtol = 1e-10;
   v.push_back({"arkode_erk_adaptive", e});
   return v;
 }
-
-// Exact ZOH step of one frictionless axis.
-struct ExactAxis {
-  Eigen::Matrix2d Ad;
-  Eigen::Vector2d Bd;
-  explicit ExactAxis(const DriveParams& p) {
-    Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
-    M(0, 1) = p.rg_mm_per_rad;
-    M(1, 1) = -p.B_kg_m2_per_s / p.J_kg_m2;
-    M(1, 2) = p.Ka_A_per_V * p.Kt_Nm_per_A / p.J_kg_m2;
-    const Eigen::Matrix3d E = (M * kTs_s).exp();
-    Ad = E.topLeftCorner<2, 2>();
-    Bd = E.topRightCorner<2, 1>();
-  }
-};
 
 DriveParams frictionless(DriveParams p) {
   p.Tc_pos_Nm = 0.0;
@@ -97,23 +68,7 @@ double max_error_mm(const IntegratorOptions& options, const std::function<double
   const std::vector<DriveParams> params{frictionless(fadal_x()), frictionless(fadal_y())};
   DriveBank bank(params, kTs_s, options);
   bank.reset({x0_mm, x0_mm});
-  std::vector<HandPid> pid_bank{HandPid(testing::fadal_x_gains(), kTs_s), HandPid(testing::fadal_y_gains(), kTs_s)};
-  std::vector<HandPid> pid_exact = pid_bank;
-  std::vector<ExactAxis> exact{ExactAxis(params[0]), ExactAxis(params[1])};
-  std::vector<Eigen::Vector2d> z(2, Eigen::Vector2d(x0_mm, 0.0));
-  std::vector<DriveInput> in(2);
-  double worst = 0.0;
-  for (int k = 0; k < n; ++k) {
-    for (int a = 0; a < 2; ++a) {
-      const double r = ref_mm(a, k);
-      in[a].u_V = pid_bank[a].step(r, bank.output(a).x_meas_mm);
-      const double u_exact = pid_exact[a].step(r, z[a](0));
-      z[a] = exact[a].Ad * z[a] + exact[a].Bd * u_exact;
-    }
-    bank.advance(k * kTs_s, (k + 1) * kTs_s, in);
-    for (int a = 0; a < 2; ++a) worst = std::max(worst, std::abs(bank.output(a).x_mm - z[a](0)));
-  }
-  return worst;
+  return max_deviation_from_exact(bank, params, {fadal_x_gains(), fadal_y_gains()}, ref_mm, n, x0_mm);
 }
 
 class LinearResponse : public ::testing::TestWithParam<Variant> {};

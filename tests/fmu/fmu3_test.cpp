@@ -52,15 +52,11 @@ TEST_P(Fmi3Archive, LayoutHasDescriptionBinaryForX86_64LinuxAndResources) {
   EXPECT_EQ(fmu_->model_identifier(), "MachineTwin");
   EXPECT_TRUE(std::filesystem::exists(fmu_->dir() + "/binaries/x86_64-linux/MachineTwin.so"));
   EXPECT_FALSE(std::filesystem::exists(fmu_->dir() + "/binaries/linux64"));
-  for (const char* r : {"model.json", "machine.yaml", "scenario.yaml"})
-    EXPECT_TRUE(std::filesystem::exists(fmu_->dir() + "/resources/" + r)) << r;
+  expect_scenario_resources(*fmu_);
 }
 
 TEST_P(Fmi3Archive, ModelDescriptionValidatesAgainstTheFmi3Schema) {
-  std::string out;
-  const int rc = validate_with_xsd(TWIN_SHARED_DIR "/fmi/schema/fmi3/fmi3ModelDescription.xsd",
-                                   fmu_->dir() + "/modelDescription.xml", out);
-  EXPECT_EQ(rc, 0) << out;
+  expect_valid_model_description(*fmu_, TWIN_SHARED_DIR "/fmi/schema/fmi3/fmi3ModelDescription.xsd");
 }
 
 TEST_P(Fmi3Archive, ModelStructureFollowsTheStandard) {
@@ -150,13 +146,7 @@ TEST_P(Fmi3Archive, BinaryExportsExactlyTheFmi3FunctionsAndNeedsOnlyTheCRuntime)
   for (std::string line; std::getline(syms, line);) exported.insert(line.substr(line.rfind(' ') + 1));
   const auto& names = fmi3_function_names();
   EXPECT_EQ(exported, std::set<std::string>(names.begin(), names.end()));
-  ASSERT_EQ(run("ldd " + fmu_->so_path(), out), 0) << out;
-  const std::regex allowed(R"(^\s*(linux-vdso\.so|libc\.so|libm\.so|libstdc\+\+\.so|libgcc_s\.so|/lib64/ld-linux))");
-  std::istringstream lines(out);
-  for (std::string line; std::getline(lines, line);)
-    if (!line.empty()) {
-      EXPECT_TRUE(std::regex_search(line, allowed)) << "the FMU needs: " << line;
-    }
+  ASSERT_NO_FATAL_FAILURE(expect_only_the_c_runtime_needed(fmu_->so_path()));
 }
 
 INSTANTIATE_TEST_SUITE_P(Exported, Fmi3Archive,

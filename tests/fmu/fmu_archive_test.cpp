@@ -25,6 +25,19 @@
 namespace twin::fmu_test {
 namespace {
 
+/// Group `group` of every match of `pattern` in the first <section>...</section> of `xml`.
+std::vector<std::string> matches_in_section(const std::string& xml, const char* section, const std::regex& pattern,
+                                            int group) {
+  const std::regex sec(std::string("<") + section + ">([\\s\\S]*?)</" + section + ">");
+  std::smatch m;
+  std::vector<std::string> out;
+  if (!std::regex_search(xml, m, sec)) return out;
+  const std::string body = m[1];
+  for (auto it = std::sregex_iterator(body.begin(), body.end(), pattern); it != std::sregex_iterator(); ++it)
+    out.push_back((*it)[group]);
+  return out;
+}
+
 class FmuArchive : public ::testing::TestWithParam<const char*> {
  protected:
   void SetUp() override {
@@ -38,15 +51,11 @@ TEST_P(FmuArchive, LayoutHasDescriptionBinaryAndResources) {
   EXPECT_EQ(fmu_->model_identifier(), "MachineTwin");
   EXPECT_TRUE(std::filesystem::exists(fmu_->dir() + "/modelDescription.xml"));
   EXPECT_TRUE(std::filesystem::exists(fmu_->so_path()));
-  for (const char* r : {"model.json", "machine.yaml", "scenario.yaml"})
-    EXPECT_TRUE(std::filesystem::exists(fmu_->dir() + "/resources/" + r)) << r;
+  expect_scenario_resources(*fmu_);
 }
 
 TEST_P(FmuArchive, ModelDescriptionValidatesAgainstTheFmi2Schema) {
-  std::string out;
-  const int rc = validate_with_xsd(TWIN_SHARED_DIR "/fmi/schema/fmi2/fmi2ModelDescription.xsd",
-                                   fmu_->dir() + "/modelDescription.xml", out);
-  EXPECT_EQ(rc, 0) << out;
+  expect_valid_model_description(*fmu_, TWIN_SHARED_DIR "/fmi/schema/fmi2/fmi2ModelDescription.xsd");
 }
 
 TEST_P(FmuArchive, ModelStructureFollowsTheStandard) {
@@ -77,15 +86,7 @@ TEST_P(FmuArchive, ModelStructureFollowsTheStandard) {
     }
   }
   auto indices = [&](const char* section) {
-    const std::regex sec(std::string("<") + section + ">([\\s\\S]*?)</" + section + ">");
-    std::smatch m;
-    std::vector<std::string> out;
-    if (!std::regex_search(x, m, sec)) return out;
-    const std::string body = m[1];
-    const std::regex u("<Unknown index=\"(\\d+)\"");
-    for (auto it = std::sregex_iterator(body.begin(), body.end(), u); it != std::sregex_iterator(); ++it)
-      out.push_back((*it)[1]);
-    return out;
+    return matches_in_section(x, section, std::regex("<Unknown index=\"(\\d+)\""), 1);
   };
   ASSERT_FALSE(outputs_expected.empty());
   EXPECT_EQ(indices("Outputs"), outputs_expected);
@@ -104,13 +105,7 @@ TEST_P(FmuArchive, BinaryIsSelfContained) {
   // Only the C and C++ runtime may be needed on a machine without the
   // project's dependencies.
   std::string out;
-  ASSERT_EQ(run("ldd " + fmu_->so_path(), out), 0) << out;
-  const std::regex allowed(R"(^\s*(linux-vdso\.so|libc\.so|libm\.so|libstdc\+\+\.so|libgcc_s\.so|/lib64/ld-linux))");
-  std::istringstream lines(out);
-  for (std::string line; std::getline(lines, line);)
-    if (!line.empty()) {
-      EXPECT_TRUE(std::regex_search(line, allowed)) << "the FMU needs: " << line;
-    }
+  ASSERT_NO_FATAL_FAILURE(expect_only_the_c_runtime_needed(fmu_->so_path()));
   // Exactly the 34 fmi2 Co-Simulation functions are exported.
   ASSERT_EQ(run("nm -D --defined-only " + fmu_->so_path(), out), 0) << out;
   std::istringstream syms(out);
@@ -271,17 +266,7 @@ TEST_P(FmuArchive, OutputsDeclareTheirDependencies) {
   // dependencies="" (fmu_cosim_test checks the behaviour). At initialization
   // an output may depend only on inputs and exact parameters.
   const std::string& x = fmu_->xml();
-  auto unknowns = [&](const char* section) {
-    const std::regex sec(std::string("<") + section + ">([\\s\\S]*?)</" + section + ">");
-    std::smatch m;
-    std::vector<std::string> out;
-    if (!std::regex_search(x, m, sec)) return out;
-    const std::string body = m[1];
-    const std::regex u("<Unknown[^>]*>");
-    for (auto it = std::sregex_iterator(body.begin(), body.end(), u); it != std::sregex_iterator(); ++it)
-      out.push_back((*it)[0]);
-    return out;
-  };
+  auto unknowns = [&](const char* section) { return matches_in_section(x, section, std::regex("<Unknown[^>]*>"), 0); };
   const auto outputs = unknowns("Outputs");
   ASSERT_FALSE(outputs.empty());
   for (const auto& u : outputs) EXPECT_NE(u.find("dependencies=\"\""), std::string::npos) << u;

@@ -90,6 +90,15 @@ class FmuCosim : public ::testing::Test {
     EXPECT_EQ(f.fmi2ExitInitializationMode(c), fmi2OK);
     return c;
   }
+  /// An instance started and stepped `ticks` ticks, its state then and that state's bytes.
+  void state_after_ticks(int ticks, fmi2Component& c, fmi2FMUstate& st, std::vector<fmi2Byte>& bytes) {
+    const auto& f = fmu_->fn();
+    c = start();
+    ASSERT_NE(c, nullptr);
+    ASSERT_EQ(f.fmi2DoStep(c, 0.0, ticks * Ts_, fmi2True), fmi2OK);
+    ASSERT_EQ(f.fmi2GetFMUstate(c, &st), fmi2OK);
+    ASSERT_NO_FATAL_FAILURE(serialize_state(f, c, st, bytes));
+  }
   std::unique_ptr<sim::CoSimulation> native() const {
     auto ref = std::make_shared<sim::ProgramReference>(
         controller::plan_trajectory(io::parse_program(sc_), sc_.machine.motion_limits(), sc_.machine.Ts_s));
@@ -373,15 +382,10 @@ TEST_F(FmuCosim, AStateOfAnotherFmuIsRefusedWithItsReason) {
   LoadedFmu other(TWIN_FMU_DEFAULT);
   const auto& f = fmu_->fn();
   const auto& g = other.fn();
-  fmi2Component c = start();
-  ASSERT_NE(c, nullptr);
-  ASSERT_EQ(f.fmi2DoStep(c, 0.0, 50 * Ts_, fmi2True), fmi2OK);
+  fmi2Component c = nullptr;
   fmi2FMUstate foreign = nullptr;
-  ASSERT_EQ(f.fmi2GetFMUstate(c, &foreign), fmi2OK);
-  std::size_t size = 0;
-  ASSERT_EQ(f.fmi2SerializedFMUstateSize(c, foreign, &size), fmi2OK);
-  std::vector<fmi2Byte> bytes(size);
-  ASSERT_EQ(f.fmi2SerializeFMUstate(c, foreign, bytes.data(), size), fmi2OK);
+  std::vector<fmi2Byte> bytes;
+  ASSERT_NO_FATAL_FAILURE(state_after_ticks(50, c, foreign, bytes));
 
   fmi2Component d = other.instantiate("other");
   ASSERT_NE(d, nullptr);
@@ -411,15 +415,10 @@ TEST_F(FmuCosim, AStateWithANegativeTickCounterIsRefused) {
   // 8-byte integer equal to 1237 (the rows and loops hold 1236); a state
   // edited to -5 ticks must be refused on deserialize, with a log line.
   const auto& f = fmu_->fn();
-  fmi2Component c = start();
-  ASSERT_NE(c, nullptr);
-  ASSERT_EQ(f.fmi2DoStep(c, 0.0, 1237 * Ts_, fmi2True), fmi2OK);
+  fmi2Component c = nullptr;
   fmi2FMUstate st = nullptr;
-  ASSERT_EQ(f.fmi2GetFMUstate(c, &st), fmi2OK);
-  std::size_t size = 0;
-  ASSERT_EQ(f.fmi2SerializedFMUstateSize(c, st, &size), fmi2OK);
-  std::vector<fmi2Byte> bytes(size);
-  ASSERT_EQ(f.fmi2SerializeFMUstate(c, st, bytes.data(), size), fmi2OK);
+  std::vector<fmi2Byte> bytes;
+  ASSERT_NO_FATAL_FAILURE(state_after_ticks(1237, c, st, bytes));
   std::vector<std::size_t> at;
   for (std::size_t i = 0; i + 8 <= bytes.size(); ++i) {
     std::int64_t v = 0;

@@ -171,6 +171,26 @@ class FmuImport : public ::testing::Test {
       names_.push_back(name);
     }
   }
+  /// Loads the FMU exported from `scenario` and expects its run in `mode` to
+  /// equal the native run bit for bit; returns the native run.
+  Outputs expect_equals_native_run(const std::string& fmu_path, const std::string& scenario, int mode) {
+    load(fmu_path, scenario);
+    const Outputs native = native_run(scenario, mode, names_);
+    const Outputs fmu = fmu_run(*fmu_, mode, names_, start_mm_, Ts_s_);
+    expect_identical(native, fmu);
+    return native;
+  }
+  /// `c` := an instance `name` of the loaded FMU, set up and initialised, and
+  /// `vrs` := the value references of names_.
+  void initialised(const std::string& name, fmi2Component& c, std::vector<fmi2ValueReference>& vrs) {
+    const auto& f = fmu_->fn();
+    c = fmu_->instantiate(name);
+    ASSERT_NE(c, nullptr);
+    ASSERT_EQ(f.fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0), fmi2OK);
+    ASSERT_EQ(f.fmi2EnterInitializationMode(c), fmi2OK);
+    ASSERT_EQ(f.fmi2ExitInitializationMode(c), fmi2OK);
+    for (const auto& n : names_) vrs.push_back(fmu_->var(n).vr);
+  }
   std::unique_ptr<LoadedFmu> fmu_;
   std::vector<std::string> names_;
   std::vector<double> start_mm_;
@@ -179,10 +199,7 @@ class FmuImport : public ::testing::Test {
 
 TEST_F(FmuImport, AirCutMode2EqualsNativeRunBitForBit) {
   REQUIRE_EXPORTED(TWIN_FMU_AIRCUT);
-  load(TWIN_FMU_AIRCUT, TWIN_FMU_AIRCUT_SCENARIO);
-  const Outputs native = native_run(TWIN_FMU_AIRCUT_SCENARIO, 2, names_);
-  const Outputs fmu = fmu_run(*fmu_, 2, names_, start_mm_, Ts_s_);
-  expect_identical(native, fmu);
+  const Outputs native = expect_equals_native_run(TWIN_FMU_AIRCUT, TWIN_FMU_AIRCUT_SCENARIO, 2);
   // The run must actually move (a frozen model would also agree with itself).
   const auto x = std::find(names_.begin(), names_.end(), "x_true_mm") - names_.begin();
   EXPECT_GT(std::abs(native.rows.back()[x] - start_mm_[0]), 0.1);
@@ -190,26 +207,17 @@ TEST_F(FmuImport, AirCutMode2EqualsNativeRunBitForBit) {
 
 TEST_F(FmuImport, AirCutMode1EqualsNativeRunBitForBit) {
   REQUIRE_EXPORTED(TWIN_FMU_AIRCUT);
-  load(TWIN_FMU_AIRCUT, TWIN_FMU_AIRCUT_SCENARIO);
-  const Outputs native = native_run(TWIN_FMU_AIRCUT_SCENARIO, 1, names_);
-  const Outputs fmu = fmu_run(*fmu_, 1, names_, start_mm_, Ts_s_);
-  expect_identical(native, fmu);
+  expect_equals_native_run(TWIN_FMU_AIRCUT, TWIN_FMU_AIRCUT_SCENARIO, 1);
 }
 
 TEST_F(FmuImport, DefaultScenarioMode2EqualsNativeRunBitForBit) {
   REQUIRE_EXPORTED(TWIN_FMU_DEFAULT);
-  load(TWIN_FMU_DEFAULT, io::default_scenario_path().string());
-  const Outputs native = native_run(io::default_scenario_path().string(), 2, names_);
-  const Outputs fmu = fmu_run(*fmu_, 2, names_, start_mm_, Ts_s_);
-  expect_identical(native, fmu);
+  expect_equals_native_run(TWIN_FMU_DEFAULT, io::default_scenario_path().string(), 2);
 }
 
 TEST_F(FmuImport, DefaultScenarioMode1EqualsNativeRunBitForBit) {
   REQUIRE_EXPORTED(TWIN_FMU_DEFAULT);
-  load(TWIN_FMU_DEFAULT, io::default_scenario_path().string());
-  const Outputs native = native_run(io::default_scenario_path().string(), 1, names_);
-  const Outputs fmu = fmu_run(*fmu_, 1, names_, start_mm_, Ts_s_);
-  expect_identical(native, fmu);
+  expect_equals_native_run(TWIN_FMU_DEFAULT, io::default_scenario_path().string(), 1);
 }
 
 TEST_F(FmuImport, DefaultScenarioWhileCuttingEqualsNativeAndRestoresState) {
@@ -223,13 +231,9 @@ TEST_F(FmuImport, DefaultScenarioWhileCuttingEqualsNativeAndRestoresState) {
   sim::CoSimulation cosim = sim::build_cosimulation(sc);
   const auto outs = expected_outputs(cosim.axes());
   const auto& f = fmu_->fn();
-  fmi2Component c = fmu_->instantiate("cut");
-  ASSERT_NE(c, nullptr);
-  ASSERT_EQ(f.fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0), fmi2OK);
-  ASSERT_EQ(f.fmi2EnterInitializationMode(c), fmi2OK);
-  ASSERT_EQ(f.fmi2ExitInitializationMode(c), fmi2OK);
+  fmi2Component c = nullptr;
   std::vector<fmi2ValueReference> vrs;
-  for (const auto& n : names_) vrs.push_back(fmu_->var(n).vr);
+  ASSERT_NO_FATAL_FAILURE(initialised("cut", c, vrs));
   const int ticks_per_step = 100;
   double peak_N = 0.0;
   std::vector<double> row(names_.size());
@@ -288,13 +292,9 @@ TEST_F(FmuImport, VibratingToolOutputsEqualNativeWhileCutting) {
     names_.push_back(name);
   }
   const auto& f = fmu_->fn();
-  fmi2Component c = fmu_->instantiate("vibrating");
-  ASSERT_NE(c, nullptr);
-  ASSERT_EQ(f.fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0), fmi2OK);
-  ASSERT_EQ(f.fmi2EnterInitializationMode(c), fmi2OK);
-  ASSERT_EQ(f.fmi2ExitInitializationMode(c), fmi2OK);
+  fmi2Component c = nullptr;
   std::vector<fmi2ValueReference> vrs;
-  for (const auto& n : names_) vrs.push_back(fmu_->var(n).vr);
+  ASSERT_NO_FATAL_FAILURE(initialised("vibrating", c, vrs));
   std::vector<double> row(names_.size());
   const int ticks_per_step = 100;
   double peak_um = 0.0;
@@ -556,6 +556,16 @@ std::string edited_resources(const LoadedFmu& fmu, const std::string& folder,
 
 bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
 
+/// `line` := the one log line of the instance `name` refused at fmi2Instantiate
+/// for a copy of the FMU's resources (folder `name`) running `program`.
+void refused_program(LoadedFmu& fmu, const std::string& name, const std::string& program, std::string& line) {
+  const std::string uri = edited_resources(fmu, name, [&](nlohmann::json& j) { j["program"] = program; });
+  fmu.clear_log();
+  EXPECT_EQ(fmu.instantiate(name, nullptr, false, uri), nullptr);
+  ASSERT_EQ(fmu.log().size(), 1u);
+  line = fmu.log()[0];
+}
+
 // Oracle: the FADAL 2216's X travel is 559 mm (scenarios/machines/fadal2216.yaml,
 // design.md 4); from the start at X100 the rapid of line 2 to X700 spans 600 mm.
 // The program of line 2 is the issue's `G0 X700 Y-100 Z-300`, which ran with
@@ -563,13 +573,8 @@ bool contains(const std::string& s, const std::string& part) { return s.find(par
 // line and the travel (the GUID would not match the edited model either: the
 // program is refused before the GUID is compared).
 TEST_F(FmuCalls, AProgramBeyondTheTravelIsRefusedAtInstantiateWithItsLine) {
-  const std::string uri = edited_resources(*fmu_, "travel", [](nlohmann::json& j) {
-    j["program"] = "G21 G90\nG0 X700 Y-100 Z-300\nM30\n";
-  });
-  fmu_->clear_log();
-  EXPECT_EQ(fmu_->instantiate("travel", nullptr, false, uri), nullptr);
-  ASSERT_EQ(fmu_->log().size(), 1u);
-  const std::string& line = fmu_->log()[0];
+  std::string line;
+  ASSERT_NO_FATAL_FAILURE(refused_program(*fmu_, "travel", "G21 G90\nG0 X700 Y-100 Z-300\nM30\n", line));
   EXPECT_TRUE(contains(line, "logStatusError: fmi2Instantiate: ")) << line;
   EXPECT_TRUE(contains(line, "model.json: program: aircut.nc:2: ")) << line;
   EXPECT_TRUE(contains(line, "travel of 559 mm")) << line;
@@ -580,13 +585,8 @@ TEST_F(FmuCalls, AProgramBeyondTheTravelIsRefusedAtInstantiateWithItsLine) {
 // more than the FMU's day of machine time (kMaxProgramDuration_s = 86400 s); the
 // issue's `G4 P1e9` is the same case, larger.
 TEST_F(FmuCalls, AProgramPlannedLongerThanADayIsRefusedAtInstantiate) {
-  const std::string uri = edited_resources(*fmu_, "dwell", [](nlohmann::json& j) {
-    j["program"] = "G21 G90\nG1 X101 F3000\nG4 P100000\nM30\n";
-  });
-  fmu_->clear_log();
-  EXPECT_EQ(fmu_->instantiate("dwell", nullptr, false, uri), nullptr);
-  ASSERT_EQ(fmu_->log().size(), 1u);
-  const std::string& line = fmu_->log()[0];
+  std::string line;
+  ASSERT_NO_FATAL_FAILURE(refused_program(*fmu_, "dwell", "G21 G90\nG1 X101 F3000\nG4 P100000\nM30\n", line));
   EXPECT_TRUE(contains(line, "model.json: program: aircut.nc: the program is planned to run 100000")) << line;
   EXPECT_TRUE(contains(line, "at most 86400 s and 1e+09 ticks")) << line;
 }
@@ -686,10 +686,8 @@ TEST_F(FmuCalls, SaveStepRestoreStepGivesIdenticalOutputs) {
   const auto b = steps(c, 50, 5);
   EXPECT_EQ(a, b);
   // Serialised, freed, deserialised: the same again.
-  std::size_t size = 0;
-  ASSERT_EQ(f.fmi2SerializedFMUstateSize(c, st, &size), fmi2OK);
-  std::vector<fmi2Byte> bytes(size);
-  ASSERT_EQ(f.fmi2SerializeFMUstate(c, st, bytes.data(), size), fmi2OK);
+  std::vector<fmi2Byte> bytes;
+  ASSERT_NO_FATAL_FAILURE(serialize_state(f, c, st, bytes));
   ASSERT_EQ(f.fmi2FreeFMUstate(c, &st), fmi2OK);
   EXPECT_EQ(st, nullptr);
   fmi2FMUstate st2 = nullptr;

@@ -15,6 +15,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <gtest/gtest.h>
+
 namespace twin::fmu_test {
 namespace {
 
@@ -69,6 +71,35 @@ int validate_with_xsd(const std::string& xsd, const std::string& xml_file, std::
   return run("xmllint --noout --nonet --schema " + xsd + " " + xml_file, out);
 }
 
+void expect_scenario_resources(const UnzippedFmu& fmu) {
+  for (const char* r : {"model.json", "machine.yaml", "scenario.yaml"})
+    EXPECT_TRUE(std::filesystem::exists(fmu.dir() + "/resources/" + r)) << r;
+}
+
+void expect_valid_model_description(const UnzippedFmu& fmu, const std::string& xsd) {
+  std::string out;
+  const int rc = validate_with_xsd(xsd, fmu.dir() + "/modelDescription.xml", out);
+  EXPECT_EQ(rc, 0) << out;
+}
+
+void expect_only_the_c_runtime_needed(const std::string& so_path) {
+  std::string out;
+  ASSERT_EQ(run("ldd " + so_path, out), 0) << out;
+  const std::regex allowed(R"(^\s*(linux-vdso\.so|libc\.so|libm\.so|libstdc\+\+\.so|libgcc_s\.so|/lib64/ld-linux))");
+  std::istringstream lines(out);
+  for (std::string line; std::getline(lines, line);)
+    if (!line.empty()) {
+      EXPECT_TRUE(std::regex_search(line, allowed)) << "the FMU needs: " << line;
+    }
+}
+
+void serialize_state(const Fmi2Functions& f, fmi2Component c, fmi2FMUstate st, std::vector<fmi2Byte>& bytes) {
+  std::size_t size = 0;
+  ASSERT_EQ(f.fmi2SerializedFMUstateSize(c, st, &size), fmi2OK);
+  bytes.resize(size);
+  ASSERT_EQ(f.fmi2SerializeFMUstate(c, st, bytes.data(), size), fmi2OK);
+}
+
 std::string python3() {
 #ifdef TWIN_SANITIZER_RUNTIME
   return "LD_PRELOAD=" TWIN_SANITIZER_RUNTIME " ASAN_OPTIONS=detect_leaks=0 python3 ";
@@ -100,18 +131,52 @@ std::string extract_fmu(const std::string& fmu) {
   return tmpl;
 }
 
-LoadedFmu::LoadedFmu(const std::string& fmu_path) {
-  dir_ = extract_fmu(fmu_path);
-  xml_ = read_text_file(dir_ + "/modelDescription.xml");
-  const std::regex root("<fmiModelDescription[^>]*>");
+UnzippedFmu::UnzippedFmu(const std::string& fmu_path)
+    : dir_(extract_fmu(fmu_path)), xml_(read_text_file(dir_ + "/modelDescription.xml")) {}
+
+UnzippedFmu::~UnzippedFmu() {
+  if (handle_ != nullptr) ::dlclose(handle_);
+  std::error_code ec;
+  std::filesystem::remove_all(dir_, ec);
+}
+
+std::string UnzippedFmu::element(const std::string& tag) const {
   std::smatch m;
-  if (!std::regex_search(xml_, m, root)) throw std::runtime_error("no fmiModelDescription element");
-  guid_ = xml_attribute(m[0], "guid");
-  const std::regex cs("<CoSimulation[^>]*>");
-  if (!std::regex_search(xml_, m, cs)) throw std::runtime_error("no CoSimulation element");
-  model_identifier_ = xml_attribute(m[0], "modelIdentifier");
+  if (!std::regex_search(xml_, m, std::regex("<" + tag + "[^>]*>"))) throw std::runtime_error("no " + tag + " element");
+  return m[0];
+}
+
+void UnzippedFmu::add_variable(const VarInfo& v) {
+  by_name_[v.name] = vars_.size();
+  vars_.push_back(v);
+}
+
+void UnzippedFmu::load_binary(const std::string& so_path) {
+  handle_ = ::dlopen(so_path.c_str(), RTLD_NOW | RTLD_LOCAL);
+  if (handle_ == nullptr) throw std::runtime_error(std::string("dlopen: ") + ::dlerror());
+}
+
+void* UnzippedFmu::symbol(const std::string& name) const {
+  void* f = ::dlsym(handle_, name.c_str());
+  if (f == nullptr) throw std::runtime_error("the FMU does not export " + name);
+  return f;
+}
+
+const VarInfo& UnzippedFmu::var(const std::string& name) const {
+  const auto it = by_name_.find(name);
+  if (it == by_name_.end()) throw std::runtime_error("no variable " + name);
+  return vars_[it->second];
+}
+
+std::string UnzippedFmu::default_experiment(const std::string& attribute) const {
+  return default_experiment_attribute(xml_, attribute);
+}
+
+LoadedFmu::LoadedFmu(const std::string& fmu_path) : UnzippedFmu(fmu_path) {
+  guid_ = xml_attribute(element("fmiModelDescription"), "guid");
+  model_identifier_ = xml_attribute(element("CoSimulation"), "modelIdentifier");
   const std::regex var("<ScalarVariable([^>]*)>\\s*<(Real|Integer|Boolean|String)([^>]*)/>");
-  for (auto it = std::sregex_iterator(xml_.begin(), xml_.end(), var); it != std::sregex_iterator(); ++it) {
+  for (auto it = std::sregex_iterator(xml().begin(), xml().end(), var); it != std::sregex_iterator(); ++it) {
     VarInfo v;
     const std::string a = (*it)[1];
     const std::string t = (*it)[3];
@@ -123,47 +188,17 @@ LoadedFmu::LoadedFmu(const std::string& fmu_path) {
     v.type = (*it)[2];
     v.unit = xml_attribute(t, "unit");
     v.start = xml_attribute(t, "start");
-    by_name_[v.name] = vars_.size();
-    vars_.push_back(v);
+    add_variable(v);
   }
-  handle_ = ::dlopen(so_path().c_str(), RTLD_NOW | RTLD_LOCAL);
-  if (handle_ == nullptr) throw std::runtime_error(std::string("dlopen: ") + ::dlerror());
-#define TWIN_FMI2_LOAD(name)                                                              \
-  fn_.name = reinterpret_cast<decltype(fn_.name)>(::dlsym(handle_, #name));               \
-  if (fn_.name == nullptr) throw std::runtime_error("the FMU does not export " #name);
-  TWIN_FMI2_LOAD(fmi2GetTypesPlatform) TWIN_FMI2_LOAD(fmi2GetVersion) TWIN_FMI2_LOAD(fmi2SetDebugLogging)
-  TWIN_FMI2_LOAD(fmi2Instantiate) TWIN_FMI2_LOAD(fmi2FreeInstance) TWIN_FMI2_LOAD(fmi2SetupExperiment)
-  TWIN_FMI2_LOAD(fmi2EnterInitializationMode) TWIN_FMI2_LOAD(fmi2ExitInitializationMode) TWIN_FMI2_LOAD(fmi2Terminate)
-  TWIN_FMI2_LOAD(fmi2Reset) TWIN_FMI2_LOAD(fmi2GetReal) TWIN_FMI2_LOAD(fmi2GetInteger) TWIN_FMI2_LOAD(fmi2GetBoolean)
-  TWIN_FMI2_LOAD(fmi2GetString) TWIN_FMI2_LOAD(fmi2SetReal) TWIN_FMI2_LOAD(fmi2SetInteger) TWIN_FMI2_LOAD(fmi2SetBoolean)
-  TWIN_FMI2_LOAD(fmi2SetString) TWIN_FMI2_LOAD(fmi2GetFMUstate) TWIN_FMI2_LOAD(fmi2SetFMUstate)
-  TWIN_FMI2_LOAD(fmi2FreeFMUstate) TWIN_FMI2_LOAD(fmi2SerializedFMUstateSize) TWIN_FMI2_LOAD(fmi2SerializeFMUstate)
-  TWIN_FMI2_LOAD(fmi2DeSerializeFMUstate) TWIN_FMI2_LOAD(fmi2GetDirectionalDerivative)
-  TWIN_FMI2_LOAD(fmi2SetRealInputDerivatives) TWIN_FMI2_LOAD(fmi2GetRealOutputDerivatives) TWIN_FMI2_LOAD(fmi2DoStep)
-  TWIN_FMI2_LOAD(fmi2CancelStep) TWIN_FMI2_LOAD(fmi2GetStatus) TWIN_FMI2_LOAD(fmi2GetRealStatus)
-  TWIN_FMI2_LOAD(fmi2GetIntegerStatus) TWIN_FMI2_LOAD(fmi2GetBooleanStatus) TWIN_FMI2_LOAD(fmi2GetStringStatus)
+  load_binary(so_path());
+#define TWIN_FMI2_LOAD(name) fn_.name = reinterpret_cast<decltype(fn_.name)>(symbol(#name));
+  TWIN_FMI2_FUNCTIONS(TWIN_FMI2_LOAD)
 #undef TWIN_FMI2_LOAD
   callbacks_.logger = &logger;
   callbacks_.componentEnvironment = &log_;
 }
 
-LoadedFmu::~LoadedFmu() {
-  if (handle_ != nullptr) ::dlclose(handle_);
-  std::error_code ec;
-  std::filesystem::remove_all(dir_, ec);
-}
-
-std::string LoadedFmu::so_path() const { return dir_ + "/binaries/linux64/" + model_identifier_ + ".so"; }
-
-const VarInfo& LoadedFmu::var(const std::string& name) const {
-  const auto it = by_name_.find(name);
-  if (it == by_name_.end()) throw std::runtime_error("no variable " + name);
-  return vars_[it->second];
-}
-
-std::string LoadedFmu::default_experiment(const std::string& attribute) const {
-  return default_experiment_attribute(xml_, attribute);
-}
+std::string LoadedFmu::so_path() const { return dir() + "/binaries/linux64/" + model_identifier_ + ".so"; }
 
 fmi2Component LoadedFmu::instantiate(const std::string& name, const char* guid, bool logging_on,
                                      const std::string& resources) {

@@ -58,37 +58,37 @@ std::string default_experiment_attribute(const std::string& xml, const std::stri
 /// The text of a file ("" when it cannot be read).
 std::string read_text_file(const std::string& path);
 
+/// Every fmi2 function of the standard, as X(name): the table below and its loader.
+#define TWIN_FMI2_FUNCTIONS(X)                                                                                   \
+  X(fmi2GetTypesPlatform) X(fmi2GetVersion) X(fmi2SetDebugLogging) X(fmi2Instantiate) X(fmi2FreeInstance)         \
+  X(fmi2SetupExperiment) X(fmi2EnterInitializationMode) X(fmi2ExitInitializationMode) X(fmi2Terminate)            \
+  X(fmi2Reset) X(fmi2GetReal) X(fmi2GetInteger) X(fmi2GetBoolean) X(fmi2GetString) X(fmi2SetReal)                 \
+  X(fmi2SetInteger) X(fmi2SetBoolean) X(fmi2SetString) X(fmi2GetFMUstate) X(fmi2SetFMUstate)                      \
+  X(fmi2FreeFMUstate) X(fmi2SerializedFMUstateSize) X(fmi2SerializeFMUstate) X(fmi2DeSerializeFMUstate)           \
+  X(fmi2GetDirectionalDerivative) X(fmi2SetRealInputDerivatives) X(fmi2GetRealOutputDerivatives) X(fmi2DoStep)    \
+  X(fmi2CancelStep) X(fmi2GetStatus) X(fmi2GetRealStatus) X(fmi2GetIntegerStatus) X(fmi2GetBooleanStatus)         \
+  X(fmi2GetStringStatus)
+
+/// A pointer per function, resolved by name.
+#define TWIN_FMU_FUNCTION_POINTER(name) decltype(&::name) name{nullptr};
+
 struct Fmi2Functions {
-#define TWIN_FMI2_FN(name) decltype(&::name) name{nullptr};
-  TWIN_FMI2_FN(fmi2GetTypesPlatform) TWIN_FMI2_FN(fmi2GetVersion) TWIN_FMI2_FN(fmi2SetDebugLogging)
-  TWIN_FMI2_FN(fmi2Instantiate) TWIN_FMI2_FN(fmi2FreeInstance) TWIN_FMI2_FN(fmi2SetupExperiment)
-  TWIN_FMI2_FN(fmi2EnterInitializationMode) TWIN_FMI2_FN(fmi2ExitInitializationMode) TWIN_FMI2_FN(fmi2Terminate)
-  TWIN_FMI2_FN(fmi2Reset) TWIN_FMI2_FN(fmi2GetReal) TWIN_FMI2_FN(fmi2GetInteger) TWIN_FMI2_FN(fmi2GetBoolean)
-  TWIN_FMI2_FN(fmi2GetString) TWIN_FMI2_FN(fmi2SetReal) TWIN_FMI2_FN(fmi2SetInteger) TWIN_FMI2_FN(fmi2SetBoolean)
-  TWIN_FMI2_FN(fmi2SetString) TWIN_FMI2_FN(fmi2GetFMUstate) TWIN_FMI2_FN(fmi2SetFMUstate)
-  TWIN_FMI2_FN(fmi2FreeFMUstate) TWIN_FMI2_FN(fmi2SerializedFMUstateSize) TWIN_FMI2_FN(fmi2SerializeFMUstate)
-  TWIN_FMI2_FN(fmi2DeSerializeFMUstate) TWIN_FMI2_FN(fmi2GetDirectionalDerivative)
-  TWIN_FMI2_FN(fmi2SetRealInputDerivatives) TWIN_FMI2_FN(fmi2GetRealOutputDerivatives) TWIN_FMI2_FN(fmi2DoStep)
-  TWIN_FMI2_FN(fmi2CancelStep) TWIN_FMI2_FN(fmi2GetStatus) TWIN_FMI2_FN(fmi2GetRealStatus)
-  TWIN_FMI2_FN(fmi2GetIntegerStatus) TWIN_FMI2_FN(fmi2GetBooleanStatus) TWIN_FMI2_FN(fmi2GetStringStatus)
-#undef TWIN_FMI2_FN
+  TWIN_FMI2_FUNCTIONS(TWIN_FMU_FUNCTION_POINTER)
 };
 
-/// The loaded FMU. Throws std::runtime_error when anything is missing.
-class LoadedFmu {
+/// What the FMI 2.0 and 3.0 importers share: the FMU unzipped into a fresh
+/// folder (removed again with the object), its modelDescription.xml, the
+/// variables read from it, the binary loaded with RTLD_NOW and what the FMU
+/// logged. Throws std::runtime_error when anything is missing.
+class UnzippedFmu {
  public:
-  explicit LoadedFmu(const std::string& fmu_path);
-  ~LoadedFmu();
-  LoadedFmu(const LoadedFmu&) = delete;
-  LoadedFmu& operator=(const LoadedFmu&) = delete;
+  ~UnzippedFmu();
+  UnzippedFmu(const UnzippedFmu&) = delete;
+  UnzippedFmu& operator=(const UnzippedFmu&) = delete;
 
-  const Fmi2Functions& fn() const { return fn_; }
   const std::string& dir() const { return dir_; }
-  const std::string& guid() const { return guid_; }
   const std::string& model_identifier() const { return model_identifier_; }
   const std::string& xml() const { return xml_; }
-  std::string so_path() const;
-  std::string resource_uri() const { return "file://" + dir_ + "/resources"; }
   const std::vector<VarInfo>& variables() const { return vars_; }
   const VarInfo& var(const std::string& name) const;
   bool has(const std::string& name) const { return by_name_.count(name) != 0; }
@@ -96,24 +96,63 @@ class LoadedFmu {
   /// DefaultExperiment attribute (stopTime, stepSize, ...) as text; empty when absent.
   std::string default_experiment(const std::string& attribute) const;
 
-  /// Instantiates with the file's GUID (or `guid`) and its resources (or
-  /// those at the file: URI `resources`); messages go to log().
-  fmi2Component instantiate(const std::string& name, const char* guid = nullptr, bool logging_on = false,
-                            const std::string& resources = {});
   const std::vector<std::string>& log() const { return log_; }
   void clear_log() { log_.clear(); }
+
+ protected:
+  explicit UnzippedFmu(const std::string& fmu_path);
+  /// The opening tag of the first `tag` element of the model description.
+  std::string element(const std::string& tag) const;
+  void add_variable(const VarInfo& v);
+  /// dlopens the binary at `so_path`.
+  void load_binary(const std::string& so_path);
+  /// The exported function `name`; throws when the binary does not export it.
+  void* symbol(const std::string& name) const;
+
+  std::string model_identifier_;
+  std::vector<std::string> log_;
 
  private:
   std::string dir_;
   std::string xml_;
-  std::string guid_;
-  std::string model_identifier_;
   std::vector<VarInfo> vars_;
   std::map<std::string, std::size_t> by_name_;
   void* handle_{nullptr};
+};
+
+/// Expects resources/ of the FMU to hold the scenario it was exported with
+/// (model.json, machine.yaml, scenario.yaml).
+void expect_scenario_resources(const UnzippedFmu& fmu);
+
+/// Expects the FMU's modelDescription.xml to validate against the schema `xsd`.
+void expect_valid_model_description(const UnzippedFmu& fmu, const std::string& xsd);
+
+/// Expects the binary at `so_path` to need only the C and C++ runtime (ldd),
+/// as on a machine without the project's dependencies.
+void expect_only_the_c_runtime_needed(const std::string& so_path);
+
+/// `bytes` := state `st` of instance `c` serialized (both calls fmi2OK).
+void serialize_state(const Fmi2Functions& f, fmi2Component c, fmi2FMUstate st, std::vector<fmi2Byte>& bytes);
+
+/// The loaded FMU.
+class LoadedFmu : public UnzippedFmu {
+ public:
+  explicit LoadedFmu(const std::string& fmu_path);
+
+  const Fmi2Functions& fn() const { return fn_; }
+  const std::string& guid() const { return guid_; }
+  std::string so_path() const;
+  std::string resource_uri() const { return "file://" + dir() + "/resources"; }
+
+  /// Instantiates with the file's GUID (or `guid`) and its resources (or
+  /// those at the file: URI `resources`); messages go to log().
+  fmi2Component instantiate(const std::string& name, const char* guid = nullptr, bool logging_on = false,
+                            const std::string& resources = {});
+
+ private:
+  std::string guid_;
   Fmi2Functions fn_;
   fmi2CallbackFunctions callbacks_{};
-  std::vector<std::string> log_;
 };
 
 }  // namespace twin::fmu_test

@@ -18,19 +18,14 @@
 #include <vector>
 
 #include "fmu_importer.hpp"
+#include "tests/support/test_files.hpp"
 
 namespace twin::fmu_test {
 namespace {
 
 namespace fs = std::filesystem;
 
-std::vector<std::string> shipped_scenarios() {
-  std::vector<std::string> names;
-  for (const auto& e : fs::directory_iterator(fs::path(TWIN_SOURCE_DIR) / "scenarios"))
-    if (fs::exists(e.path() / "scenario.yaml")) names.push_back(e.path().filename().string());
-  std::sort(names.begin(), names.end());
-  return names;
-}
+using test_support::shipped_scenarios;
 
 class ShippedScenarioFmu : public ::testing::TestWithParam<std::string> {
  protected:

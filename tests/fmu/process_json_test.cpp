@@ -4,6 +4,8 @@
 // must give identical outputs (the reader only transports numbers).
 #include <gtest/gtest.h>
 
+#include <array>
+#include <cstdint>
 #include <filesystem>
 
 #include <nlohmann/json.hpp>
@@ -50,19 +52,27 @@ process::ProcessSetup direct_setup() {
   return s;
 }
 
+/// Tick k (of 1e-4 s) of a straight move from p0 at v (mm/s) with the spindle at `rpm`.
+process::ProcessInput straight_move_tick(std::int64_t k, const std::array<double, 3>& p0,
+                                         const std::array<double, 3>& v, double rpm) {
+  process::ProcessInput in;
+  in.k = k;
+  in.Ts_s = 1e-4;
+  in.t_s = static_cast<double>(k) * in.Ts_s;
+  in.p_mm = {p0[0] + v[0] * in.t_s, p0[1] + v[1] * in.t_s, p0[2] + v[2] * in.t_s};
+  in.v_mm_per_s = v;
+  in.spindle_rpm = rpm;
+  return in;
+}
+
 TEST(ProcessJson, BuildsTheSameProcessAsTheSetupItDescribes) {
   auto from_json = make_process_from_json(nlohmann::json::parse(kProcess));
   auto direct = process::make_process(direct_setup());
   ASSERT_NE(from_json, nullptr);
   double peak_N = 0.0;
   for (std::int64_t k = 0; k < 300; ++k) {
-    process::ProcessInput in;
-    in.k = k;
-    in.Ts_s = 1e-4;
-    in.t_s = static_cast<double>(k) * in.Ts_s;
-    in.p_mm = {-4.0 + 50.0 * in.t_s, 20.0, -2.0};  // entering the stock along +x at 50 mm/s, 2 mm deep
-    in.v_mm_per_s = {50.0, 0.0, 0.0};
-    in.spindle_rpm = 6000.0;
+    // Entering the stock along +x at 50 mm/s, 2 mm deep.
+    const process::ProcessInput in = straight_move_tick(k, {-4.0, 20.0, -2.0}, {50.0, 0.0, 0.0}, 6000.0);
     const process::ProcessOutput a = from_json->step(in);
     const process::ProcessOutput b = direct->step(in);
     for (std::size_t i = 0; i < 3; ++i) {
@@ -98,13 +108,7 @@ TEST(ProcessJson, SetupWrittenAndReadBackGivesTheSameProcess) {
   const double x0 = x_max, y0 = 0.5 * (y_min + y_max), z = setup.stock.top_z_mm - 1.0;
   double peak_N = 0.0;
   for (std::int64_t k = 0; k < 300; ++k) {
-    process::ProcessInput in;
-    in.k = k;
-    in.Ts_s = 1e-4;
-    in.t_s = static_cast<double>(k) * in.Ts_s;
-    in.p_mm = {x0, y0 + 40.0 * in.t_s, z};
-    in.v_mm_per_s = {0.0, 40.0, 0.0};
-    in.spindle_rpm = 8000.0;
+    const process::ProcessInput in = straight_move_tick(k, {x0, y0, z}, {0.0, 40.0, 0.0}, 8000.0);
     const process::ProcessOutput a = from_json->step(in);
     const process::ProcessOutput b = direct->step(in);
     for (std::size_t i = 0; i < 3; ++i) ASSERT_EQ(a.F_N[i], b.F_N[i]) << "tick " << k;

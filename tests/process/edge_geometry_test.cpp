@@ -17,14 +17,8 @@ namespace {
 constexpr double kPi = std::numbers::pi;
 
 ToolGeometry bull_nose_d10_r15() {
-  ToolGeometry t;
-  t.shape = ToolShape::kBullNose;
-  t.diameter_mm = 10.0;
-  t.flutes = 1;
-  t.helix_deg = 0.0;
-  t.corner_radius_mm = 1.5;
-  t.flute_length_mm = 22.0;
-  return t;
+  return {.shape = ToolShape::kBullNose, .diameter_mm = 10.0, .flutes = 1, .helix_deg = 0.0, .corner_radius_mm = 1.5,
+          .flute_length_mm = 22.0};
 }
 
 // Oracle: the corner arc from the tip (kappa = 0) to height ap has length
@@ -67,12 +61,8 @@ TEST(EdgeGeometry, EdgeForceOfTheCornerIsKteTimesArcLength) {
 // differ by < rho^2/(2R) = 6.4e-6 mm here. A radius constant along the flute
 // is off by up to rho |cos(a) - cos(a + z tan(beta)/R)| (1.5 um at z = 2 mm).
 TEST(EdgeGeometry, RunoutRadiusFollowsTheHelix) {
-  ToolGeometry t;
-  t.diameter_mm = 10.0;
-  t.flutes = 2;
-  t.helix_deg = 30.0;
-  t.runout_rho_mm = 0.008;
-  t.runout_lambda_deg = 40.0;
+  const ToolGeometry t{
+      .diameter_mm = 10.0, .flutes = 2, .helix_deg = 30.0, .runout_rho_mm = 0.008, .runout_lambda_deg = 40.0};
   const double R = 5.0, rho = 0.008, lambda = 40.0 * kPi / 180.0;
   for (int j = 0; j < 2; ++j) {
     for (double z : {0.0, 1.0, 2.0, 5.0}) {

@@ -20,15 +20,7 @@ namespace {
 constexpr double kPi = std::numbers::pi;
 
 PocketProgramSpec oracle_pocket() {
-  PocketProgramSpec p;
-  p.x0_mm = 0;
-  p.y0_mm = 0;
-  p.x1_mm = 30;
-  p.y1_mm = 22;
-  p.tool_diameter_mm = 8;
-  p.stepover_mm = 3;
-  p.depth_z_mm = -1;
-  return p;
+  return {.x0_mm = 0, .y0_mm = 0, .x1_mm = 30, .y1_mm = 22, .tool_diameter_mm = 8, .stepover_mm = 3, .depth_z_mm = -1};
 }
 
 // Measure (deg) of the part of the exact arcs where the edge moves into the
@@ -171,19 +163,18 @@ TEST(PocketProgram, InsetConvexPolygon) {
 // The saved program of scenarios/pocket_rectangle is the generator's output
 // for that scenario's pocket (so the file can be regenerated and checked).
 TEST(PocketProgram, SavedScenarioProgramIsGenerated) {
-  PocketProgramSpec s;
-  s.x0_mm = 0;
-  s.y0_mm = 0;
-  s.x1_mm = 40;
-  s.y1_mm = 30;
-  s.tool_diameter_mm = 10;
-  s.stepover_mm = 4;
-  s.depth_z_mm = -1;
-  s.safe_z_mm = 5;
-  s.feed_mm_per_min = 500;
-  s.plunge_feed_mm_per_min = 100;
-  s.spindle_rpm = 1200;
-  s.blend_tolerance_mm = 0.01;
+  const PocketProgramSpec s{.x0_mm = 0,
+                            .y0_mm = 0,
+                            .x1_mm = 40,
+                            .y1_mm = 30,
+                            .tool_diameter_mm = 10,
+                            .stepover_mm = 4,
+                            .depth_z_mm = -1,
+                            .safe_z_mm = 5,
+                            .feed_mm_per_min = 500,
+                            .plunge_feed_mm_per_min = 100,
+                            .spindle_rpm = 1200,
+                            .blend_tolerance_mm = 0.01};
   const std::string generated = make_rectangular_pocket_program(s).gcode;
   std::FILE* f = std::fopen(TWIN_SOURCE_DIR "/scenarios/pocket_rectangle/program.nc", "rb");
   ASSERT_NE(f, nullptr);

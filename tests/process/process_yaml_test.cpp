@@ -50,30 +50,35 @@ TEST(ProcessYaml, DuanSet4IsReadAsWritten) {
   }
 }
 
+/// `message` := what the ConfigError says that loading `file`, written with
+/// `text`, throws (a fatal failure when it throws none).
+void tool_file_error(const std::filesystem::path& file, const std::string& text, std::string& message) {
+  std::ofstream(file) << text;
+  try {
+    load_tool_file(file);
+    FAIL();
+  } catch (const ConfigError& e) {
+    message = e.what();
+  }
+}
+
 TEST(ProcessYaml, ErrorsNameFileAndKey) {
   const auto dir = std::filesystem::path(TWIN_BINARY_DIR) / "process_yaml_test";
   std::filesystem::create_directories(dir);
   const auto file = dir / "tool.yaml";
-  std::ofstream(file) << "tool:\n  type: bull_nose\n  diameter_mm: 10\n  flutes: 2\n  helix_deg: 30\n"
-                         "  corner_radius_mm: 7\n  flute_length_mm: 20\n";
-  try {
-    load_tool_file(file);
-    FAIL();
-  } catch (const ConfigError& e) {
-    const std::string m = e.what();
-    EXPECT_NE(m.find("tool.yaml"), std::string::npos) << m;
-    EXPECT_NE(m.find("corner_radius_mm"), std::string::npos) << m;
-    EXPECT_EQ(m.find('\n'), std::string::npos) << m;
-  }
-  std::ofstream(file) << "tool:\n  type: flat\n  diameter_mm: 10\n  flutes: 2\n  helix_deg: 30\n"
-                         "  flute_length_mm: 20\n  colour: red\n";
-  try {
-    load_tool_file(file);
-    FAIL();
-  } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find("colour"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find(":7:"), std::string::npos) << e.what();
-  }
+  // A bull-nose corner larger than the tool's radius; then a key no tool has, on line 7.
+  const std::string corner = "tool:\n  type: bull_nose\n  diameter_mm: 10\n  flutes: 2\n  helix_deg: 30\n"
+                             "  corner_radius_mm: 7\n  flute_length_mm: 20\n";
+  const std::string colour = "tool:\n  type: flat\n  diameter_mm: 10\n  flutes: 2\n  helix_deg: 30\n"
+                             "  flute_length_mm: 20\n  colour: red\n";
+  std::string m;
+  ASSERT_NO_FATAL_FAILURE(tool_file_error(file, corner, m));
+  EXPECT_NE(m.find("tool.yaml"), std::string::npos) << m;
+  EXPECT_NE(m.find("corner_radius_mm"), std::string::npos) << m;
+  EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+  ASSERT_NO_FATAL_FAILURE(tool_file_error(file, colour, m));
+  EXPECT_NE(m.find("colour"), std::string::npos) << m;
+  EXPECT_NE(m.find(":7:"), std::string::npos) << m;
 }
 
 }  // namespace

@@ -13,16 +13,14 @@ namespace twin::process {
 namespace {
 
 SteadyCutSpec slot() {
-  SteadyCutSpec s;
-  s.tool = testing::flat_tool(10.0, 2, 30.0);
-  s.coefficients = CuttingCoefficients::linear(850.0, 280.0, 120.0, 22.0, 28.0, 4.0);
-  s.spindle_rpm = 6000.0;
-  s.feed_per_tooth_mm = 0.05;
-  s.ae_mm = 10.0;
-  s.ap_mm = 2.0;
-  s.angle_step_deg = 1.0;
-  s.dz_mm = 0.05;
-  return s;
+  return {.tool = testing::flat_tool(10.0, 2, 30.0),
+          .coefficients = CuttingCoefficients::linear(850.0, 280.0, 120.0, 22.0, 28.0, 4.0),
+          .spindle_rpm = 6000.0,
+          .feed_per_tooth_mm = 0.05,
+          .ae_mm = 10.0,
+          .ap_mm = 2.0,
+          .angle_step_deg = 1.0,
+          .dz_mm = 0.05};
 }
 
 // The force is linear in the coefficients (dF = (K h + Ke) db): a factor on

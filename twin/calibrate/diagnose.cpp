@@ -152,8 +152,9 @@ struct DiagnoseContext {
 
 namespace {
 
+/// A candidate of `kind` found by the fit `f`, with the torque it leaves to the next detectors.
 void add(std::vector<EffectCandidate>& out, const DiagnoseContext& c, EffectKind kind, const Fit& f, ParamSet params,
-         std::string evidence) {
+         std::string evidence, std::vector<double> T_after_Nm) {
   EffectCandidate e;
   e.set_kind(kind);
   e.axis = c.s.axis;
@@ -162,8 +163,54 @@ void add(std::vector<EffectCandidate>& out, const DiagnoseContext& c, EffectKind
   e.t_stat = f.t_stat;
   e.evidence = std::move(evidence);
   e.base = base_of(f, c.d);
-  e.T_after_Nm = minus(c.T, f.extra_Nm);
+  e.T_after_Nm = std::move(T_after_Nm);
   out.push_back(std::move(e));
+}
+
+/// A candidate whose fit added columns to the base model: the torque less what they explain is left.
+void add(std::vector<EffectCandidate>& out, const DiagnoseContext& c, EffectKind kind, const Fit& f, ParamSet params,
+         std::string evidence) {
+  add(out, c, kind, f, std::move(params), std::move(evidence), minus(c.T, f.extra_Nm));
+}
+
+/// The fit of an effect that changes the torque itself (shifted, clipped) rather
+/// than adding columns: `with` on the changed torque against `without`, its gain
+/// from the held-out residuals before (h0) and after (h1).
+Fit changed_torque_fit(const LsqResult& with, const LsqResult& without, double h0, double h1, double t_stat) {
+  Fit g;
+  g.ok = true;
+  g.with = with;
+  g.without = without;
+  g.gain = h0 > 0.0 ? 1.0 - h1 / h0 : 0.0;
+  g.t_stat = t_stat;
+  return g;
+}
+
+/// sn[k], cs[k] := the sine and cosine of angle_rad(x_mm[k]) over the samples.
+template <class Angle>
+void sin_cos_of_position(const AxisSignals& s, Angle angle_rad, std::vector<double>& sn, std::vector<double>& cs) {
+  for (std::size_t k = 0; k < s.n; ++k) {
+    const double th = angle_rad(s.x_mm[k]);
+    sn[k] = std::sin(th);
+    cs[k] = std::cos(th);
+  }
+}
+
+/// Takes `f` as `best` when it fitted with a smaller residual than best_rms.
+bool keep_better_fit(Fit& f, Fit& best, double& best_rms) {
+  if (!(f.ok && f.with.residual_rms < best_rms)) return false;
+  best_rms = f.with.residual_rms;
+  best = std::move(f);
+  return true;
+}
+
+/// The amplitude and phase of the sine-cosine pair a fit added (its columns 4 and 5).
+struct Harmonic {
+  double amplitude;
+  double phase_rad;
+};
+Harmonic added_harmonic(const Fit& f) {
+  return {std::hypot(f.with.theta[4], f.with.theta[5]), std::atan2(f.with.theta[5], f.with.theta[4])};
 }
 
 }  // namespace
@@ -243,35 +290,22 @@ void detect_cogging(const DiagnoseContext& c, std::vector<EffectCandidate>& out)
   std::vector<double> sn(c.s.n), cs(c.s.n);
   for (int n = 1; n <= 48; ++n) {
     if (2.0 * kPi * c.s.rg_mm_per_rad / n > 0.5 * c.travel_mm) continue;  // two periods at least
-    for (std::size_t k = 0; k < c.s.n; ++k) {
-      const double th = feeddrive::cogging_angle_rad(n, c.s.x_mm[k], c.s.rg_mm_per_rad);
-      sn[k] = std::sin(th);
-      cs[k] = std::cos(th);
-    }
+    sin_cos_of_position(
+        c.s, [&](double x_mm) { return feeddrive::cogging_angle_rad(n, x_mm, c.s.rg_mm_per_rad); }, sn, cs);
     const auto sl = lowpass(sn, c.s.fc_Hz, fs);
     const auto cl = lowpass(cs, c.s.fc_Hz, fs);
     Fit f = fit_additive(c.s, c.T, c.reg, {&sl, &cl}, c.fit_moving, c.held_moving);
-    if (f.ok && f.with.residual_rms < best_rms) {
-      best_rms = f.with.residual_rms;
-      best = std::move(f);
-      best_n = n;
-    }
+    if (keep_better_fit(f, best, best_rms)) best_n = n;
   }
   if (!best.ok) return;
-  const double A = std::hypot(best.with.theta[4], best.with.theta[5]);
-  const double phase = std::atan2(best.with.theta[5], best.with.theta[4]);
+  const Harmonic h = added_harmonic(best);
   add(out, c, EffectKind::kCogging, best,
-      {{EffectParam::cogging_amplitude_Nm, A},
-       {EffectParam::cogging_cycles_per_rev, best_n},
-       {EffectParam::cogging_phase_rad, phase}},
+      {{EffectParam::cogging_amplitude_Nm, h.amplitude}, {EffectParam::cogging_cycles_per_rev, best_n},
+       {EffectParam::cogging_phase_rad, h.phase_rad}},
       fmt::format("torque ripple {:.3f} N m at {} cycles per motor revolution (period {:.3g} mm, t = {:.1f}) cuts the "
                   "held-out torque residual by {:.0f} %",
-                  A, best_n, 2.0 * kPi * c.s.rg_mm_per_rad / best_n, best.t_stat, 100.0 * best.gain));
+                  h.amplitude, best_n, 2.0 * kPi * c.s.rg_mm_per_rad / best_n, best.t_stat, 100.0 * best.gain));
 }
-
-namespace {
-
-}  // namespace
 
 void detect_screw_pitch_error(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   double best_rms = 1e300, best_P = 0.0;
@@ -280,22 +314,14 @@ void detect_screw_pitch_error(const DiagnoseContext& c, std::vector<EffectCandid
   // A periodic error is told from a slow drift only if the travel holds two periods.
   const double P_max = 0.5 * c.travel_mm;
   auto try_period = [&](double P) {
-    for (std::size_t k = 0; k < c.s.n; ++k) {
-      const double th = feeddrive::screw_pitch_angle_rad(c.s.x_mm[k], P);
-      sn[k] = std::sin(th);
-      cs[k] = std::cos(th);
-    }
+    sin_cos_of_position(c.s, [P](double x_mm) { return feeddrive::screw_pitch_angle_rad(x_mm, P); }, sn, cs);
     // The motor sits at x - A sin(...): its torque lacks (J D^2 + B D) of that.
     auto ks = kinematic_torque(c.s, sn, c.base.J_kg_m2, c.base.B_kg_m2_per_s);
     auto kc = kinematic_torque(c.s, cs, c.base.J_kg_m2, c.base.B_kg_m2_per_s);
     for (auto& v : ks) v = -v;
     for (auto& v : kc) v = -v;
     Fit f = fit_additive(c.s, c.T, c.reg, {&ks, &kc}, c.fit_moving, c.held_moving);
-    if (f.ok && f.with.residual_rms < best_rms) {
-      best_rms = f.with.residual_rms;
-      best = std::move(f);
-      best_P = P;
-    }
+    if (keep_better_fit(f, best, best_rms)) best_P = P;
   };
   for (double P = 1.0; P <= P_max; P *= 1.06) try_period(P);
   // The coarse scan places the period to 6 %; over a travel of many periods
@@ -307,18 +333,16 @@ void detect_screw_pitch_error(const DiagnoseContext& c, std::vector<EffectCandid
     for (double P = P0 / span; P <= std::min(P_max, P0 * span); P *= step) try_period(P);
   }
   if (!best.ok) return;
-  const double A = std::hypot(best.with.theta[4], best.with.theta[5]);
-  const double phase = std::atan2(best.with.theta[5], best.with.theta[4]);
+  const Harmonic h = added_harmonic(best);
   // A lead error under half an encoder count is not resolved by the data;
   // replayed, it only moves the quantisation boundaries.
-  if (c.s.encoder_resolution_mm > 0.0 && A < 0.5 * c.s.encoder_resolution_mm) return;
+  if (c.s.encoder_resolution_mm > 0.0 && h.amplitude < 0.5 * c.s.encoder_resolution_mm) return;
   add(out, c, EffectKind::kScrewPitchError, best,
-      {{EffectParam::screw_pitch_error_amplitude_mm, A},
-       {EffectParam::screw_pitch_error_period_mm, best_P},
-       {EffectParam::screw_pitch_error_phase_rad, phase}},
+      {{EffectParam::screw_pitch_error_amplitude_mm, h.amplitude}, {EffectParam::screw_pitch_error_period_mm, best_P},
+       {EffectParam::screw_pitch_error_phase_rad, h.phase_rad}},
       fmt::format("lead error {:.4f} mm with period {:.3g} mm (t = {:.1f}): the torque to follow it cuts the held-out "
                   "torque residual by {:.0f} %",
-                  A, best_P, best.t_stat, 100.0 * best.gain));
+                  h.amplitude, best_P, best.t_stat, 100.0 * best.gain));
 }
 
 namespace {
@@ -602,25 +626,14 @@ void detect_delay(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   if (!rs.ok) return;
   const double h0 = residual_rms(cols, r0.theta, T0, c.held_moving);
   const double h1 = residual_rms(cols, rs.theta, Td, c.held_moving);
-  Fit g;
-  g.ok = true;
-  g.with = rs;
-  g.without = r0;
-  g.gain = h0 > 0.0 ? 1.0 - h1 / h0 : 0.0;
-  g.t_stat = r0.residual_rms > 0.0 ? 100.0 * (1.0 - rs.residual_rms / r0.residual_rms) : 0.0;
+  const Fit g = changed_torque_fit(rs, r0, h0, h1,
+                                   r0.residual_rms > 0.0 ? 100.0 * (1.0 - rs.residual_rms / r0.residual_rms) : 0.0);
   const double delay_s = best_ticks * c.s.controller_period_s;
-  EffectCandidate e;
-  e.set_kind(EffectKind::kDelay);
-  e.axis = c.s.axis;
-  e.params = {{EffectParam::delay_delay_s, delay_s}};
-  e.signal_gain = g.gain;
-  e.t_stat = g.t_stat;
-  e.evidence = fmt::format("torque lags the command by {:.2f} ms beyond the hold: shifting it cuts the held-out torque "
-                           "residual by {:.0f} %",
-                           1e3 * delay_s, 100.0 * g.gain);
-  e.base = base_of(g, c.d);
-  e.T_after_Nm = std::move(Td);
-  out.push_back(std::move(e));
+  add(out, c, EffectKind::kDelay, g, {{EffectParam::delay_delay_s, delay_s}},
+      fmt::format("torque lags the command by {:.2f} ms beyond the hold: shifting it cuts the held-out torque "
+                  "residual by {:.0f} %",
+                  1e3 * delay_s, 100.0 * g.gain),
+      std::move(Td));
 }
 
 namespace {
@@ -735,23 +748,10 @@ void detect_current_saturation(const DiagnoseContext& c, std::vector<EffectCandi
   if (best_i == 0.0) return;
   const double h0 = residual_rms(base_cols, r0.theta, c.T, c.held_moving);
   const double h1 = residual_rms(base_cols, best_r.theta, best_T, c.held_moving);
-  Fit g;
-  g.ok = true;
-  g.with = best_r;
-  g.without = r0;
-  g.gain = h0 > 0.0 ? 1.0 - h1 / h0 : 0.0;
-  g.t_stat = 100.0 * (1.0 - best_rms / r0.residual_rms);
-  EffectCandidate e;
-  e.set_kind(EffectKind::kCurrentSaturation);
-  e.axis = c.s.axis;
-  e.params = {{EffectParam::current_saturation_i_max_A, best_i}};
-  e.signal_gain = g.gain;
-  e.t_stat = g.t_stat;
-  e.evidence = fmt::format("clipping Ka u at {:.2f} A cuts the held-out torque residual by {:.0f} %", best_i,
-                           100.0 * g.gain);
-  e.base = base_of(g, c.d);
-  e.T_after_Nm = std::move(best_T);
-  out.push_back(std::move(e));
+  const Fit g = changed_torque_fit(best_r, r0, h0, h1, 100.0 * (1.0 - best_rms / r0.residual_rms));
+  add(out, c, EffectKind::kCurrentSaturation, g, {{EffectParam::current_saturation_i_max_A, best_i}},
+      fmt::format("clipping Ka u at {:.2f} A cuts the held-out torque residual by {:.0f} %", best_i, 100.0 * g.gain),
+      std::move(best_T));
 }
 
 namespace {

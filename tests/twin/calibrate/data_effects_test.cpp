@@ -123,10 +123,7 @@ TEST(DataEffects, NothingIsAddedWithoutAnEffect) {
 // frequency at speed is above the velocity loop's bandwidth, and the
 // logged speed's central difference blurs it slightly).
 TEST(DataEffects, CoggingIsFound) {
-  truth::Effects fx;
-  fx.cogging_A = 0.06;
-  fx.cogging_n = 4.0;
-  const Outcome o = calibrate_truth("cogging", fx);
+  const Outcome o = calibrate_truth("cogging", {.cogging_A = 0.06, .cogging_n = 4.0});
   expect_only(o, "cogging");
   const DataEffect& e = kept_effect(o, "cogging");
   const double n_identified = 2.0 * M_PI / (2.0 * M_PI * kRg / 4.0);
@@ -139,11 +136,7 @@ TEST(DataEffects, CoggingIsFound) {
 // band's ends within 3 mm (bins of 1.2 mm, and the 50 ms it takes the
 // commanded and measured positions to agree at speed), the rise within 25 %.
 TEST(DataEffects, PositionDependentFrictionIsFound) {
-  truth::Effects fx;
-  fx.pdf_dTc = 0.1;
-  fx.pdf_x0 = 40.0;
-  fx.pdf_x1 = 60.0;
-  const Outcome o = calibrate_truth("pdf", fx);
+  const Outcome o = calibrate_truth("pdf", {.pdf_dTc = 0.1, .pdf_x0 = 40.0, .pdf_x1 = 60.0});
   expect_only(o, "position_dependent_friction");
   const DataEffect& e = kept_effect(o, "position_dependent_friction");
   EXPECT_NEAR(e.params.at("x_start_mm"), 40.0, 3.0) << describe(o);
@@ -157,10 +150,7 @@ TEST(DataEffects, PositionDependentFrictionIsFound) {
 // logged speed on the speed of the logged position, whose 1 um steps are
 // the noise).
 TEST(DataEffects, ScrewPitchErrorIsFound) {
-  truth::Effects fx;
-  fx.screw_A_mm = 0.004;
-  fx.screw_P_mm = 8.0;
-  const Outcome o = calibrate_truth("screw", fx);
+  const Outcome o = calibrate_truth("screw", {.screw_A_mm = 0.004, .screw_P_mm = 8.0});
   expect_only(o, "screw_pitch_error");
   const DataEffect& e = kept_effect(o, "screw_pitch_error");
   EXPECT_NEAR(e.params.at("amplitude_mm"), 0.004, 0.2 * 0.004) << describe(o);
@@ -173,9 +163,7 @@ TEST(DataEffects, ScrewPitchErrorIsFound) {
 // stopped axis's held torque relaxes, and smooth_friction is kept; on
 // plain stick/slip (the run without an effect above) it is not.
 TEST(DataEffects, SmoothFrictionIsKeptOnlyWhereTheHeldTorqueRelaxes) {
-  truth::Effects fx;
-  fx.creep_w = 0.2;
-  const Outcome o = calibrate_truth("creep", fx);
+  const Outcome o = calibrate_truth("creep", {.creep_w = 0.2});
   expect_only(o, "smooth_friction");
   expect_validation_improves(o);
   const Outcome plain = calibrate_truth("stick", {});
@@ -195,10 +183,7 @@ TEST(DataEffects, SmoothFrictionIsKeptOnlyWhereTheHeldTorqueRelaxes) {
 // 15 %: the curve's excess halves over a factor 1.2 of speed, so the
 // residual pins ws less tightly than the level.
 TEST(DataEffects, StribeckIsFound) {
-  truth::Effects fx;
-  fx.stribeck_Ts = 0.45;
-  fx.stribeck_ws = 3.0;
-  const Outcome o = calibrate_truth("stribeck", fx);
+  const Outcome o = calibrate_truth("stribeck", {.stribeck_Ts = 0.45, .stribeck_ws = 3.0});
   expect_only(o, "stribeck");
   const DataEffect& e = kept_effect(o, "stribeck");
   EXPECT_NEAR(e.params.at("Ts_static"), 0.45 * kRawPerNm, 0.15 * 0.45 * kRawPerNm) << describe(o);
@@ -214,9 +199,7 @@ TEST(DataEffects, StribeckIsFound) {
 // and the lead error's (ScrewPitchErrorIsFound, whose encoder error also
 // parts motor and encoder, but by position, not direction) keep no gap.
 TEST(DataEffects, BacklashIsFound) {
-  truth::Effects fx;
-  fx.backlash_mm = 0.02;
-  const Outcome o = calibrate_truth("backlash", fx);
+  const Outcome o = calibrate_truth("backlash", {.backlash_mm = 0.02});
   expect_only(o, "backlash");
   EXPECT_NEAR(kept_effect(o, "backlash").params.at("gap_mm"), 0.02, 0.1 * 0.02) << describe(o);
   expect_validation_improves(o, {"x_err_mm"});
@@ -227,9 +210,7 @@ TEST(DataEffects, BacklashIsFound) {
 // which the PI law on the logged speed error fits the logged torque best,
 // exactly 2 ms (a whole number of 1 ms samples).
 TEST(DataEffects, DelayIsFound) {
-  truth::Effects fx;
-  fx.delay_ticks = 2;
-  const Outcome o = calibrate_truth("delay", fx);
+  const Outcome o = calibrate_truth("delay", {.delay_ticks = 2});
   expect_only(o, "delay");
   EXPECT_NEAR(kept_effect(o, "delay").params.at("delay_s"), 0.002, 1e-9) << describe(o);
   expect_validation_improves(o);
@@ -240,9 +221,7 @@ TEST(DataEffects, DelayIsFound) {
 // few samples (the unlimited run peaks at 170 raw): the limit is the level
 // the logged torque flattens at, within 1 % (the torque noise is 0.08 raw).
 TEST(DataEffects, CurrentSaturationIsFound) {
-  truth::Effects fx;
-  fx.i_max_A = 8.0;
-  const Outcome o = calibrate_truth("saturation", fx);
+  const Outcome o = calibrate_truth("saturation", {.i_max_A = 8.0});
   expect_only(o, "current_saturation");
   const double limit_raw = kRawPerNm * 0.4769 * 8.0;
   EXPECT_NEAR(kept_effect(o, "current_saturation").params.at("i_max_A"), limit_raw, 0.01 * limit_raw) << describe(o);

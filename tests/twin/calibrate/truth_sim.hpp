@@ -8,49 +8,37 @@
 #include <string>
 #include <vector>
 
+#include "tests/feeddrive/fadal_fixture.hpp"
+
 namespace twin::truth {
 
 struct Plant {
-  double Ka{6.4898}, Kt{0.4769}, J{0.0077736}, B{0.019811}, rg{1.5915};
-  double Tc_pos{0.2}, Tc_neg{0.18};
-  // FADAL X gains, Ozcan et al. 2017 Table 3.
-  double Kp{500.0}, Ki{70.0}, Kd{0.3}, K1{0.0}, K2{-2.37e-6}, u_max{10.0};
+  double Ka{0.0}, Kt{0.0}, J{0.0}, B{0.0}, rg{0.0};
+  double Tc_pos{0.0}, Tc_neg{0.0};
+  double Kp{0.0}, Ki{0.0}, Kd{0.0}, K1{0.0}, K2{0.0}, u_max{0.0};
 };
 
-/// The FADAL Y drive: Ozcan et al. 2017 Table 1 (Ka, J, B) and Table 3 (gains).
-inline Plant fadal_y_plant() {
-  Plant p;
-  p.Ka = 7.5768;
-  p.J = 0.0098109;
-  p.B = 0.28438;
-  p.Tc_pos = 0.30;
-  p.Tc_neg = 0.28;
-  p.Kp = 462.539;
-  p.Ki = 64.75;
-  p.Kd = 0.278;
-  p.K2 = 5.55e-4;
-  return p;
+/// A FADAL drive and its position-loop gains as the plant (the numbers of
+/// tests/feeddrive/fadal_fixture.hpp: Ozcan et al. 2017, Tables 1 and 3).
+inline Plant fadal_plant(const feeddrive::DriveParams& d, const feeddrive::testing::PidGains& g) {
+  return {d.Ka_A_per_V,  d.Kt_Nm_per_A,    d.J_kg_m2,        d.B_kg_m2_per_s,  d.rg_mm_per_rad, d.Tc_pos_Nm, d.Tc_neg_Nm,
+          g.Kp_V_per_mm, g.Ki_V_per_s_mm, g.Kd_V_s_per_mm, g.K1_V_s2_per_mm, g.K2_V_s_per_mm,  g.u_max_V};
 }
+inline Plant fadal_x_plant() { return fadal_plant(feeddrive::testing::fadal_x(), feeddrive::testing::fadal_x_gains()); }
+inline Plant fadal_y_plant() { return fadal_plant(feeddrive::testing::fadal_y(), feeddrive::testing::fadal_y_gains()); }
 
 /// The plants of the calibration tests and sweep: J, B and Coulomb levels
 /// moved from nominal (X: as far as the clean example's X is; Y: as the
 /// clean example's Y is), so identification is needed.
-inline Plant perturbed_x_plant() {
-  Plant p;
-  p.J = 0.0084;
-  p.B = 0.016;
-  p.Tc_pos = 0.23;
-  p.Tc_neg = 0.17;
+inline Plant perturbed(Plant p, double J, double B, double Tc_pos, double Tc_neg) {
+  p.J = J;
+  p.B = B;
+  p.Tc_pos = Tc_pos;
+  p.Tc_neg = Tc_neg;
   return p;
 }
-inline Plant perturbed_y_plant() {
-  Plant p = fadal_y_plant();
-  p.J = 0.0105;
-  p.B = 0.34;
-  p.Tc_pos = 0.26;
-  p.Tc_neg = 0.32;
-  return p;
-}
+inline Plant perturbed_x_plant() { return perturbed(fadal_x_plant(), 0.0084, 0.016, 0.23, 0.17); }
+inline Plant perturbed_y_plant() { return perturbed(fadal_y_plant(), 0.0105, 0.34, 0.26, 0.32); }
 
 struct Effects {
   double stribeck_Ts{0.0}, stribeck_ws{1.0};               // on when Ts > 0
@@ -89,7 +77,7 @@ struct CascadeLaw {
 };
 
 struct RunSpec {
-  Plant plant;
+  Plant plant{fadal_x_plant()};
   CascadeLaw cascade;
   /// > 0: logged positions rounded to this many significant figures (as some
   /// CNCs export them); 0: to the encoder's resolution.

@@ -44,14 +44,25 @@ std::filesystem::path run_dir(const std::string& name) {
   return std::filesystem::path(TWIN_BINARY_DIR) / "tests" / "calibrate_runs" / name;
 }
 
+/// The truth run of `spec` written to run_dir(name) and read back.
+MeasuredRun written_run(const std::string& name, const truth::RunSpec& spec) {
+  const auto dir = run_dir(name);
+  truth::write_truth_run(dir, spec);
+  return load_run(dir);
+}
+
+/// Logged as a CNC logs it: every 10th controller sample (1 kHz), position and current only (no u).
+void log_as_a_cnc_at_1khz(truth::RunSpec& spec) {
+  spec.log_every = 10;
+  spec.log_current_only = true;
+}
+
 // `folder` keeps runs of tests that ctest runs in parallel apart.
 CalibrationResult calibrate_case(const Case& c, const std::string& folder = "") {
   truth::RunSpec spec = perturbed();
   spec.effects = c.effects;
   if (c.example_motion) spec.reference_mm = example_reference();
-  const auto dir = run_dir(folder.empty() ? c.name : folder);
-  truth::write_truth_run(dir, spec);
-  const MeasuredRun run = load_run(dir);
+  const MeasuredRun run = written_run(folder.empty() ? c.name : folder, spec);
   std::vector<std::string> notes;
   const auto machine = machine_for_run(run, "", &notes);
   CalibrationResult r = calibrate(run, machine);
@@ -175,9 +186,7 @@ TEST(TruthBacklash, GapInTheCouplingOnTheYDrive) {
       spec.effects.backlash_mm = 0.01;
       spec.effects.backlash_in_coupling = true;
     }
-    const auto dir = run_dir(folder);
-    truth::write_truth_run(dir, spec);
-    const MeasuredRun run = load_run(dir);
+    const MeasuredRun run = written_run(folder, spec);
     std::vector<std::string> notes;
     return calibrate(run, machine_for_run(run, "", &notes));
   };
@@ -229,9 +238,7 @@ TEST(TruthLoop, GainsOtherThanTheMachinesAreFoundFromU) {
   spec.plant.Kp = 400.0;
   spec.plant.Kd = 0.24;
   spec.plant.K2 = 1e-4;
-  const auto dir = run_dir("loop_gains");
-  truth::write_truth_run(dir, spec);
-  const MeasuredRun run = load_run(dir);
+  const MeasuredRun run = written_run("loop_gains", spec);
   std::vector<std::string> notes;
   const auto machine = machine_for_run(run, "", &notes);
   const CalibrationResult r = calibrate(run, machine);
@@ -271,11 +278,8 @@ TEST(TruthCoarse, CurrentLimitFromTheCurrentAlone) {
   spec.axis = "y";
   spec.reference_mm = example_reference("y");
   spec.effects.i_max_A = 16.0;
-  spec.log_every = 10;
-  spec.log_current_only = true;
-  const auto dir = run_dir("current_limit_1ms");
-  truth::write_truth_run(dir, spec);
-  const MeasuredRun run = load_run(dir);
+  log_as_a_cnc_at_1khz(spec);
+  const MeasuredRun run = written_run("current_limit_1ms", spec);
   std::vector<std::string> notes;
   const CalibrationResult r = calibrate(run, machine_for_run(run, "", &notes));
   ASSERT_FALSE(r.added.empty());
@@ -354,11 +358,8 @@ namespace {
 // 0.08 N m of the truth's 0.23 and 0.17 (the nominal's own distance is 0.03).
 TEST(TruthCoarse, CurrentOnlyAtOneKilohertz) {
   truth::RunSpec spec = perturbed();
-  spec.log_every = 10;
-  spec.log_current_only = true;
-  const auto dir = run_dir("coarse_current_only");
-  truth::write_truth_run(dir, spec);
-  const MeasuredRun run = load_run(dir);
+  log_as_a_cnc_at_1khz(spec);
+  const MeasuredRun run = written_run("coarse_current_only", spec);
   std::vector<std::string> notes;
   const auto machine = machine_for_run(run, "", &notes);
   CalibrationResult r;

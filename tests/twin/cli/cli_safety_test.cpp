@@ -28,6 +28,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "tests/support/test_files.hpp"
+
 extern char** environ;
 
 namespace twin {
@@ -43,18 +45,12 @@ std::string twin_exe() {
 
 // One folder per test and build folder: ctest runs the tests of this file in
 // parallel, and the suites of two builds (build/, build-san/) may run at once.
-fs::path work() {
-  const auto d = fs::temp_directory_path() / "twin_cli_safety_test" / fs::path(TWIN_BINARY_DIR).filename() /
-                 ::testing::UnitTest::GetInstance()->current_test_info()->name();
-  fs::create_directories(d);
-  return d;
-}
+using test_support::shipped_scenarios;
+using test_support::slurp;
 
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
+fs::path work() {
+  return test_support::made_dir(fs::temp_directory_path() / "twin_cli_safety_test" /
+                                fs::path(TWIN_BINARY_DIR).filename() / test_support::current_test_name());
 }
 
 int count_lines(const std::string& s) {
@@ -502,14 +498,6 @@ TEST(CliSafety, TuneAllAxesFinishesWhenAnAxisAlreadyBreaksTheULimit) {
 
 namespace twin {
 namespace {
-
-std::vector<std::string> shipped_scenarios() {
-  std::vector<std::string> names;
-  for (const auto& e : fs::directory_iterator(fs::path(TWIN_SOURCE_DIR) / "scenarios"))
-    if (fs::exists(e.path() / "scenario.yaml")) names.push_back(e.path().filename().string());
-  std::sort(names.begin(), names.end());
-  return names;
-}
 
 class TuneShipped : public ::testing::TestWithParam<std::string> {};
 

@@ -1,7 +1,6 @@
 // The command-line program as a user meets it: every subcommand has --help;
 // every bad input gives exactly one line on stderr, a non-zero exit and no
 // file at a final name in OUT.
-#include <sys/wait.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -14,45 +13,23 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "tests/support/test_files.hpp"
+
 namespace twin {
 namespace {
 
 using ::testing::HasSubstr;
 using ::testing::Not;
 
-struct Result {
-  int exit_code{0};
-  std::string out;
-  std::string err;
-};
+using Result = test_support::CommandResult;
+using test_support::slurp;
 
-// One folder per test: ctest runs the tests of this file in parallel.
 std::filesystem::path work() {
-  const auto d = std::filesystem::temp_directory_path() / "twin_cli_test" /
-                 ::testing::UnitTest::GetInstance()->current_test_info()->name();
-  std::filesystem::create_directories(d);
-  return d;
+  return test_support::made_dir(std::filesystem::temp_directory_path() / "twin_cli_test" /
+                                test_support::current_test_name());
 }
 
-std::string slurp(const std::filesystem::path& p) {
-  std::ifstream f(p);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-Result twin_cmd(const std::string& args) {
-  const auto out = work() / "stdout.txt";
-  const auto err = work() / "stderr.txt";
-  const std::string cmd = std::string(TWIN_BINARY_DIR) + "/bin/twin " + args + " >" + out.string() + " 2>" +
-                          err.string() + " </dev/null";
-  const int rc = std::system(cmd.c_str());
-  Result r;
-  r.exit_code = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
-}
+Result twin_cmd(const std::string& args) { return test_support::run_command(work(), test_support::twin_exe() + " " + args); }
 
 int lines(const std::string& s) {
   int n = 0;
@@ -67,10 +44,14 @@ void expect_one_line_failure(const Result& r, const std::string& what) {
 }
 
 std::filesystem::path file(const std::string& name, const std::string& text) {
-  const auto p = work() / name;
-  std::filesystem::create_directories(p.parent_path());
-  std::ofstream(p) << text;
-  return p;
+  return test_support::write_file(work() / name, text);
+}
+
+/// DIR/program.nc holding `program` and DIR/scenario.yaml running it on the fadal2216 (`extra` appended).
+std::filesystem::path scenario_with(const std::string& dir, const std::string& program,
+                                    const std::string& extra = "start_mm: [0, 0, 0]\n") {
+  file(dir + "/program.nc", program);
+  return file(dir + "/scenario.yaml", "name: " + dir + "\nmachine: fadal2216\nprogram: program.nc\n" + extra);
 }
 
 TEST(Cli, HelpForEverySubcommand) {
@@ -82,8 +63,7 @@ TEST(Cli, HelpForEverySubcommand) {
 }
 
 TEST(Cli, BadInputsFailWithOneLineAndNoFiles) {
-  const auto out = work() / "out_bad";
-  std::filesystem::remove_all(out);
+  const auto out = test_support::removed(work() / "out_bad");
   expect_one_line_failure(twin_cmd("run nosuch_scenario -o " + out.string()), "nosuch_scenario");
   expect_one_line_failure(twin_cmd("run -o " + out.string() + " --set x.Jay=1"), "Jay");
   expect_one_line_failure(twin_cmd("run -o " + out.string() + " --set x.J=-1"), "J");
@@ -115,12 +95,9 @@ TEST(Cli, BadInputsFailWithOneLineAndNoFiles) {
 }
 
 TEST(Cli, RunWritesTraceSummaryAndPlots) {
-  const auto prog = file("small/program.nc", "G21 G90 G64 P0.01\nG1 X10 F2000\nY10\nM30\n");
-  static_cast<void>(prog);
-  const auto scen = file("small/scenario.yaml",
-                         "name: small\nmachine: fadal2216\nprogram: program.nc\nstart_mm: [0, 0, 0]\nsettle_s: 0.02\n");
-  const auto out = work() / "out_small";
-  std::filesystem::remove_all(out);
+  const auto scen = scenario_with("small", "G21 G90 G64 P0.01\nG1 X10 F2000\nY10\nM30\n",
+                                  "start_mm: [0, 0, 0]\nsettle_s: 0.02\n");
+  const auto out = test_support::removed(work() / "out_small");
   const Result r = twin_cmd("run " + scen.string() + " -o " + out.string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   for (const char* f : {"trace.csv", "summary.json", "feedrate.png", "errors.png"})
@@ -148,8 +125,7 @@ TEST(Cli, CalibrateSaysWhichErrorsItCouldNotCompute) {
     t << "t_s,x_ref_mm,x_mm,x_u_V\n";
     for (int k = 0; k < 400; ++k) t << k * 1e-4 << ",10,10,0\n";
   }
-  const auto out = work() / "out_still";
-  std::filesystem::remove_all(out);
+  const auto out = test_support::removed(work() / "out_still");
   const Result r = twin_cmd("calibrate " + run.string() + " -o " + out.string() + " --no-plots");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const std::string report = slurp(out / "report.json");
@@ -163,13 +139,11 @@ TEST(Cli, CalibrateSaysWhichErrorsItCouldNotCompute) {
 // tens of microns where the FADAL PID keeps about two); `tune --axis all` tunes
 // its cascade gains and writes them under the machine file's names.
 TEST(Cli, CascadeMachineRunsAndTunes) {
-  const auto out = work() / "out_cascade";
-  std::filesystem::remove_all(out);
+  const auto out = test_support::removed(work() / "out_cascade");
   const Result r = twin_cmd("run --machine fadal2216_cascade --no-plots -o " + out.string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_TRUE(std::filesystem::exists(out / "summary.json"));
-  const auto tuned = work() / "out_tune";
-  std::filesystem::remove_all(tuned);
+  const auto tuned = test_support::removed(work() / "out_tune");
   const Result t = twin_cmd("tune --machine fadal2216_cascade --axis all --max-evals 8 --check none --no-plots -o " +
                             tuned.string());
   ASSERT_EQ(t.exit_code, 0) << t.err;
@@ -180,12 +154,9 @@ TEST(Cli, CascadeMachineRunsAndTunes) {
 }
 
 TEST(Cli, CalibrateRunOfAnUnnamedMachineWithAnAxisUnmeasured) {
-  const auto prog = file("partial/program.nc", "G21 G90 G64 P0.01\nG1 X10 Y5 F3000\nX0 Y0\nX10\nX0\nM30\n");
-  static_cast<void>(prog);
-  const auto scen = file("partial/scenario.yaml",
-                         "name: partial\nmachine: fadal2216\nprogram: program.nc\nstart_mm: [0, 0, 0]\nsettle_s: 0.05\n");
-  const auto sim = work() / "sim";
-  std::filesystem::remove_all(sim);
+  const auto scen = scenario_with("partial", "G21 G90 G64 P0.01\nG1 X10 Y5 F3000\nX0 Y0\nX10\nX0\nM30\n",
+                                  "start_mm: [0, 0, 0]\nsettle_s: 0.05\n");
+  const auto sim = test_support::removed(work() / "sim");
   const Result made = twin_cmd("run " + scen.string() + " -o " + sim.string() + " --no-plots");
   ASSERT_EQ(made.exit_code, 0) << made.err;
   // Keep t_s, x_ref_mm, x_mm, x_u_V and y_ref_mm of the simulated trace.
@@ -214,8 +185,7 @@ TEST(Cli, CalibrateRunOfAnUnnamedMachineWithAnAxisUnmeasured) {
   file("partial_run/trace.csv", csv);
   file("partial_run/meta.json", R"({"machine": null, "axes": ["x", "y"], "controller_period_s": 0.0001, )"
                                 R"("sample_period_s": 0.0001, "encoder_resolution_mm": 0.001})");
-  const auto out = work() / "out_partial";
-  std::filesystem::remove_all(out);
+  const auto out = test_support::removed(work() / "out_partial");
   const Result r = twin_cmd("calibrate " + (work() / "partial_run").string() + " -o " + out.string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   for (const char* f : {"report.json", "report.md", "machine.yaml", "trace.csv", "trace_before.csv"})
@@ -237,22 +207,14 @@ TEST(Cli, CalibrateRunOfAnUnnamedMachineWithAnAxisUnmeasured) {
 // of the readers. A hang is bounded by `timeout` (exit 124 fails the test).
 
 Result twin_bounded(const std::string& args, int seconds = 120) {
-  const auto out = work() / "stdout.txt";
-  const auto err = work() / "stderr.txt";
-  const std::string cmd = "timeout -k 5 " + std::to_string(seconds) + " " + std::string(TWIN_BINARY_DIR) +
-                          "/bin/twin " + args + " >" + out.string() + " 2>" + err.string() + " </dev/null";
-  const int rc = std::system(cmd.c_str());
-  Result r;
-  r.exit_code = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
+  return test_support::run_command(work(), "timeout -k 5 " + std::to_string(seconds) + " " + test_support::twin_exe() +
+                                               " " + args);
 }
 
-std::filesystem::path scenario_with(const std::string& dir, const std::string& program,
-                                    const std::string& extra = "start_mm: [0, 0, 0]\n") {
-  file(dir + "/program.nc", program);
-  return file(dir + "/scenario.yaml", "name: " + dir + "\nmachine: fadal2216\nprogram: program.nc\n" + extra);
+/// `twin run` of a scenario made by scenario_with(dir, program) into `out`, with `flags`.
+Result run_program(const std::string& dir, const std::string& program, const std::filesystem::path& out,
+                   const std::string& flags = "") {
+  return twin_bounded("run " + scenario_with(dir, program).string() + " -o " + out.string() + flags);
 }
 
 void expect_no_files(const std::filesystem::path& out) {
@@ -261,15 +223,14 @@ void expect_no_files(const std::filesystem::path& out) {
 }
 
 TEST(CliHostile, NonFiniteOrAstronomicalDurationsRefusedWithTheLine) {
-  const auto out = work() / "out";
-  std::filesystem::remove_all(out);
+  const auto out = test_support::removed(work() / "out");
   // X1 followed by 300 zeros: 1e300 mm, a planned duration beyond any tick count.
-  const auto s1 = scenario_with("inf", "G21 G90\nG1 X1" + std::string(300, '0') + " F1000\nM30\n");
-  expect_one_line_failure(twin_bounded("run " + s1.string() + " -o " + out.string()), "inf/program.nc:2");
+  expect_one_line_failure(run_program("inf", "G21 G90\nG1 X1" + std::string(300, '0') + " F1000\nM30\n", out),
+                          "inf/program.nc:2");
   // Two incremental moves of 1e307 mm.
   const std::string big = "1" + std::string(307, '0');
-  const auto s2 = scenario_with("g91", "G21 G91\nG1 X" + big + " F1000\nX" + big + "\nM30\n");
-  expect_one_line_failure(twin_bounded("run " + s2.string() + " -o " + out.string()), "g91/program.nc:2");
+  expect_one_line_failure(run_program("g91", "G21 G91\nG1 X" + big + " F1000\nX" + big + "\nM30\n", out),
+                          "g91/program.nc:2");
   // A start position no machine reaches.
   const auto s3 = scenario_with("start", "G21 G90\nG1 Y10 F1000\nM30\n", "start_mm: [1e300, 0, 0]\n");
   expect_one_line_failure(twin_bounded("run " + s3.string() + " -o " + out.string()), "start_mm[0]");
@@ -277,36 +238,30 @@ TEST(CliHostile, NonFiniteOrAstronomicalDurationsRefusedWithTheLine) {
 }
 
 TEST(CliHostile, MovesBeyondTheTravelRefusedWithTheLine) {
-  const auto out = work() / "out";
-  std::filesystem::remove_all(out);
+  const auto out = test_support::removed(work() / "out");
   // fadal2216: x travel 559 mm, y 406 mm, z 508 mm.
-  const auto s1 = scenario_with("rapid", "G21 G90\nG1 X10 F1000\nG0 X700 Y-100 Z-300\nM30\n");
-  const Result r1 = twin_bounded("run " + s1.string() + " -o " + out.string());
+  const Result r1 = run_program("rapid", "G21 G90\nG1 X10 F1000\nG0 X700 Y-100 Z-300\nM30\n", out);
   expect_one_line_failure(r1, "rapid/program.nc:3");
   EXPECT_THAT(r1.err, HasSubstr("travel of 559 mm"));
   // An arc whose ends are 20 mm apart in y but which, counter-clockwise the
   // long way round its centre (300, 10) of radius 300.2 mm, reaches x = 600 mm.
-  const auto s2 = scenario_with("bulge", "G21 G90\nG3 X0 Y20 I300 J10 F1000\nM30\n");
-  const Result r2 = twin_bounded("run " + s2.string() + " -o " + out.string());
+  const Result r2 = run_program("bulge", "G21 G90\nG3 X0 Y20 I300 J10 F1000\nM30\n", out);
   expect_one_line_failure(r2, "bulge/program.nc:2");
   EXPECT_THAT(r2.err, HasSubstr("in x"));
   // An arc of radius 1e12 mm (a full circle: start = end).
-  const auto s3 = scenario_with("huge_arc", "G21 G90\nG2 X0 Y0 I1000000000000 F1000\nM30\n");
-  expect_one_line_failure(twin_bounded("run " + s3.string() + " -o " + out.string()), "huge_arc/program.nc:2");
+  expect_one_line_failure(run_program("huge_arc", "G21 G90\nG2 X0 Y0 I1000000000000 F1000\nM30\n", out),
+                          "huge_arc/program.nc:2");
   expect_no_files(out);
   // The whole travel is allowed: a 559 mm move in x reaches the planning
   // stage (and is refused there only by the budget asked for here).
-  const auto s4 = scenario_with("full", "G21 G90\nG0 X559\nM30\n");
-  const Result r4 = twin_bounded("run " + s4.string() + " -o " + out.string() + " --max-duration-s 0.001");
+  const Result r4 = run_program("full", "G21 G90\nG0 X559\nM30\n", out, " --max-duration-s 0.001");
   expect_one_line_failure(r4, "--max-duration-s");
 }
 
 TEST(CliHostile, LongRunsRefusedBeforeSimulatingWithBothFigures) {
-  const auto out = work() / "out";
-  std::filesystem::remove_all(out);
+  const auto out = test_support::removed(work() / "out");
   // A dwell of 1e9 s: 1e13 ticks of 1e-4 s.
-  const auto s1 = scenario_with("dwell", "G21 G90\nG4 P1000000000\nM30\n");
-  const Result r1 = twin_bounded("run " + s1.string() + " -o " + out.string());
+  const Result r1 = run_program("dwell", "G21 G90\nG4 P1000000000\nM30\n", out);
   expect_one_line_failure(r1, "--max-duration-s");
   EXPECT_THAT(r1.err, HasSubstr("--max-trace-mb"));
   EXPECT_THAT(r1.err, HasSubstr("1e+09 s"));
@@ -325,8 +280,7 @@ TEST(CliHostile, LongRunsRefusedBeforeSimulatingWithBothFigures) {
 }
 
 TEST(CliHostile, IntegerWordsAndSpindleSpeedRangeChecked) {
-  const auto out = work() / "out";
-  std::filesystem::remove_all(out);
+  const auto out = test_support::removed(work() / "out");
   const struct {
     const char* dir;
     std::string program;
@@ -340,8 +294,7 @@ TEST(CliHostile, IntegerWordsAndSpindleSpeedRangeChecked) {
       {"t_neg", "G21 G90\nT-3\nG1 X1 F100\nM30\n", "T must be a whole number"},
   };
   for (const auto& c : cases) {
-    const auto s = scenario_with(c.dir, c.program);
-    const Result r = twin_bounded("run " + s.string() + " -o " + out.string());
+    const Result r = run_program(c.dir, c.program, out);
     expect_one_line_failure(r, std::string(c.dir) + "/program.nc:");
     EXPECT_THAT(r.err, HasSubstr(c.what)) << c.dir;
   }
@@ -352,8 +305,7 @@ TEST(CliHostile, EmptyProgramsRefused) {
   const auto out = work() / "out";
   for (const auto& [dir, text] : std::vector<std::pair<std::string, std::string>>{
            {"empty", ""}, {"percent", "%\n%\n"}, {"settings", "%\nG21 G90 (no motion)\nM30\n%\n"}}) {
-    const auto s = scenario_with(dir, text);
-    expect_one_line_failure(twin_bounded("run " + s.string() + " -o " + out.string()), "holds no move");
+    expect_one_line_failure(run_program(dir, text, out), "holds no move");
   }
   expect_no_files(out);
 }

@@ -3,7 +3,6 @@
 // trace of the same run; a sweep case's figures against `twin run` of the same
 // case on its own; the MPI sweep's tables against the local sweep's, byte for
 // byte (the same cases, the same figures: nothing may depend on who ran what).
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -18,6 +17,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "tests/support/test_files.hpp"
 #include "twin/io/trace_csv.hpp"
 
 namespace twin {
@@ -25,34 +25,18 @@ namespace {
 
 using ::testing::HasSubstr;
 
+using test_support::slurp;
+
 std::filesystem::path work() {
-  const auto d = std::filesystem::temp_directory_path() / "twin_scale_cli_test" /
-                 ::testing::UnitTest::GetInstance()->current_test_info()->name();
-  std::filesystem::remove_all(d);
-  std::filesystem::create_directories(d);
-  return d;
+  return test_support::fresh_dir(std::filesystem::temp_directory_path() / "twin_scale_cli_test" /
+                                 test_support::current_test_name());
 }
 
-std::string slurp(const std::filesystem::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
+using Result = test_support::CommandResult;
 
-struct Result {
-  int exit_code{0};
-  std::string err;
-};
+Result sh(const std::filesystem::path& dir, const std::string& command) { return test_support::run_command(dir, command); }
 
-Result sh(const std::filesystem::path& dir, const std::string& command) {
-  const auto err = dir / "stderr.txt";
-  const std::string cmd = command + " >" + (dir / "stdout.txt").string() + " 2>" + err.string() + " </dev/null";
-  const int rc = std::system(cmd.c_str());
-  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, slurp(err)};
-}
-
-std::string twin() { return std::string(TWIN_BINARY_DIR) + "/bin/twin"; }
+std::string twin() { return test_support::twin_exe(); }
 
 // A 0.33 s air move on the FADAL 2216: a case costs a fraction of a second.
 std::filesystem::path short_scenario(const std::filesystem::path& dir) {

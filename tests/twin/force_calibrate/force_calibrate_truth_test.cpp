@@ -62,9 +62,7 @@ TEST(ForceCalibrateTruth, CleanSeriesIsNone) {
 }
 
 TEST(ForceCalibrateTruth, Runout) {
-  TruthSeries s;
-  s.rho_mm = 0.010;
-  s.lambda_deg = 120.0;
+  TruthSeries s{.rho_mm = 0.010, .lambda_deg = 120.0};
   const ForceCalibration r = calibrate_truth("runout", s);
   EXPECT_EQ(effects(r), std::vector<std::string>{"runout"});
   EXPECT_NEAR(r.after.runout.rho_mm, 0.010, 0.001);
@@ -74,10 +72,7 @@ TEST(ForceCalibrateTruth, Runout) {
 }
 
 TEST(ForceCalibrateTruth, SizeEffect) {
-  TruthSeries s;
-  s.Kc = {600.0, 180.0, 70.0};
-  s.Kb = {700.0, 300.0, 90.0};
-  s.c_per_mm = 40.0;
+  TruthSeries s{.Kc = {600.0, 180.0, 70.0}, .Kb = {700.0, 300.0, 90.0}, .c_per_mm = 40.0};
   const ForceCalibration r = calibrate_truth("size_effect", s);
   EXPECT_EQ(effects(r), std::vector<std::string>{"size_effect"});
   ASSERT_TRUE(r.after.k.exponential);
@@ -95,9 +90,7 @@ TEST(ForceCalibrateTruth, SizeEffect) {
 }
 
 TEST(ForceCalibrateTruth, SensorResonance) {
-  TruthSeries s;
-  s.mode_f_hz = 1600.0;
-  s.mode_zeta = 0.04;
+  TruthSeries s{.mode_f_hz = 1600.0, .mode_zeta = 0.04};
   const ForceCalibration r = calibrate_truth("sensor_resonance", s);
   EXPECT_EQ(effects(r), std::vector<std::string>{"sensor_resonance"});
   ASSERT_TRUE(r.after.mode.has_value());
@@ -120,8 +113,7 @@ TEST(ForceCalibrateTruth, ToolWear) {
 // Without spindle_deg the angle comes from the tooth pattern: a clean series
 // still gives the coefficients within 2 %.
 TEST(ForceCalibrateTruth, NoSpindleAngleUsesTheToothPattern) {
-  TruthSeries s;
-  s.log_angle = false;
+  TruthSeries s{.log_angle = false};
   const ForceCalibration r = calibrate_truth("no_angle", s);
   expect_coefficients(r, s, 0.02);
   EXPECT_TRUE(r.added.empty()) << ::testing::PrintToString(effects(r));
@@ -129,9 +121,7 @@ TEST(ForceCalibrateTruth, NoSpindleAngleUsesTheToothPattern) {
 
 // Bad cut data: a one-line error naming the field.
 TEST(ForceCalibrateTruth, BadMetaNamesTheField) {
-  TruthSeries s;
-  s.fz_mm = {0.05};
-  s.duration_s = 0.1;
+  TruthSeries s{.fz_mm = {0.05}, .duration_s = 0.1};
   const auto dir = scratch("bad_meta");
   process::truth::write_truth_series(dir, s);
   const auto meta = dir / "fz0.050" / "meta.json";

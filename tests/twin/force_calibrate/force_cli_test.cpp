@@ -2,50 +2,34 @@
 // outputs, the YAML files `twin cut` reads as they are (with the runout),
 // and a bad field as one line naming it with no file left at a final name.
 // The series is made by the tests' independent generator (runout 10 um).
-#include <sys/wait.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <string>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 #include "tests/process/force_truth_generator.hpp"
+#include "tests/support/test_files.hpp"
 #include "twin/io/process_yaml.hpp"
 
 namespace twin {
 namespace {
 
+using test_support::slurp;
+
 std::filesystem::path work() {
-  const auto d = std::filesystem::path(TWIN_BINARY_DIR) / "tests" / "force_cli" /
-                 ::testing::UnitTest::GetInstance()->current_test_info()->name();
-  std::filesystem::remove_all(d);
-  std::filesystem::create_directories(d);
-  return d;
+  return test_support::fresh_dir(std::filesystem::path(TWIN_BINARY_DIR) / "tests" / "force_cli" /
+                                 test_support::current_test_name());
 }
 
-std::string slurp(const std::filesystem::path& p) {
-  std::ifstream f(p);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-struct Result {
-  int exit_code{0};
-  std::string out, err;
-};
+using Result = test_support::CommandResult;
 
 Result twin_cmd(const std::filesystem::path& dir, const std::string& args) {
-  const std::string cmd = std::string(TWIN_BINARY_DIR) + "/bin/twin " + args + " >" + (dir / "stdout.txt").string() +
-                          " 2>" + (dir / "stderr.txt").string() + " </dev/null";
-  const int rc = std::system(cmd.c_str());
-  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, slurp(dir / "stdout.txt"), slurp(dir / "stderr.txt")};
+  return test_support::run_command(dir, test_support::twin_exe() + " " + args);
 }
 
 process::truth::TruthSeries small_series() {

@@ -1,12 +1,12 @@
 // Machine definitions: the shipped FADAL 2216 file against Ozcan et al. 2017
 // Tables 1 and 3 (typed in here from the paper), and every kind of bad input.
 #include <filesystem>
-#include <fstream>
 #include <string>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "tests/support/test_files.hpp"
 #include "twin/core/error.hpp"
 #include "twin/io/machine_file.hpp"
 
@@ -16,17 +16,10 @@ namespace {
 using ::testing::HasSubstr;
 
 std::filesystem::path temp_yaml(const std::string& name, const std::string& text) {
-  const auto dir = std::filesystem::temp_directory_path() / "twin_machine_file_test";
-  std::filesystem::create_directories(dir);
-  const auto p = dir / name;
-  std::ofstream(p) << text;
-  return p;
+  return test_support::write_file(std::filesystem::temp_directory_path() / "twin_machine_file_test" / name, text);
 }
 
-std::string fadal_text() {
-  std::ifstream f(std::string(TWIN_SOURCE_DIR) + "/scenarios/machines/fadal2216.yaml");
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
+std::string fadal_text() { return test_support::slurp(TWIN_SOURCE_DIR "/scenarios/machines/fadal2216.yaml"); }
 
 TEST(MachineFile, ShippedFadalMatchesOzcanTables) {
   const sim::MachineDefinition m = io::load_machine(io::resolve_machine_path("fadal2216"));

@@ -4,14 +4,13 @@
 #include <filesystem>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "tests/support/test_files.hpp"
 #include "twin/core/error.hpp"
 #include "twin/io/trace_csv.hpp"
 
@@ -20,16 +19,14 @@ namespace {
 
 using ::testing::HasSubstr;
 
+using test_support::slurp;
+
 std::filesystem::path dir() {
-  const auto d = std::filesystem::temp_directory_path() / "twin_trace_csv_test";
-  std::filesystem::create_directories(d);
-  return d;
+  return test_support::made_dir(std::filesystem::temp_directory_path() / "twin_trace_csv_test");
 }
 
 std::filesystem::path write(const std::string& name, const std::string& text) {
-  const auto p = dir() / name;
-  std::ofstream(p) << text;
-  return p;
+  return test_support::write_file(dir() / name, text);
 }
 
 TEST(TraceCsv, RoundTrip) {
@@ -64,12 +61,7 @@ TEST(TraceCsv, UncommittedWriterLeavesNoFile) {
 
 TEST(TraceCsv, MalformedInputsNameTheLine) {
   auto expect_error = [](const std::string& name, const std::string& text, const std::string& what) {
-    try {
-      io::read_trace_csv(write(name, text));
-      ADD_FAILURE() << name << ": no error";
-    } catch (const IoError& e) {
-      EXPECT_THAT(e.what(), HasSubstr(what)) << name;
-    }
+    test_support::expect_error<IoError>([&] { io::read_trace_csv(write(name, text)); }, name, what);
   };
   expect_error("nan.csv", "t_s,x_mm\n0,1\n0.1,nan\n", ":3: column x_mm");
   expect_error("short.csv", "t_s,x_mm\n0,1\n0.1\n", ":3:");
@@ -79,13 +71,6 @@ TEST(TraceCsv, MalformedInputsNameTheLine) {
   expect_error("notime.csv", "x_mm\n1\n", "missing column t_s");
   expect_error("back.csv", "t_s,x_mm\n0,1\n0.2,1\n0.1,1\n", "not increasing");
   expect_error("dup.csv", "t_s,t_s\n0,1\n", "appears twice");
-}
-
-std::string slurp(const std::filesystem::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
 }
 
 // The writer formats numbers itself (std::to_chars into a fixed buffer); the

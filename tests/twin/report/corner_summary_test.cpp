@@ -30,10 +30,8 @@ namespace {
 // before the speed dip, which here lies inside the engagement ramp.
 TEST(CornerSummary, StraightCutOutsideTheRampAgainstTheCorner) {
   const double Ts = 1e-4;
-  controller::MotionLimits lim;
-  lim.v_max_mm_per_s = {100, 100, 100};
-  lim.a_max_mm_per_s2 = {2000, 2000, 2000};
-  lim.j_max_mm_per_s3 = {1e12, 1e12, 1e12};
+  controller::MotionLimits lim{.v_max_mm_per_s = {100, 100, 100}, .a_max_mm_per_s2 = {2000, 2000, 2000},
+                               .j_max_mm_per_s3 = {1e12, 1e12, 1e12}};
   const controller::Program prog =
       controller::parse_gcode("G64 P0.05\nG1 X20 F600\nY20\n", "corner.nc", {0, 0, 0}, 6000.0);
   const controller::Trajectory traj = controller::plan_trajectory(prog, lim, Ts);
@@ -77,10 +75,8 @@ TEST(CornerSummary, StraightCutOutsideTheRampAgainstTheCorner) {
 // ticks and reports no corner (this run used to write past an empty buffer).
 TEST(CornerSummary, ProgramWithoutCornersKeepsNoHistory) {
   const double Ts = 1e-4;
-  controller::MotionLimits lim;
-  lim.v_max_mm_per_s = {100, 100, 100};
-  lim.a_max_mm_per_s2 = {2000, 2000, 2000};
-  lim.j_max_mm_per_s3 = {50000, 50000, 50000};
+  controller::MotionLimits lim{.v_max_mm_per_s = {100, 100, 100}, .a_max_mm_per_s2 = {2000, 2000, 2000},
+                               .j_max_mm_per_s3 = {50000, 50000, 50000}};
   const controller::Program prog = controller::parse_gcode("G1 X2 F600\n", "line.nc", {0, 0, 0}, 6000.0);
   const controller::Trajectory traj = controller::plan_trajectory(prog, lim, Ts);
   ASSERT_TRUE(traj.corners().empty());

@@ -5,21 +5,19 @@
 // depth at the scenario's speed is the boundary of the lobes computed on
 // their own (process/stability_lobes, verified against closed forms in
 // tests/process); the machine file's tool tip reads back as written.
-#include <sys/wait.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
-#include <sstream>
 #include <string>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "tests/support/test_files.hpp"
 #include "twin/core/error.hpp"
 #include "twin/io/machine_file.hpp"
 #include "twin/io/scenario_file.hpp"
@@ -30,29 +28,18 @@ namespace {
 
 constexpr double kDeg = 180.0 / std::numbers::pi;
 
-std::filesystem::path work() {
-  const auto d = std::filesystem::temp_directory_path() / "twin_lobe_study_test" /
-                 ::testing::UnitTest::GetInstance()->current_test_info()->name();
-  std::filesystem::remove_all(d);
-  std::filesystem::create_directories(d);
-  return d;
-}
+using test_support::slurp;
 
-std::string slurp(const std::filesystem::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
+std::filesystem::path work() {
+  return test_support::fresh_dir(std::filesystem::temp_directory_path() / "twin_lobe_study_test" /
+                                 test_support::current_test_name());
 }
 
 int sh(const std::filesystem::path& dir, const std::string& command) {
-  const std::string cmd = command + " >" + (dir / "stdout.txt").string() + " 2>" + (dir / "stderr.txt").string() +
-                          " </dev/null";
-  const int rc = std::system(cmd.c_str());
-  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+  return test_support::run_command(dir, command).exit_code;
 }
 
-std::string twin() { return std::string(TWIN_BINARY_DIR) + "/bin/twin"; }
+std::string twin() { return test_support::twin_exe(); }
 
 TEST(CutStudy, TheDefaultWallCutIsTwoMillimetresOfATenMillimetreTool) {
   // fadal_pocket_corner: "Wall cut with radial depth 2 mm ... ap 1 mm", a

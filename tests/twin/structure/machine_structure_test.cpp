@@ -19,16 +19,8 @@ namespace {
 constexpr double kRel = 1e-12;
 
 StructureSpec spec_of(Stacking s) {
-  StructureSpec sp;
-  sp.stacking = s;
-  sp.table_kg = 250.0;
-  sp.saddle_kg = 300.0;
-  sp.head_kg = 400.0;
-  sp.workpiece_kg = 35.0;
-  sp.counterbalance_N = 1200.0;
-  sp.screw_efficiency = 0.9;
-  sp.screw_stiffness_N_per_um = {150.0, 160.0, 170.0};
-  return sp;
+  return {.stacking = s, .table_kg = 250.0, .saddle_kg = 300.0, .head_kg = 400.0, .workpiece_kg = 35.0,
+          .counterbalance_N = 1200.0, .screw_efficiency = 0.9, .screw_stiffness_N_per_um = {150.0, 160.0, 170.0}};
 }
 
 const std::array<std::array<double, 3>, 2> kConfigurations{{{0.0, 0.0, 0.0}, {430.0, -215.5, -377.0}}};

@@ -4,20 +4,18 @@
 // the stacking), a constant torque m g rg / eta on Z that the Z motor holds at
 // standstill. Checked against these closed forms; tolerances are stated where
 // they are not round-off.
-#include <sys/wait.h>
-
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <memory>
-#include <sstream>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "controller/gcode.hpp"
 #include "feeddrive/drive_bank.hpp"
+#include "tests/support/test_files.hpp"
 #include "twin/core/error.hpp"
 #include "twin/io/machine_file.hpp"
 #include "twin/io/trace_csv.hpp"
@@ -35,29 +33,17 @@ sim::MachineDefinition structure_machine() {
   return io::load_machine(io::resolve_machine_path("fadal2216_structure"));
 }
 
+using test_support::slurp;
+
 std::filesystem::path temp_dir() {
-  const auto d = std::filesystem::temp_directory_path() / "structure_machine_test" /
-                 ::testing::UnitTest::GetInstance()->current_test_info()->name();
-  std::filesystem::create_directories(d);
-  return d;
+  return test_support::made_dir(std::filesystem::temp_directory_path() / "structure_machine_test" /
+                                test_support::current_test_name());
 }
 
 std::filesystem::path write(const std::string& name, const std::string& text) {
-  const auto p = temp_dir() / name;
-  std::ofstream(p) << text;
-  return p;
+  return test_support::write_file(temp_dir() / name, text);
 }
 
-std::string slurp(const std::filesystem::path& p) {
-  std::ifstream f(p);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-// The FADAL structure machine's totals equal Ozcan's identified J (the file's
-// J is that less the reflected carried mass at the nominal workpiece): 1e-9
-// relative, the file's J being given to 8 digits.
 TEST(StructureMachine, DrivesCarryTheStackAndZTheWeight) {
   const sim::MachineDefinition m = structure_machine();
   const sim::MachineDefinition rigid = io::load_machine(io::resolve_machine_path("fadal2216"));
@@ -129,13 +115,10 @@ TEST(StructureMachine, ZMotorHoldsTheGravityTorqueAtStandstill) {
 // and at the end (Z at rest after the program's last move and the settle
 // time) the Z torque in trace.csv is the gravity torque (same band as above).
 TEST(StructureMachine, DefaultScenarioRunsOnTheStructureMachine) {
-  const auto out = temp_dir() / "out";
-  std::filesystem::remove_all(out);
-  const std::string cmd = std::string(TWIN_BINARY_DIR) + "/bin/twin run --machine fadal2216_structure --no-plots -o " +
-                          out.string() + " >" + (temp_dir() / "stdout.txt").string() + " 2>" +
-                          (temp_dir() / "stderr.txt").string() + " </dev/null";
-  const int rc = std::system(cmd.c_str());
-  ASSERT_TRUE(WIFEXITED(rc) && WEXITSTATUS(rc) == 0) << slurp(temp_dir() / "stderr.txt");
+  const auto out = test_support::removed(temp_dir() / "out");
+  const auto r = test_support::run_command(
+      temp_dir(), test_support::twin_exe() + " run --machine fadal2216_structure --no-plots -o " + out.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
   const io::TraceTable t = io::read_trace_csv(out / "trace.csv");
   const auto& T = t.at("z_Tm_Nm");
   ASSERT_FALSE(T.empty());

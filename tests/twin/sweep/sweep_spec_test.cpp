@@ -2,26 +2,21 @@
 // slowest (oracle: the product written out by hand); listed cases follow;
 // every bad input is one ConfigError naming the file and line.
 #include <filesystem>
-#include <fstream>
 #include <string>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "tests/support/test_files.hpp"
 #include "twin/core/error.hpp"
 #include "twin/sweep/sweep_spec.hpp"
 
 namespace twin {
 namespace {
 
-using ::testing::HasSubstr;
 
 std::filesystem::path write(const std::string& name, const std::string& text) {
-  const auto d = std::filesystem::temp_directory_path() / "twin_sweep_spec_test";
-  std::filesystem::create_directories(d);
-  const auto p = d / name;
-  std::ofstream(p) << text;
-  return p;
+  return test_support::write_file(std::filesystem::temp_directory_path() / "twin_sweep_spec_test" / name, text);
 }
 
 TEST(SweepSpec, GridIsTheProductFirstKeySlowestThenListedCases) {
@@ -75,13 +70,9 @@ TEST(SweepSpec, CalibrateFleetIsOneCasePerRun) {
 
 TEST(SweepSpec, BadInputsAreOneLineNamingFileAndLine) {
   auto expect_error = [](const std::string& name, const std::string& text, const std::string& what) {
-    try {
-      sweep::load_sweep(write(name, text));
-      ADD_FAILURE() << name << ": no error";
-    } catch (const ConfigError& e) {
-      EXPECT_THAT(e.what(), HasSubstr(what)) << name;
-      EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << name;
-    }
+    const std::string message =
+        test_support::expect_error<ConfigError>([&] { sweep::load_sweep(write(name, text)); }, name, what);
+    EXPECT_EQ(message.find('\n'), std::string::npos) << name;
   };
   expect_error("unknown.yaml", "scenario: a\nfrobnicate: 1\n", "unknown.yaml:2: frobnicate: unknown key");
   expect_error("dup.yaml", "cases:\n  - {name: a}\n  - {name: a}\n", "case name 'a' is given twice");

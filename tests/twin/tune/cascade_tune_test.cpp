@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/twin/tune/window_check.hpp"
 #include "twin/tune/tune.hpp"
 #include "twin/io/machine_file.hpp"
 #include "twin/io/scenario_file.hpp"
@@ -108,13 +109,8 @@ TEST(CascadeTune, TunedGainsMeetConstraintsAndLowerTheObjectiveInSimulation) {
 // (1 um), the quantisation of the error the loop acts on, on the max tracking error of
 // each axis and the max contour error.
 TEST(CascadeTune, SteadyMotionWindowMatchesTheFullRun) {
-  const io::Scenario sc = cascade_scenario();
-  const PlannedScenario planned = plan_scenario(sc);
-  const ScenarioMetrics full = simulate_window(sc, planned, sc.machine, full_window(planned));
-  const ScenarioMetrics win = simulate_window(sc, planned, sc.machine, corner_window(planned, 0.03, 0.03));
-  ASSERT_TRUE(full.completed && win.completed);
-  EXPECT_LT(win.ticks, full.ticks);
-  EXPECT_NEAR(win.max_contour_error_mm, full.max_contour_error_mm, 1e-3);
+  ScenarioMetrics full, win;
+  ASSERT_NO_FATAL_FAILURE(testing::expect_corner_window_matches_full_run(cascade_scenario(), full, win));
   for (Axis a : {Axis::kX, Axis::kY})
     EXPECT_NEAR(win.max_tracking_error_mm[index(a)], full.max_tracking_error_mm[index(a)], 1e-3) << axis_name(a);
   EXPECT_GT(full.max_tracking_error_mm[index(Axis::kX)], 0.03);  // the lag is there to be matched

@@ -28,6 +28,14 @@ controller::PositionLoopParams table3_x() {
   return g;
 }
 
+/// A PD position loop: Kp and Kd, no integral and no feedforward.
+controller::PositionLoopParams pd_loop(double Kp_V_per_mm, double Kd_V_s_per_mm) {
+  controller::PositionLoopParams g;
+  g.Kp_V_per_mm = Kp_V_per_mm;
+  g.Kd_V_s_per_mm = Kd_V_s_per_mm;
+  return g;
+}
+
 /// An independent closed loop: the drive integrated in closed form over each
 /// tick with u held (w(t) = w0 e^{-at} + (G/a)(1 - e^{-at}), a = B/J, G = Ka Kt u / J;
 /// x the integral of rg w), and the law from controller::PositionLoop.
@@ -79,9 +87,7 @@ TEST(LinearAnalysis, ZohDiscretisationMatchesClosedForm) {
 TEST(LinearAnalysis, PureInertiaUnderPdMatchesContinuousClosedForms) {
   LinearPlant p = fadal_x();
   p.B_kg_m2_per_s = 0.0;
-  controller::PositionLoopParams g;
-  g.Kp_V_per_mm = 500.0;
-  g.Kd_V_s_per_mm = 1.0;
+  const controller::PositionLoopParams g = pd_loop(500.0, 1.0);
   const double Ts_s = 1e-6;
   const DiscreteLoopModel m(p, g, Ts_s);
   const LoopAnalysis a = analyse_loop(m, 0.1, 6000);
@@ -114,9 +120,7 @@ TEST(LinearAnalysis, PureInertiaUnderPdMatchesContinuousClosedForms) {
 TEST(LinearAnalysis, PhaseMarginAtRealTsLosesAtMostTheSampleLag) {
   LinearPlant p = fadal_x();
   p.B_kg_m2_per_s = 0.0;
-  controller::PositionLoopParams g;
-  g.Kp_V_per_mm = 500.0;
-  g.Kd_V_s_per_mm = 0.3;
+  const controller::PositionLoopParams g = pd_loop(500.0, 0.3);
   const LoopAnalysis a = analyse_loop(DiscreteLoopModel(p, g, kTs_s));
   const double K = p.Ka_A_per_V * p.Kt_Nm_per_A * p.rg_mm_per_rad / p.J_kg_m2;
   const double Kp = g.Kp_V_per_mm, Kd = g.Kd_V_s_per_mm;

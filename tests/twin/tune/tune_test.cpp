@@ -12,6 +12,7 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/twin/tune/window_check.hpp"
 #include "twin/core/error.hpp"
 #include "twin/core/units.hpp"
 #include "twin/io/scenario_file.hpp"
@@ -165,13 +166,8 @@ TEST(Tune, NeverReturnsGainsThatBreakTheULimit) {
 // the max contour error of the corner agrees within one encoder count (1 um), the
 // quantisation of the error the loop acts on.
 TEST(Tune, SteadyMotionWindowMatchesTheFullRun) {
-  const io::Scenario sc = tuning_scenario();
-  const PlannedScenario planned = plan_scenario(sc);
-  const ScenarioMetrics full = simulate_window(sc, planned, sc.machine, full_window(planned));
-  const ScenarioMetrics win = simulate_window(sc, planned, sc.machine, corner_window(planned, 0.03, 0.03));
-  ASSERT_TRUE(full.completed && win.completed);
-  EXPECT_LT(win.ticks, full.ticks);
-  EXPECT_NEAR(win.max_contour_error_mm, full.max_contour_error_mm, 1e-3);
+  ScenarioMetrics full, win;
+  testing::expect_corner_window_matches_full_run(tuning_scenario(), full, win);
 }
 
 // Oracle: the corner windows' own tick ranges. The search window holds the first tuning
