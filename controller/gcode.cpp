@@ -11,6 +11,7 @@
 #include <fmt/format.h>
 
 #include "twin/core/error.hpp"
+#include "twin/core/text.hpp"
 #include "twin/core/units.hpp"
 
 namespace twin::controller {
@@ -32,26 +33,8 @@ constexpr double kMaxSpindle_rpm = 200000.0;
 /// Error messages quote at most this many characters of the offending text.
 constexpr std::size_t kExcerptChars = 40;
 
-/// A short printable excerpt: control and non-ASCII bytes as \xNN, cut to
-/// kExcerptChars with "..." so that a 1 MB line gives a one-line message.
-std::string excerpt(std::string_view text) {
-  std::string out;
-  std::size_t shown = 0;
-  for (char ch : text) {
-    if (shown == kExcerptChars) {
-      out += "...";
-      break;
-    }
-    const auto c = static_cast<unsigned char>(ch);
-    if (c >= 0x20 && c < 0x7f && c != '\\') {
-      out.push_back(ch);
-    } else {
-      out += fmt::format("\\x{:02x}", c);
-    }
-    ++shown;
-  }
-  return out;
-}
+/// A short printable excerpt of the offending text (twin/core/text.hpp).
+std::string excerpt(std::string_view text) { return printable_excerpt(text, kExcerptChars, ExcerptBytes::kAscii); }
 
 struct Word {
   char letter{};

@@ -183,13 +183,8 @@ int HeightMapStock::count_in_material(double cx_mm, double cy_mm, double r_mm, c
 }
 
 double HeightMapStock::top_z_at_mm(double x_mm, double y_mm) const noexcept {
-  const double fx = (x_mm - x0_mm_) * inv_cell_;
-  const double fy = (y_mm - y0_mm_) * inv_cell_;
-  if (!(fx >= 0.0 && fy >= 0.0)) return bottom_z_mm_;
-  const auto ix = static_cast<std::size_t>(fx);
-  const auto iy = static_cast<std::size_t>(fy);
-  if (ix >= nx_ || iy >= ny_) return bottom_z_mm_;
-  return static_cast<double>(top_[iy * nx_ + ix]);
+  const std::size_t cell = cell_at(x_mm, y_mm);
+  return cell == kNoCell ? bottom_z_mm_ : static_cast<double>(top_[cell]);
 }
 
 double HeightMapStock::volume_mm3() const {

@@ -54,13 +54,21 @@ class HeightMapStock {
 
   /// True when (x, y, z) (mm) lies inside remaining material.
   bool has_material(double x_mm, double y_mm, double z_mm) const noexcept {
+    const std::size_t cell = cell_at(x_mm, y_mm);
+    if (cell == kNoCell) return false;
+    return z_mm > bottom_z_mm_ && z_mm < static_cast<double>(top_[cell]);
+  }
+  /// The index of the cell under (x, y) (mm) in the height map, or kNoCell
+  /// off the map.
+  static constexpr std::size_t kNoCell = static_cast<std::size_t>(-1);
+  std::size_t cell_at(double x_mm, double y_mm) const noexcept {
     const double fx = (x_mm - x0_mm_) * inv_cell_;
     const double fy = (y_mm - y0_mm_) * inv_cell_;
-    if (!(fx >= 0.0 && fy >= 0.0)) return false;
+    if (!(fx >= 0.0 && fy >= 0.0)) return kNoCell;
     const auto ix = static_cast<std::size_t>(fx);
     const auto iy = static_cast<std::size_t>(fy);
-    if (ix >= nx_ || iy >= ny_) return false;
-    return z_mm > bottom_z_mm_ && z_mm < static_cast<double>(top_[iy * nx_ + ix]);
+    if (ix >= nx_ || iy >= ny_) return kNoCell;
+    return iy * nx_ + ix;
   }
   /// How many of the n points (cx + r s[i], cy + r c[i]) (mm) lie inside
   /// remaining material at height z_mm: has_material of each, counted.

@@ -7,27 +7,13 @@
 #include <fmt/format.h>
 
 #include "twin/core/error.hpp"
+#include "twin/core/text.hpp"
 #include "twin/io/atomic_file.hpp"
 
 namespace twin::io {
 
 std::string escaped(std::string_view text, std::size_t max_chars) {
-  std::string out;
-  std::size_t shown = 0;
-  for (char ch : text) {
-    if (shown == max_chars) {
-      out += "...";
-      break;
-    }
-    const auto c = static_cast<unsigned char>(ch);
-    if (c >= 0x20 && c != 0x7f && c != '\\') {
-      out.push_back(ch);
-    } else {
-      out += fmt::format("\\x{:02x}", c);
-    }
-    ++shown;
-  }
-  return out;
+  return printable_excerpt(text, max_chars, ExcerptBytes::kUtf8Ok);
 }
 
 namespace {
