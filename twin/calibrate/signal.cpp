@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "twin/core/error.hpp"
+#include "twin/report/fft.hpp"
 
 namespace twin::analysis {
 namespace {
@@ -176,27 +177,7 @@ std::vector<double> amplitude_spectrum(std::span<const double> x, double fs_Hz, 
     const double w = 0.5 - 0.5 * std::cos(2.0 * std::numbers::pi * static_cast<double>(i) / static_cast<double>(n));
     a[i] = {(x[i] - mean) * w, 0.0};
   }
-  // Iterative radix-2 FFT.
-  for (std::size_t i = 1, j = 0; i < n; ++i) {
-    std::size_t bit = n >> 1;
-    for (; j & bit; bit >>= 1) j ^= bit;
-    j ^= bit;
-    if (i < j) std::swap(a[i], a[j]);
-  }
-  for (std::size_t len = 2; len <= n; len <<= 1) {
-    const double ang = -2.0 * std::numbers::pi / static_cast<double>(len);
-    const std::complex<double> wl(std::cos(ang), std::sin(ang));
-    for (std::size_t i = 0; i < n; i += len) {
-      std::complex<double> w(1.0, 0.0);
-      for (std::size_t j = 0; j < len / 2; ++j) {
-        const auto u = a[i + j];
-        const auto v = a[i + j + len / 2] * w;
-        a[i + j] = u + v;
-        a[i + j + len / 2] = u - v;
-        w *= wl;
-      }
-    }
-  }
+  fft_in_place(a);
   std::vector<double> mag(n / 2 + 1);
   // Hann window coherent gain 0.5: a sine of amplitude A reads A.
   for (std::size_t k = 0; k <= n / 2; ++k) mag[k] = std::abs(a[k]) * 4.0 / static_cast<double>(n);

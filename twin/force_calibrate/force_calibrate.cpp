@@ -12,6 +12,7 @@
 #include <Eigen/Dense>
 #include <fmt/format.h>
 
+#include "twin/report/fft.hpp"
 #include "twin/report/plots.hpp"
 #include "twin/core/error.hpp"
 #include "twin/io/atomic_file.hpp"
@@ -869,29 +870,6 @@ std::vector<ForceRun> load_force_series(const std::filesystem::path& path) {
 
 namespace {
 
-// In-place radix-2 FFT (size a power of two).
-void fft(std::vector<cd>& x) {
-  const std::size_t n = x.size();
-  for (std::size_t i = 1, j = 0; i < n; ++i) {
-    std::size_t bit = n >> 1;
-    for (; j & bit; bit >>= 1) j ^= bit;
-    j ^= bit;
-    if (i < j) std::swap(x[i], x[j]);
-  }
-  for (std::size_t len = 2; len <= n; len <<= 1) {
-    const cd wl = std::polar(1.0, -kTwoPi / static_cast<double>(len));
-    for (std::size_t i = 0; i < n; i += len) {
-      cd w = 1.0;
-      for (std::size_t k = 0; k < len / 2; ++k) {
-        const cd u = x[i + k], v = x[i + k + len / 2] * w;
-        x[i + k] = u + v;
-        x[i + k + len / 2] = u - v;
-        w *= wl;
-      }
-    }
-  }
-}
-
 struct Evaluated {
   Fit fit;
   std::array<double, 3> err{};
@@ -1586,7 +1564,7 @@ void residual_spectrum(Identifier& id, const std::vector<Prep>& preps, const For
         x[k] = win * (zeroed(p, a, k0 + k) - pred[a][k0 + k]);
         wsum += win;
       }
-      fft(x);
+      fft_in_place(x);
       for (std::size_t k = 0; k < nfft / 2; ++k) out[a][k] += 2.0 * std::abs(x[k]) / wsum;
     }
   }
