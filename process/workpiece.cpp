@@ -145,11 +145,11 @@ void HeightMapStock::refresh_block_max() {
 int HeightMapStock::count_in_material(double cx_mm, double cy_mm, double r_mm, const double* s, const double* c,
                                       std::size_t n, double z_mm) const noexcept {
   if (!(z_mm > bottom_z_mm_)) return 0;
-  // has_material's arithmetic; fx < nx is floor(fx) < nx for fx >= 0.
-  const double nx = static_cast<double>(nx_), ny = static_cast<double>(ny_);
   int hits = 0;
   std::size_t i = 0;
 #if defined(__SSE2__)
+  // cell_at's arithmetic; fx < nx is floor(fx) < nx for fx >= 0.
+  const double nx = static_cast<double>(nx_), ny = static_cast<double>(ny_);
   // Two points at a time. The cell index iy nx + ix is formed in doubles
   // (exact: below 2^31 cells) and converted once.
   const __m128d vcx = _mm_set1_pd(cx_mm), vcy = _mm_set1_pd(cy_mm), vr = _mm_set1_pd(r_mm),
@@ -173,11 +173,8 @@ int HeightMapStock::count_in_material(double cx_mm, double cy_mm, double r_mm, c
   }
 #endif
   for (; i < n; ++i) {
-    const double fx = (cx_mm + r_mm * s[i] - x0_mm_) * inv_cell_;
-    const double fy = (cy_mm + r_mm * c[i] - y0_mm_) * inv_cell_;
-    if (!(fx >= 0.0 && fy >= 0.0 && fx < nx && fy < ny)) continue;
-    const std::size_t cell = static_cast<std::size_t>(fy) * nx_ + static_cast<std::size_t>(fx);
-    hits += z_mm < static_cast<double>(top_[cell]) ? 1 : 0;
+    const std::size_t cell = cell_at(cx_mm + r_mm * s[i], cy_mm + r_mm * c[i]);
+    if (cell != kNoCell) hits += z_mm < static_cast<double>(top_[cell]) ? 1 : 0;
   }
   return hits;
 }

@@ -58,18 +58,6 @@ class HeightMapStock {
     if (cell == kNoCell) return false;
     return z_mm > bottom_z_mm_ && z_mm < static_cast<double>(top_[cell]);
   }
-  /// The index of the cell under (x, y) (mm) in the height map, or kNoCell
-  /// off the map.
-  static constexpr std::size_t kNoCell = static_cast<std::size_t>(-1);
-  std::size_t cell_at(double x_mm, double y_mm) const noexcept {
-    const double fx = (x_mm - x0_mm_) * inv_cell_;
-    const double fy = (y_mm - y0_mm_) * inv_cell_;
-    if (!(fx >= 0.0 && fy >= 0.0)) return kNoCell;
-    const auto ix = static_cast<std::size_t>(fx);
-    const auto iy = static_cast<std::size_t>(fy);
-    if (ix >= nx_ || iy >= ny_) return kNoCell;
-    return iy * nx_ + ix;
-  }
   /// How many of the n points (cx + r s[i], cy + r c[i]) (mm) lie inside
   /// remaining material at height z_mm: has_material of each, counted.
   int count_in_material(double cx_mm, double cy_mm, double r_mm, const double* s, const double* c, std::size_t n,
@@ -95,6 +83,18 @@ class HeightMapStock {
   double volume_mm3() const;
 
  private:
+  /// The index of the cell under (x, y) (mm) in the height map, or kNoCell
+  /// off the map.
+  static constexpr std::size_t kNoCell = static_cast<std::size_t>(-1);
+  std::size_t cell_at(double x_mm, double y_mm) const noexcept {
+    const double fx = (x_mm - x0_mm_) * inv_cell_;
+    const double fy = (y_mm - y0_mm_) * inv_cell_;
+    if (!(fx >= 0.0 && fy >= 0.0)) return kNoCell;
+    const auto ix = static_cast<std::size_t>(fx);
+    const auto iy = static_cast<std::size_t>(fy);
+    if (ix >= nx_ || iy >= ny_) return kNoCell;
+    return iy * nx_ + ix;
+  }
   /// One straight move of the tool: the constants every visited cell needs.
   struct SweepCut {
     double R_mm, R2_mm2;             ///< tool radius and its square
