@@ -2,16 +2,18 @@
 """Calibrates the twin on real machines' logs and tabulates it against the
 baselines (standard library only).
 
-  scripts/real_logs_study.py RUNS_DIR OUT_DIR [--twin build/bin/twin] [--cross RUN]
+  scripts/real_logs_study.py RUNS_DIR OUT_DIR [--twin build/bin/twin] [--cross RUN] [--jobs N]
 
 For every run folder in RUNS_DIR: `twin calibrate RUN -o OUT_DIR/RUN` (fitted
 on the first 60 % of the rows, judged on the rest), then the held-out NRMS of
 each torque channel for the twin, the rigid-body regression and the zero
 model, per run and pooled (root of the row-weighted mean square). With
 --cross RUN: calibrated on RUN alone and validated on every other run (whole
-runs, never fitted on), the same table. Prints markdown tables.
+runs, never fitted on), the same table. --jobs N calibrates N runs at once.
+Prints markdown tables.
 """
 import argparse
+import concurrent.futures
 import json
 import math
 import os
@@ -60,6 +62,7 @@ def main():
     ap.add_argument("--twin", default="build/bin/twin")
     ap.add_argument("--cross", default=None)
     ap.add_argument("--channels", default="x_i_A,y_i_A")
+    ap.add_argument("--jobs", type=int, default=1)
     a = ap.parse_args()
     keys = a.channels.split(",")
     runs = sorted(d for d in os.listdir(a.runs_dir) if os.path.isdir(os.path.join(a.runs_dir, d)))
@@ -71,8 +74,9 @@ def main():
         table([(os.path.basename(v["run"]), v) for v in rep["validation_runs"]], keys)
         return
     rows = []
-    for r in runs:
-        rep = calibrate(a.twin, [os.path.join(a.runs_dir, r)], os.path.join(a.out_dir, r))
+    with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, a.jobs)) as pool:
+        reports = pool.map(lambda r: calibrate(a.twin, [os.path.join(a.runs_dir, r)], os.path.join(a.out_dir, r)), runs)
+    for r, rep in zip(runs, reports):
         rows.append((r, rep["fit_runs"][0]))
         lag = {ax: p.get("lag_s") for ax, p in rep["parameters_identified"].items()}
         print(f"{r}: lag " + ", ".join(f"{ax} {1e3 * v:.1f} ms" for ax, v in lag.items() if v), file=sys.stderr)
