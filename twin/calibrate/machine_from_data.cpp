@@ -1784,34 +1784,30 @@ ChannelErrors pooled_on_fit_runs(DataCalibration& out, const std::vector<RunData
   return errors_from(pools);
 }
 
-/// The velocity loop where the log cannot show it: its bandwidth and
-/// integral time still shape what the current does where the axis stops
-/// (the torque the integral holds against friction), which the fitting rows
-/// show. A small grid around the default, chosen per axis on the fitting
-/// rows of the fitting runs; the held-out rows judge it like everything else.
-void choose_velocity_loops(DataCalibration& out, const std::vector<RunData>& runs) {
-  struct Choice {
-    double score{1e300};
-    double Kvp{0.0}, Tn{0.0};
-  };
-  AxisArray<Choice> best{};
-  bool any = false;
-  for (const AxisFromData& ax : out.axis) any = any || (ax.identified && !ax.velocity_loop_from_data);
-  const std::vector<double> wv_factors{0.25, 0.5, 1.0, 2.0};
-  const std::vector<double> tn_factors{0.0, 2.0, 4.0, 16.0};
-  for (double fw : any ? wv_factors : std::vector<double>{}) {
-    for (double ft : tn_factors) {
-      sim::MachineDefinition trial = out.identified;
+/// The best of 16 velocity loops per axis where `on`: bandwidths 0.25 to 2
+/// times the default's, integral times 0 (none) to 16 over the bandwidth,
+/// each replayed on `base` and scored on the fitting rows.
+struct LoopChoice {
+  double score{1e300};
+  double Kvp{0.0}, Tn{0.0};
+};
+AxisArray<LoopChoice> best_velocity_loops(DataCalibration& out, const std::vector<RunData>& runs,
+                                          const sim::MachineDefinition& base, const AxisArray<bool>& on) {
+  AxisArray<LoopChoice> best{};
+  if (std::none_of(on.begin(), on.end(), [](bool b) { return b; })) return best;
+  for (double fw : {0.25, 0.5, 1.0, 2.0}) {
+    for (double ft : {0.0, 2.0, 4.0, 16.0}) {
+      sim::MachineDefinition trial = base;
       for (const AxisFromData& ax : out.axis) {
-        if (!ax.identified || ax.velocity_loop_from_data) continue;
+        if (!on[index(ax.axis)]) continue;
         auto& g = trial.axes[index(ax.axis)].loop.cascade;
-        const double wv = fw * ax.gains.Kvp_torque_s_per_rad / ax.J;
+        const double wv = fw * ax.default_velocity_loop.Kvp_torque_s_per_rad / ax.J;
         g.Kvp_torque_s_per_rad = ax.J * wv;
         g.Tn_s = ft > 0.0 ? ft / wv : 0.0;
       }
       const ChannelErrors e = pooled_on_fit_runs(out, runs, trial, false);
       for (const AxisFromData& ax : out.axis) {
-        if (!ax.identified || ax.velocity_loop_from_data) continue;
+        if (!on[index(ax.axis)]) continue;
         const auto it = e.nrms.find(ax.channel.column);
         if (it == e.nrms.end() || !(it->second < best[index(ax.axis)].score)) continue;
         const auto& g = trial.axes[index(ax.axis)].loop.cascade;
@@ -1819,9 +1815,24 @@ void choose_velocity_loops(DataCalibration& out, const std::vector<RunData>& run
       }
     }
   }
+  return best;
+}
+
+/// The velocity loop where the log cannot show it: its bandwidth and
+/// integral time still shape what the current does where the axis stops
+/// (the torque the integral holds against friction), which the fitting rows
+/// show. A small grid around the default, chosen per axis on the fitting
+/// rows of the fitting runs; the held-out rows judge it like everything else.
+void choose_velocity_loops(DataCalibration& out, const std::vector<RunData>& runs) {
+  AxisArray<bool> on{};
   for (AxisFromData& ax : out.axis) {
-    const Choice& c = best[index(ax.axis)];
-    if (!ax.identified || ax.velocity_loop_from_data || c.score >= 1e300) continue;
+    ax.default_velocity_loop = ax.gains;
+    on[index(ax.axis)] = ax.identified && !ax.velocity_loop_from_data;
+  }
+  const AxisArray<LoopChoice> best = best_velocity_loops(out, runs, out.identified, on);
+  for (AxisFromData& ax : out.axis) {
+    const LoopChoice& c = best[index(ax.axis)];
+    if (!on[index(ax.axis)] || c.score >= 1e300) continue;
     ax.gains.Kvp_torque_s_per_rad = c.Kvp;
     ax.gains.Tn_s = c.Tn;
     out.identified.axes[index(ax.axis)].loop.cascade = ax.gains;
@@ -1838,6 +1849,71 @@ sim::MachineDefinition with_smooth_friction(const sim::MachineDefinition& base, 
   fx.enabled = true;
   fx.ws_rad_per_s = ws;
   return trial;
+}
+
+/// The smooth_friction trial of an axis (the speed scale its fitting rows
+/// chose, kept or not), or null.
+DataEffect* smooth_friction_trial(DataCalibration& out, Axis a) {
+  const std::string ws_key = param_key(EffectKind::kSmoothFriction, EffectParam::smooth_friction_ws);
+  for (DataEffect& e : out.effects)
+    if (e.kind == EffectKind::kSmoothFriction && e.axis == a && e.params.count(ws_key)) return &e;
+  return nullptr;
+}
+
+/// smooth_friction and the velocity loop chosen together where the log does
+/// not show the loop. The first choice of the loop was made with stick/slip
+/// friction, under which the integral holds what the axis stopped at; with
+/// friction that creeps at rest, the loop's gains set how the held torque
+/// settles (too soft a loop rings for a second at every stop). With each
+/// axis's speed scale, the 16 loops are replayed and chosen on the fitting
+/// rows; the pair is kept where it lowers the held-out error of the fitting
+/// runs against the machine so far (smooth_friction kept or not: the rule
+/// of every change to the machine).
+void rechoose_velocity_loops(DataCalibration& out, const std::vector<RunData>& runs) {
+  const std::string ws_key = param_key(EffectKind::kSmoothFriction, EffectParam::smooth_friction_ws);
+  AxisArray<bool> on{};
+  sim::MachineDefinition base = out.final_machine;
+  for (const AxisFromData& ax : out.axis) {
+    const DataEffect* sf = smooth_friction_trial(out, ax.axis);
+    on[index(ax.axis)] = ax.identified && !ax.velocity_loop_from_data && sf != nullptr;
+    if (on[index(ax.axis)]) base = with_smooth_friction(base, ax.axis, sf->params.at(ws_key));
+  }
+  if (std::none_of(on.begin(), on.end(), [](bool b) { return b; })) return;
+  const ChannelErrors fit_base = pooled_on_fit_runs(out, runs, base, false);
+  const AxisArray<LoopChoice> best = best_velocity_loops(out, runs, base, on);
+  sim::MachineDefinition trial = base;
+  for (const AxisFromData& ax : out.axis) {
+    const LoopChoice& c = best[index(ax.axis)];
+    if (!on[index(ax.axis)] || c.score >= 1e300) continue;
+    auto& g = trial.axes[index(ax.axis)].loop.cascade;
+    g.Kvp_torque_s_per_rad = c.Kvp;
+    g.Tn_s = c.Tn;
+  }
+  const ChannelErrors held_now = pooled_on_fit_runs(out, runs, out.final_machine, true);
+  const ChannelErrors held_trial = pooled_on_fit_runs(out, runs, trial, true);
+  for (AxisFromData& ax : out.axis) {
+    if (!on[index(ax.axis)]) continue;
+    const std::string& key = ax.channel.column;
+    const auto hn = held_now.nrms.find(key);
+    const auto ht = held_trial.nrms.find(key);
+    const auto fb = fit_base.nrms.find(key);
+    if (hn == held_now.nrms.end() || ht == held_trial.nrms.end() || fb == fit_base.nrms.end()) continue;
+    const LoopChoice& c = best[index(ax.axis)];
+    const bool kept = ht->second < hn->second;
+    DataEffect& sf = *smooth_friction_trial(out, ax.axis);
+    sf.evidence += fmt::format("; with the velocity loop chosen again on the fitting rows (Kvp {:.4g}, Tn {:.4g} s: "
+                               "fitting rows {:.4g} -> {:.4g}) the held-out error is {:.4g} against {:.4g} without "
+                               "{}",
+                               c.Kvp, c.Tn, fb->second, c.score, ht->second, hn->second,
+                               kept ? "(kept with that loop)" : "(that loop not kept)");
+    if (!kept) continue;
+    sf.kept = true;
+    sf.after = ht->second;
+    ax.gains = trial.axes[index(ax.axis)].loop.cascade;
+    out.final_machine = with_smooth_friction(out.final_machine, ax.axis, sf.params.at(ws_key));
+    out.final_machine.axes[index(ax.axis)].loop.cascade = ax.gains;
+    ax.loop_source += fmt::format("; chosen again with smooth friction: Kvp {:.4g}, Tn {:.4g} s", c.Kvp, c.Tn);
+  }
 }
 
 /// What a stopped axis holds off the constant load, mean over the fitting
@@ -2126,6 +2202,7 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
   skip_unseen_effects(fit, out);
   choose_velocity_loops(out, runs);
   try_smooth_friction(out, runs);
+  rechoose_velocity_loops(out, runs);
   search_catalogue_effects(out, runs);
   const AxisArray<Regression> reg = fit_regressions(out, runs);
   errors_on_fit_part(out, runs, nominal, reg);

@@ -9,8 +9,10 @@
 /// 2. The loop: the cascade law of the spec, its position gain Kv (and kff)
 ///    from a logged velocity command where there is one, else from the lag of
 ///    the position behind the command; the velocity loop from a logged torque
-///    against the velocity error where both speeds are logged, else set well
-///    above the position loop (said).
+///    against the velocity error where both speeds are logged, else chosen on
+///    the fitting rows among 16 about a default well above the position loop,
+///    and chosen again with smooth_friction (friction that creeps at rest),
+///    the pair kept where it lowers the held-out error (said).
 /// 3. The drive in the channel's own unit (Kt = Ka = 1, rg = 1 mm/rad):
 ///    T = J a + B v + Tc_pos [v > 0] - Tc_neg [v < 0] + c, by least squares on
 ///    the commanded kinematics (the logged positions are often too coarse to
@@ -100,6 +102,7 @@ struct AxisFromData {
   bool velocity_loop_from_data{false};  ///< Kvp, Tn from a logged torque against the speed error
   double lag_s{0.0};             ///< lag of the position behind the command
   controller::CascadeGains gains;
+  controller::CascadeGains default_velocity_loop;  ///< the gains before the velocity loop was chosen
   double J{0.0}, B{0.0}, Tc_pos{0.0}, Tc_neg{0.0}, c{0.0};  ///< channel unit, rg = 1 mm/rad
   double J_se{0.0}, B_se{0.0}, Tc_pos_se{0.0}, Tc_neg_se{0.0}, c_se{0.0};
   std::size_t fit_rows{0};
