@@ -1901,6 +1901,12 @@ void rechoose_velocity_loops(DataCalibration& out, const std::vector<RunData>& r
     const LoopChoice& c = best[index(ax.axis)];
     const bool kept = ht->second < hn->second;
     DataEffect& sf = *smooth_friction_trial(out, ax.axis);
+    if (c.Kvp == ax.gains.Kvp_torque_s_per_rad && c.Tn == ax.gains.Tn_s) {
+      sf.evidence += fmt::format("; the velocity loop chosen again on the fitting rows with it is the one chosen "
+                                 "first (Kvp {:.4g}, Tn {:.4g} s)",
+                                 c.Kvp, c.Tn);
+      continue;
+    }
     sf.evidence += fmt::format("; with the velocity loop chosen again on the fitting rows (Kvp {:.4g}, Tn {:.4g} s: "
                                "fitting rows {:.4g} -> {:.4g}) the held-out error is {:.4g} against {:.4g} without "
                                "{}",
