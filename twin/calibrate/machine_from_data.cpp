@@ -1872,11 +1872,14 @@ DataEffect* smooth_friction_trial(DataCalibration& out, Axis a) {
 void rechoose_velocity_loops(DataCalibration& out, const std::vector<RunData>& runs) {
   const std::string ws_key = param_key(EffectKind::kSmoothFriction, EffectParam::smooth_friction_ws);
   AxisArray<bool> on{};
+  AxisArray<DataEffect*> trials{};
   sim::MachineDefinition base = out.final_machine;
   for (const AxisFromData& ax : out.axis) {
-    const DataEffect* sf = smooth_friction_trial(out, ax.axis);
+    DataEffect* sf = smooth_friction_trial(out, ax.axis);
     on[index(ax.axis)] = ax.identified && !ax.velocity_loop_from_data && sf != nullptr;
-    if (on[index(ax.axis)]) base = with_smooth_friction(base, ax.axis, sf->params.at(ws_key));
+    if (!on[index(ax.axis)]) continue;
+    trials[index(ax.axis)] = sf;
+    base = with_smooth_friction(base, ax.axis, sf->params.at(ws_key));
   }
   if (std::none_of(on.begin(), on.end(), [](bool b) { return b; })) return;
   const ChannelErrors fit_base = pooled_on_fit_runs(out, runs, base, false);
@@ -1900,7 +1903,7 @@ void rechoose_velocity_loops(DataCalibration& out, const std::vector<RunData>& r
     if (hn == held_now.nrms.end() || ht == held_trial.nrms.end() || fb == fit_base.nrms.end()) continue;
     const LoopChoice& c = best[index(ax.axis)];
     const bool kept = ht->second < hn->second;
-    DataEffect& sf = *smooth_friction_trial(out, ax.axis);
+    DataEffect& sf = *trials[index(ax.axis)];
     if (c.Kvp == ax.gains.Kvp_torque_s_per_rad && c.Tn == ax.gains.Tn_s) {
       sf.evidence += fmt::format("; the velocity loop chosen again on the fitting rows with it is the one chosen "
                                  "first (Kvp {:.4g}, Tn {:.4g} s)",
