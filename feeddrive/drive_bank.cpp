@@ -133,6 +133,7 @@ double coulomb_Nm(const DriveParams& p, int s, double x_mm) {
 // Static friction that must be exceeded to start moving in direction s.
 double breakaway_Nm(const DriveParams& p, int s, double x_mm) {
   if (p.effects.stribeck.enabled) return p.effects.stribeck.Ts_static_Nm + position_friction_Nm(p, x_mm);
+  if (p.effects.rising_friction.enabled) return p.effects.rising_friction.share * coulomb_Nm(p, s, x_mm);
   return coulomb_Nm(p, s, x_mm);
 }
 
@@ -141,6 +142,8 @@ double sliding_friction_Nm(const DriveParams& p, int s, double w, double x_mm) {
   double T = coulomb_Nm(p, s, x_mm);
   const auto& st = p.effects.stribeck;
   if (st.enabled) T += stribeck_excess_Nm(st.Ts_static_Nm, s > 0 ? p.Tc_pos_Nm : p.Tc_neg_Nm, w, st.ws_rad_per_s);
+  const auto& rf = p.effects.rising_friction;
+  if (rf.enabled) T -= rising_friction_deficit_Nm(T, rf.share, w, rf.ws_rad_per_s);
   return T;
 }
 
@@ -264,6 +267,12 @@ double fastest_rate_per_s(const AxisConst& a) {
   if (p.effects.stribeck.enabled) {
     const double slope = stribeck_max_slope(p.effects.stribeck.Ts_static_Nm, std::min(p.Tc_pos_Nm, p.Tc_neg_Nm),
                                             p.effects.stribeck.ws_rad_per_s);
+    rate += slope / (a.compliant ? a.Jl_kg_m2 : a.Jm_kg_m2);
+  }
+  if (p.effects.rising_friction.enabled) {  // the same shape as stribeck's, deficit (1 - share) Tc
+    const auto& rf = p.effects.rising_friction;
+    const double Tc_max = std::max(p.Tc_pos_Nm, p.Tc_neg_Nm);
+    const double slope = stribeck_max_slope(Tc_max, rf.share * Tc_max, rf.ws_rad_per_s);
     rate += slope / (a.compliant ? a.Jl_kg_m2 : a.Jm_kg_m2);
   }
   if (a.compliant) {
@@ -612,6 +621,7 @@ DriveBank::DriveBank(std::vector<DriveParams> axes, double Ts_s, IntegratorOptio
     }
     const DriveEffects& fx = a.p.effects;
     a.linear = !a.compliant && !fx.stribeck.enabled && !fx.cogging.enabled && !fx.smooth_friction.enabled &&
+               !fx.rising_friction.enabled &&
                !(fx.position_dependent_friction.enabled && fx.position_dependent_friction.dTc_Nm != 0.0);
     a.tick = linear_tick(a.p.B_kg_m2_per_s / a.Jm_kg_m2, Ts_s);
     if (a.p.effects.delay.enabled) a.delay_ticks = static_cast<std::size_t>(std::llround(a.p.effects.delay.delay_s / Ts_s));

@@ -64,6 +64,15 @@ void DriveParams::validate(std::string_view where) const {
     if (e.compliance.enabled)
       c.fail("effects.smooth_friction.enabled", 1.0, "off with compliance (rigid drives only)");
   }
+  if (e.rising_friction.enabled) {
+    c.finite("effects.rising_friction.share", e.rising_friction.share);
+    if (!(e.rising_friction.share >= 0.0 && e.rising_friction.share < 1.0))
+      c.fail("effects.rising_friction.share", e.rising_friction.share, "in [0, 1)");
+    c.positive("effects.rising_friction.ws_rad_per_s", e.rising_friction.ws_rad_per_s);
+    if (e.stribeck.enabled || e.smooth_friction.enabled)
+      c.fail("effects.rising_friction.enabled", 1.0,
+             "off with stribeck and smooth_friction (each describes the friction at low speed: choose one)");
+  }
   if (e.cogging.enabled) {
     c.non_negative("effects.cogging.amplitude_Nm", e.cogging.amplitude_Nm);
     c.positive("effects.cogging.cycles_per_rev", e.cogging.cycles_per_rev);

@@ -92,6 +92,21 @@ struct SmoothFrictionEffect {
   double ws_rad_per_s{1.0};
 };
 
+/// Friction that rises with speed from a breakaway level below Coulomb: an
+/// axis at rest holds only a share of the friction it slides with,
+///   Tf(w) = sign(w) Tc_dir (1 - (1 - share) exp(-(w/ws)^2)),
+/// breakaway at share Tc_dir (stick/slip as without it). A position loop
+/// that stops an axis with its torque near the Coulomb level of the last
+/// direction lets it creep on until the torque falls to the breakaway level:
+/// the axis holds share Tc_dir in the direction it last moved, not the full
+/// Coulomb level (share 1) nor nothing (smooth_friction). Not with stribeck
+/// (the same low-speed range the other way) nor with smooth_friction.
+struct RisingFrictionEffect {
+  bool enabled{false};
+  double share{0.5};          ///< breakaway as a share of the Coulomb level, [0, 1)
+  double ws_rad_per_s{1.0};   ///< speed over which friction rises to Coulomb
+};
+
 struct DriveEffects {
   StribeckEffect stribeck;
   CoggingEffect cogging;
@@ -103,6 +118,7 @@ struct DriveEffects {
   ComplianceEffect compliance;
   CurrentSaturationEffect current_saturation;
   SmoothFrictionEffect smooth_friction;
+  RisingFrictionEffect rising_friction;
 };
 
 struct DriveParams {

@@ -23,7 +23,8 @@
   E(delay, kDelay)                                                                                                \
   E(compliance, kCompliance)                                                                                      \
   E(current_saturation, kCurrentSaturation)                                                                       \
-  E(smooth_friction, kSmoothFriction)
+  E(smooth_friction, kSmoothFriction)                                                                              \
+  E(rising_friction, kRisingFriction)
 
 /// P(effect, parameter name, field of the effect's struct, unit, description),
 /// in the order of the machine file's table.
@@ -46,7 +47,9 @@
   P(compliance, C_Nm_s_per_rad, C_Nm_s_per_rad, "N m s/rad", "torsional damping motor-load")                      \
   P(compliance, load_fraction, load_fraction, "1", "share of J on the load side")                                 \
   P(current_saturation, i_max_A, i_max_A, "A", "current limit")                                                   \
-  P(smooth_friction, ws, ws_rad_per_s, "rad/s", "speed below which Coulomb friction is smoothed (no stiction)")
+  P(smooth_friction, ws, ws_rad_per_s, "rad/s", "speed below which Coulomb friction is smoothed (no stiction)")   \
+  P(rising_friction, share, share, "1", "breakaway friction as a share of the Coulomb level")                      \
+  P(rising_friction, ws, ws_rad_per_s, "rad/s", "speed over which friction rises to the Coulomb level")
 
 namespace twin::feeddrive {
 

@@ -67,6 +67,13 @@ inline double band_friction_Nm(double dTc_Nm, double x_start_mm, double x_end_mm
 
 inline double smooth_friction_Nm(double Tc_dir_Nm, double w, double ws) { return Tc_dir_Nm * std::tanh(w / ws); }
 
+// rising_friction: Tf(w) = Tc (1 - (1 - share) g(w)), g as stribeck's.
+
+/// Friction below the Coulomb level Tc at speed w (a magnitude).
+inline double rising_friction_deficit_Nm(double Tc_Nm, double share, double w, double ws) {
+  return (1.0 - share) * Tc_Nm * stribeck_shape(w, ws);
+}
+
 // current_saturation: i = clamp(Ka u, -i_max, i_max).
 
 inline double saturated_current_A(double i_A, double i_max_A) { return std::clamp(i_A, -i_max_A, i_max_A); }

@@ -355,5 +355,51 @@ TEST(SmoothFriction, TorqueBelowCoulombCreepsAtTheBalanceSpeed) {
   EXPECT_THROW(both.validate("x"), ConfigError);
 }
 
+// Oracle: rising friction. Breakaway is share Tc_dir: a torque 5 % below it
+// holds (exactly), one 5 % above it, still below the Coulomb level, slips and
+// slides at the speed w where Ka Kt u = B w + Tc_dir (1 - (1 - share)
+// exp(-(w/ws)^2)) (solved here by bisection; the friction rises with speed,
+// so the balance has one root). Tolerance 1e-7 relative: after 2 s the
+// transient (time constant J / (B + slope), below J / B = 35 ms on the Y
+// drive) is gone to far below that. The same torque holds the axis with
+// plain stick/slip. The energy balance closes to 1e-6 of the electrical work.
+TEST(RisingFriction, BreakawayBelowCoulombAndSteadyBalance) {
+  DriveParams p = fadal_y();
+  p.effects.rising_friction = {true, 0.4, 2.0};
+  const double KaKt = p.Ka_A_per_V * p.Kt_Nm_per_A;
+  for (const int dir : {+1, -1}) {
+    const double Tc = dir > 0 ? p.Tc_pos_Nm : p.Tc_neg_Nm;
+    DriveBank held = axis_at_rest(p);
+    run_constant(held, dir * 0.95 * 0.4 * Tc / KaKt, 2000);
+    EXPECT_EQ(held.output(0).x_mm, 0.0) << dir;
+    const double T = 1.05 * 0.4 * Tc;
+    double lo = 0.0, hi = 100.0;
+    for (int k = 0; k < 200; ++k) {
+      const double w = 0.5 * (lo + hi);
+      const double net = T - p.B_kg_m2_per_s * w - Tc * (1.0 - 0.6 * std::exp(-(w / 2.0) * (w / 2.0)));
+      (net > 0.0 ? lo : hi) = w;
+    }
+    DriveBank slip = axis_at_rest(p);
+    run_constant(slip, dir * T / KaKt, 20000);
+    EXPECT_NEAR(slip.output(0).w_rad_per_s, dir * lo, 1e-7 * lo) << dir;
+    EXPECT_GT(lo, 0.01);  // it slides (0.02 rad/s here), where stick/slip holds
+    const DriveState& s = slip.state(0);
+    EXPECT_GT(s.work_friction_J, 0.0);
+    EXPECT_NEAR(s.work_electrical_J, s.work_friction_J + s.work_damping_J + s.work_load_J + kinetic_energy_J(p, s),
+                1e-6 * std::abs(s.work_electrical_J));
+    DriveParams plain = fadal_y();
+    DriveBank sticky = axis_at_rest(plain);
+    run_constant(sticky, dir * T / KaKt, 2000);
+    EXPECT_EQ(sticky.output(0).x_mm, 0.0) << dir;
+  }
+  // A share outside [0, 1), or with smooth_friction, is refused in one line.
+  DriveParams bad = p;
+  bad.effects.rising_friction.share = 1.0;
+  EXPECT_THROW(bad.validate("x"), ConfigError);
+  DriveParams both = p;
+  both.effects.smooth_friction.enabled = true;
+  EXPECT_THROW(both.validate("x"), ConfigError);
+}
+
 }  // namespace
 }  // namespace twin::feeddrive

@@ -20,22 +20,24 @@ constexpr std::uint8_t kBoth = kJudgeTorque | kJudgeTracking;
 // kind, diagnose, torque_after, from_data, from_data_rank, judged_on, replaces, plot.
 constexpr std::array<EffectEntry, feeddrive::kDriveEffectCount> kRegistry{{
     {EffectKind::kStribeck, detect_stribeck, stribeck_torque_after, detect_stribeck_in_data, 2, kBoth,
-     EffectKind::kSmoothFriction, PlotAlong::kTime},
-    {EffectKind::kCogging, detect_cogging, nullptr, detect_cogging_in_data, 4, kTorque, std::nullopt,
+     effect_bit(EffectKind::kSmoothFriction) | effect_bit(EffectKind::kRisingFriction), PlotAlong::kTime},
+    {EffectKind::kCogging, detect_cogging, nullptr, detect_cogging_in_data, 4, kTorque, 0,
      PlotAlong::kPosition},
     {EffectKind::kScrewPitchError, detect_screw_pitch_error, nullptr, detect_screw_pitch_error_in_data, 5, kTracking,
-     std::nullopt, PlotAlong::kPosition},
-    {EffectKind::kBacklash, detect_backlash, nullptr, detect_backlash_in_data, 6, kTracking, std::nullopt,
+     0, PlotAlong::kPosition},
+    {EffectKind::kBacklash, detect_backlash, nullptr, detect_backlash_in_data, 6, kTracking, 0,
      PlotAlong::kTime},
-    {EffectKind::kConstantLoad, detect_constant_load, nullptr, nullptr, 0, kTorque, std::nullopt, PlotAlong::kTime},
+    {EffectKind::kConstantLoad, detect_constant_load, nullptr, nullptr, 0, kTorque, 0, PlotAlong::kTime},
     {EffectKind::kPositionDependentFriction, detect_position_dependent_friction, nullptr,
-     detect_position_dependent_friction_in_data, 3, kTorque, std::nullopt, PlotAlong::kPosition},
-    {EffectKind::kDelay, detect_delay, nullptr, detect_delay_in_data, 0, kBoth, std::nullopt, PlotAlong::kTime},
-    {EffectKind::kCompliance, detect_compliance, nullptr, nullptr, 0, kTracking, std::nullopt, PlotAlong::kTime},
+     detect_position_dependent_friction_in_data, 3, kTorque, 0, PlotAlong::kPosition},
+    {EffectKind::kDelay, detect_delay, nullptr, detect_delay_in_data, 0, kBoth, 0, PlotAlong::kTime},
+    {EffectKind::kCompliance, detect_compliance, nullptr, nullptr, 0, kTracking, 0, PlotAlong::kTime},
     {EffectKind::kCurrentSaturation, detect_current_saturation, nullptr, detect_current_saturation_in_data, 1, kBoth,
-     std::nullopt, PlotAlong::kTime},
+     0, PlotAlong::kTime},
     // Found while the drive is identified from data (calibrate_from_data), not by a detector.
-    {EffectKind::kSmoothFriction, nullptr, nullptr, nullptr, 0, kTorque, std::nullopt, PlotAlong::kTime},
+    {EffectKind::kSmoothFriction, nullptr, nullptr, nullptr, 0, kTorque, 0, PlotAlong::kTime},
+    {EffectKind::kRisingFriction, nullptr, nullptr, nullptr, 0, kTorque, effect_bit(EffectKind::kSmoothFriction),
+     PlotAlong::kTime},
 }};
 
 constexpr bool registry_in_catalogue_order() {
@@ -65,6 +67,13 @@ const EffectEntry& registry_entry(EffectKind kind) {
   const auto i = static_cast<std::size_t>(kind);
   TWIN_DEMAND(i < kRegistry.size());
   return kRegistry[i];
+}
+
+std::vector<EffectKind> replaced_by(EffectKind kind) {
+  std::vector<EffectKind> r;
+  for (const EffectEntry& e : kRegistry)
+    if ((registry_entry(kind).replaces & effect_bit(e.kind)) != 0) r.push_back(e.kind);
+  return r;
 }
 
 std::vector<const EffectEntry*> from_data_search_order() {

@@ -44,6 +44,8 @@ enum JudgedOn : std::uint8_t { kJudgeTorque = 1, kJudgeTracking = 2 };
 /// What the evidence plot of an added effect runs along.
 enum class PlotAlong { kTime, kPosition };
 
+constexpr std::uint32_t effect_bit(EffectKind k) { return 1u << static_cast<unsigned>(k); }
+
 struct EffectEntry {
   EffectKind kind;
   /// Candidates from the inverse-dynamics residual of a machine the twin
@@ -58,15 +60,17 @@ struct EffectEntry {
   /// first, then friction, then the periodic ones, then the gap.
   int from_data_rank;
   std::uint8_t judged_on;  ///< JudgedOn bits (from data)
-  /// The effect this one replaces where it is kept: the drive holds one of
-  /// the two (both describe the friction at low speed).
-  std::optional<EffectKind> replaces;
+  /// The effects this one replaces where it is kept (bits of effect_bit):
+  /// the drive holds one of them (each describes the friction at low speed).
+  std::uint32_t replaces;
   PlotAlong plot;
 };
 
 /// Every entry, in catalogue order.
 std::span<const EffectEntry> effect_registry();
 const EffectEntry& registry_entry(EffectKind kind);
+/// The effects `kind` replaces where it is kept, in catalogue order.
+std::vector<EffectKind> replaced_by(EffectKind kind);
 /// The entries with a from-data detector, in the order of the search.
 std::vector<const EffectEntry*> from_data_search_order();
 

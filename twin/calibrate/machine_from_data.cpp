@@ -713,8 +713,7 @@ sim::MachineDefinition with_trial(const sim::MachineDefinition& base, Axis a, co
   if (!t.drives.empty()) set_drive(def.drive, t.drives[set]);
   if (t.gains) def.loop.cascade = *t.gains;
   // Two effects that describe the same thing: the drive holds one.
-  if (const auto replaced = registry_entry(t.kind).replaces)
-    feeddrive::effect_def(*replaced).enabled(def.drive.effects) = false;
+  for (const EffectKind replaced : replaced_by(t.kind)) feeddrive::effect_def(replaced).enabled(def.drive.effects) = false;
   for (const auto& [param, value] : t.sets[set]) {
     const std::string_view name = feeddrive::effect_param_def(param).qualified;
     const sim::AxisParamSpec* spec = sim::find_axis_param(name);
@@ -885,10 +884,10 @@ void DataSearch::judge_held_out(const Trial& t, const FitRunErrors& best_e, Data
 /// is dropped), its torque out of the rows the later detectors fit.
 void DataSearch::keep(const Trial& t, std::size_t best, FitRunErrors&& best_e) {
   const Axis a = ax.axis;
-  if (const auto replaced = registry_entry(t.kind).replaces;
-      replaced && feeddrive::effect_def(*replaced).enabled(out.final_machine.axes[ai()].drive.effects))
+  for (const EffectKind replaced : replaced_by(t.kind))
     for (DataEffect& other : out.effects)
-      if (other.kind == *replaced && other.axis == a && other.kept) {
+      if (other.kind == replaced && other.axis == a && other.kept &&
+          feeddrive::effect_def(replaced).enabled(out.final_machine.axes[ai()].drive.effects)) {
         other.kept = false;
         other.evidence += fmt::format("; replaced by {}, which lowers the held-out error further",
                                       feeddrive::effect_name(t.kind));
