@@ -2039,6 +2039,140 @@ void try_smooth_friction(DataCalibration& out, const std::vector<RunData>& runs)
   out.final_machine = final_machine;
 }
 
+sim::MachineDefinition with_rising_friction(const sim::MachineDefinition& base, Axis a, double share, double ws) {
+  sim::MachineDefinition trial = base;
+  auto& fx = trial.axes[index(a)].drive.effects;
+  fx.smooth_friction.enabled = false;
+  fx.rising_friction.enabled = true;
+  fx.rising_friction.share = share;
+  fx.rising_friction.ws_rad_per_s = ws;
+  return trial;
+}
+
+/// What a stopped axis holds off the constant load in the log, by the
+/// direction it last moved: mean over the fitting rows where the command has
+/// stood still for 0.2 s.
+struct DirectionalHold {
+  double after_pos{0.0}, after_neg{0.0};
+  std::size_t rows_pos{0}, rows_neg{0};
+};
+DirectionalHold directional_hold(const std::vector<RunData>& runs, const AxisFromData& ax) {
+  DirectionalHold h;
+  const std::size_t i = index(ax.axis);
+  for (const RunData& rd : runs) {
+    const auto& T = rd.run->trace.at(ax.channel.column);
+    const auto settle = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.2 / rd.run->sample_period_s)));
+    std::size_t still = 0;
+    int last = 0;
+    for (std::size_t k = 0; k < rd.n_fit; ++k) {
+      const int d = direction(rd.kin[i].v_mm_per_s[k], rd.v_move[i]);
+      if (d != 0) last = d;
+      if (k > 0 && !rd.interior[k - 1]) last = 0;  // a stitched segment starts from an unseen approach
+      still = d == 0 ? still + 1 : 0;
+      if (still < settle || !rd.interior[k] || last == 0) continue;
+      (last > 0 ? h.after_pos : h.after_neg) += T[k] - ax.c;
+      ++(last > 0 ? h.rows_pos : h.rows_neg);
+    }
+  }
+  if (h.rows_pos > 0) h.after_pos /= static_cast<double>(h.rows_pos);
+  if (h.rows_neg > 0) h.after_neg /= static_cast<double>(h.rows_neg);
+  return h;
+}
+
+/// Friction that rises with speed from a breakaway level below Coulomb
+/// (rising_friction), tried on every identified axis without stribeck (which
+/// describes the same range the other way) against the machine so far, the
+/// catalogue's effects included (a gap at reversals, say, also moves what a
+/// stopped axis holds, and is looked for first). Stick/slip friction makes a stopped axis hold the Coulomb level of
+/// the direction it last moved; smooth_friction lets the hold relax to the
+/// constant load; a real axis often holds part of its sliding friction in
+/// that direction, which breakaway below Coulomb gives (the loop's torque
+/// falls while the axis creeps until it is within the breakaway level). The
+/// share and the speed scale are chosen per axis on the fitting rows from
+/// four shares and two multiples of the moving threshold (the axes replay
+/// independently, so one replay scores a grid point on every axis); kept
+/// where the held-out error of the fitting runs falls by more than
+/// kKeepMargin without the tracking error rising by more than kRiseAllowed.
+void try_rising_friction(DataCalibration& out, const std::vector<RunData>& runs) {
+  std::vector<const AxisFromData*> axes;
+  for (const AxisFromData& ax : out.axis)
+    if (ax.identified && ax.channel.present() &&
+        !out.final_machine.axes[index(ax.axis)].drive.effects.stribeck.enabled)
+      axes.push_back(&ax);
+  if (axes.empty()) return;
+  const FitRunErrors now = errors_on_fit_runs(runs, out.final_machine, out.axes, out.rounding, out.replays);
+  if (!now.ok) return;
+  struct Best {
+    double fit{1e300}, share{0.0}, ws{0.0};
+    ChannelErrors held;
+  };
+  AxisArray<Best> best{};
+  AxisArray<double> v_move{};
+  for (const AxisFromData* ax : axes)
+    for (const RunData& rd : runs) v_move[index(ax->axis)] = std::max(v_move[index(ax->axis)], rd.v_move[index(ax->axis)]);
+  for (double share : {0.1, 0.2, 0.35, 0.6}) {
+    for (double fw : {0.3, 1.0}) {
+      sim::MachineDefinition trial = out.final_machine;
+      for (const AxisFromData* ax : axes)
+        trial = with_rising_friction(trial, ax->axis, share, fw * v_move[index(ax->axis)]);
+      const FitRunErrors e = errors_on_fit_runs(runs, trial, out.axes, out.rounding, out.replays);
+      if (!e.ok) continue;
+      for (const AxisFromData* ax : axes) {
+        const auto it = e.fit.nrms.find(ax->channel.column);
+        Best& b = best[index(ax->axis)];
+        if (it == e.fit.nrms.end() || it->second >= b.fit) continue;
+        b = {it->second, share, fw * v_move[index(ax->axis)], e.held};
+      }
+    }
+  }
+  for (const AxisFromData* ax : axes) {
+    const std::string& key = ax->channel.column;
+    const Best& b = best[index(ax->axis)];
+    const auto ff = now.fit.nrms.find(key);
+    const auto hn = now.held.nrms.find(key);
+    if (ff == now.fit.nrms.end() || hn == now.held.nrms.end()) continue;
+    DataEffect eff;
+    eff.set_kind(EffectKind::kRisingFriction);
+    eff.axis = ax->axis;
+    eff.before = eff.after = hn->second;
+    const DirectionalHold h = directional_hold(runs, *ax);
+    const std::string held_in_log =
+        fmt::format("after moving + a stopped axis holds {:+.3g} off the constant load in the log ({} rows), after "
+                    "moving - {:+.3g} ({} rows); its Coulomb level is {:.3g} / {:.3g}",
+                    h.after_pos, h.rows_pos, h.after_neg, h.rows_neg, ax->Tc_pos, ax->Tc_neg);
+    if (b.fit >= ff->second) {
+      eff.evidence = fmt::format("{}: no breakaway share lowers the fitting rows' {} error ({:.4g})", held_in_log, key,
+                                 ff->second);
+      out.effects.push_back(eff);
+      continue;
+    }
+    eff.params[param_key(EffectKind::kRisingFriction, EffectParam::rising_friction_share)] = b.share;
+    eff.params[param_key(EffectKind::kRisingFriction, EffectParam::rising_friction_ws)] = b.ws;
+    const auto ha = b.held.nrms.find(key);
+    eff.after = ha != b.held.nrms.end() ? ha->second : hn->second;
+    bool tracking_ok = true;
+    const std::string err_key = col(ax->axis, "_err_mm");
+    if (const auto en = now.held.nrms.find(err_key), ea = b.held.nrms.find(err_key);
+        en != now.held.nrms.end() && ea != b.held.nrms.end() && en->second > 0.0)
+      tracking_ok = ea->second <= en->second * (1.0 + kRiseAllowed);
+    eff.kept = eff.after < eff.before * (1.0 - kKeepMargin) && tracking_ok;
+    eff.evidence = fmt::format(
+        "{}: breakaway at {:.2g} of the Coulomb level, rising to it over {:.3g} mm/s, takes the {} error from "
+        "{:.4g} to {:.4g} on the fitting rows and from {:.4g} to {:.4g} on the held-out rows{}",
+        held_in_log, b.share, b.ws, key, ff->second, b.fit, eff.before, eff.after,
+        eff.kept ? "" : (tracking_ok ? " (not kept)" : " (not kept: the tracking error rises)"));
+    if (eff.kept) {
+      out.final_machine = with_rising_friction(out.final_machine, ax->axis, b.share, b.ws);
+      for (DataEffect& other : out.effects)
+        if (other.kind == EffectKind::kSmoothFriction && other.axis == ax->axis && other.kept) {
+          other.kept = false;
+          other.evidence += "; replaced by rising_friction, which lowers the held-out error further";
+        }
+    }
+    out.effects.push_back(eff);
+  }
+}
+
 /// Baselines fitted on the fitting rows: the rigid-body regression per axis
 /// T = m a_cmd + Fc sgn(v_cmd) + b v_cmd + c, and the first-order lag of the
 /// tracking error e = lag v.
@@ -2212,6 +2346,7 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
   try_smooth_friction(out, runs);
   rechoose_velocity_loops(out, runs);
   search_catalogue_effects(out, runs);
+  try_rising_friction(out, runs);
   const AxisArray<Regression> reg = fit_regressions(out, runs);
   errors_on_fit_part(out, runs, nominal, reg);
   errors_on_validation_runs(out, validate, nominal, reg);

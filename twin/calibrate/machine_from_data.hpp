@@ -13,6 +13,9 @@
 ///    the fitting rows among 16 about a default well above the position loop,
 ///    and chosen again with smooth_friction (friction that creeps at rest),
 ///    the pair kept where it lowers the held-out error (said).
+///    After the catalogue's effects, rising_friction (breakaway below the
+///    Coulomb level: a stopped axis holds part of its sliding friction),
+///    its share and speed chosen on the fitting rows, kept by the same rule.
 /// 3. The drive in the channel's own unit (Kt = Ka = 1, rg = 1 mm/rad):
 ///    T = J a + B v + Tc_pos [v > 0] - Tc_neg [v < 0] + c, by least squares on
 ///    the commanded kinematics (the logged positions are often too coarse to

@@ -174,6 +174,23 @@ TEST(DataEffects, SmoothFrictionIsKeptOnlyWhereTheHeldTorqueRelaxes) {
   }
 }
 
+// Friction that rises with speed from a breakaway of 0.12 N m (the truth's
+// own Stribeck law with its static level below both Coulomb levels, 0.25 /
+// 0.15 N m, breakaway at that level): the axis breaks away and creeps under
+// torques that stick/slip at the Coulomb level would hold, while the held
+// torque does not relax to the load (smooth_friction is not tried). Only
+// rising_friction is kept (the stribeck detector looks for friction above
+// Coulomb). Its share is chosen from four on the fitting rows and the
+// truth's one breakaway level is a different share of each direction's
+// Coulomb level (0.48 / 0.8), so the share is not checked; the validation
+// run (another program) improves. On plain stick/slip
+// (NothingIsAddedWithoutAnEffect) it is not kept.
+TEST(DataEffects, RisingFrictionIsKeptWhereBreakawayIsBelowCoulomb) {
+  const Outcome o = calibrate_truth("rising", {.stribeck_Ts = 0.12, .stribeck_ws = 1.0});
+  expect_only(o, "rising_friction");
+  expect_validation_improves(o);
+}
+
 // Friction rising to 0.45 N m (18 raw) below about 3 rad/s (4.77 mm/s of
 // travel) over Coulomb levels of 0.25 / 0.15 N m (the truth's own law,
 // Tc + (Ts - Tc) exp(-(w/ws)^2), with its breakaway at Ts). The breakaway
