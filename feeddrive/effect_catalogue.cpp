@@ -52,6 +52,8 @@ const EffectParamDef& effect_param_def(EffectParam p) {
   return kParams[i];
 }
 
+std::span<const EffectParamDef> effect_params() { return kParams; }
+
 std::string_view effect_name(EffectKind kind) { return effect_def(kind).name; }
 
 }  // namespace twin::feeddrive

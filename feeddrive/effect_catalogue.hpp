@@ -7,6 +7,7 @@
 /// these lines.
 #include <cstddef>
 #include <cstdint>
+#include <span>
 #include <string_view>
 
 #include "feeddrive/drive_params.hpp"
@@ -88,6 +89,8 @@ struct EffectParamDef {
 
 const EffectDef& effect_def(EffectKind kind);
 const EffectParamDef& effect_param_def(EffectParam p);
+/// Every parameter of every effect, in the machine file's order.
+std::span<const EffectParamDef> effect_params();
 std::string_view effect_name(EffectKind kind);
 
 /// A parameter equals a name when the name is its own ("ws") or its

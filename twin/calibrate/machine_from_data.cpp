@@ -2543,6 +2543,26 @@ std::string data_calibration_report_markdown(const DataCalibration& r, const std
       }
     }
   };
+  if (!r.effects.empty()) {
+    // Each candidate once, in the order tried: what was chosen (the values the
+    // fitting rows chose, none where nothing lowered them) and why it was kept
+    // or not.
+    o << "\n## Effects tried (kept where the held-out error falls)\n\n";
+    for (const DataEffect& e : r.effects) {
+      std::vector<std::string> values;
+      for (const feeddrive::EffectParamDef& d : feeddrive::effect_params()) {
+        if (d.effect != e.kind) continue;
+        const auto it = e.params.find(param_key(e.kind, d.id));
+        if (it != e.params.end())
+          values.push_back(d.unit == "1" ? fmt::format("{} {:.4g}", d.name, it->second)
+                                         : fmt::format("{} {:.4g} {}", d.name, it->second, d.unit));
+      }
+      const bool untried = e.evidence.starts_with("not tried");
+      o << fmt::format("- {} on {}{}{}: {}\n", e.effect, axis_name(e.axis),
+                       e.kept ? ", **kept**" : (untried ? "" : ", not kept"),
+                       values.empty() ? "" : fmt::format(" ({})", fmt::join(values, ", ")), e.evidence);
+    }
+  }
   table("Held-out errors (normalised RMS, lower is better)", r.fit_runs);
   table("Other runs (not used for fitting)", r.validation_runs);
   if (!r.skipped.empty()) {

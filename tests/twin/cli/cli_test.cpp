@@ -195,6 +195,10 @@ TEST(Cli, CalibrateRunOfAnUnnamedMachineWithAnAxisUnmeasured) {
   // x from its logged u, y (reference only) said and left out.
   EXPECT_THAT(report, HasSubstr("name no machine"));
   EXPECT_THAT(report, HasSubstr("axis y: no torque, current or command channel"));
+  // Every effect tried is listed once, kept or not, with why (rising_friction
+  // is tried on every axis the drive is identified on).
+  EXPECT_THAT(report, HasSubstr("## Effects tried"));
+  EXPECT_THAT(report, HasSubstr("- rising_friction on x"));
   EXPECT_THAT(report, Not(HasSubstr("plots not drawn")));
   EXPECT_TRUE(std::filesystem::exists(out / "overlay.png") || report.find("gnuplot") != std::string::npos);
 }
