@@ -713,7 +713,8 @@ sim::MachineDefinition with_trial(const sim::MachineDefinition& base, Axis a, co
   if (!t.drives.empty()) set_drive(def.drive, t.drives[set]);
   if (t.gains) def.loop.cascade = *t.gains;
   // Two effects that describe the same thing: the drive holds one.
-  for (const EffectKind replaced : replaced_by(t.kind)) feeddrive::effect_def(replaced).enabled(def.drive.effects) = false;
+  for (const EffectKind replaced : replaced_by(t.kind))
+    feeddrive::effect_def(replaced).enabled(def.drive.effects) = false;
   for (const auto& [param, value] : t.sets[set]) {
     const std::string_view name = feeddrive::effect_param_def(param).qualified;
     const sim::AxisParamSpec* spec = sim::find_axis_param(name);
@@ -2083,11 +2084,12 @@ DirectionalHold directional_hold(const std::vector<RunData>& runs, const AxisFro
 /// (rising_friction), tried on every identified axis without stribeck (which
 /// describes the same range the other way) against the machine so far, the
 /// catalogue's effects included (a gap at reversals, say, also moves what a
-/// stopped axis holds, and is looked for first). Stick/slip friction makes a stopped axis hold the Coulomb level of
-/// the direction it last moved; smooth_friction lets the hold relax to the
-/// constant load; a real axis often holds part of its sliding friction in
-/// that direction, which breakaway below Coulomb gives (the loop's torque
-/// falls while the axis creeps until it is within the breakaway level). The
+/// stopped axis holds, and is looked for first). Stick/slip friction makes a
+/// stopped axis hold the Coulomb level of the direction it last moved;
+/// smooth_friction lets the hold relax to the constant load; a real axis
+/// often holds part of its sliding friction in that direction, which
+/// breakaway below Coulomb gives (the loop's torque falls while the axis
+/// creeps until it is within the breakaway level). The
 /// share and the speed scale are chosen per axis on the fitting rows from
 /// four shares and two multiples of the moving threshold (the axes replay
 /// independently, so one replay scores a grid point on every axis); kept
@@ -2108,8 +2110,10 @@ void try_rising_friction(DataCalibration& out, const std::vector<RunData>& runs)
   };
   AxisArray<Best> best{};
   AxisArray<double> v_move{};
-  for (const AxisFromData* ax : axes)
-    for (const RunData& rd : runs) v_move[index(ax->axis)] = std::max(v_move[index(ax->axis)], rd.v_move[index(ax->axis)]);
+  for (const AxisFromData* ax : axes) {
+    const std::size_t i = index(ax->axis);
+    for (const RunData& rd : runs) v_move[i] = std::max(v_move[i], rd.v_move[i]);
+  }
   for (double share : {0.1, 0.2, 0.35, 0.6}) {
     for (double fw : {0.3, 1.0}) {
       sim::MachineDefinition trial = out.final_machine;
@@ -2136,10 +2140,13 @@ void try_rising_friction(DataCalibration& out, const std::vector<RunData>& runs)
     eff.axis = ax->axis;
     eff.before = eff.after = hn->second;
     const DirectionalHold h = directional_hold(runs, *ax);
-    const std::string held_in_log =
-        fmt::format("after moving + a stopped axis holds {:+.3g} off the constant load in the log ({} rows), after "
-                    "moving - {:+.3g} ({} rows); its Coulomb level is {:.3g} / {:.3g}",
-                    h.after_pos, h.rows_pos, h.after_neg, h.rows_neg, ax->Tc_pos, ax->Tc_neg);
+    auto hold = [](double mean, std::size_t rows) {
+      return rows == 0 ? std::string("no settled rest row") : fmt::format("{:+.3g} ({} rows)", mean, rows);
+    };
+    const std::string held_in_log = fmt::format(
+        "a stopped axis holds, off the constant load in the log: after moving + {}, after moving - {}; its Coulomb "
+        "levels are {:.3g} / {:.3g} {}",
+        hold(h.after_pos, h.rows_pos), hold(h.after_neg, h.rows_neg), ax->Tc_pos, ax->Tc_neg, ax->channel.unit);
     if (b.fit >= ff->second) {
       eff.evidence = fmt::format("{}: no breakaway share lowers the fitting rows' {} error ({:.4g})", held_in_log, key,
                                  ff->second);
