@@ -1343,12 +1343,13 @@ namespace {
 /// The catalogue effects the log's rate and resolution can show, each
 /// detected on the residual of the machine so far (the registry's from-data
 /// detectors, in its order), replayed, and kept only where the held-out
-/// error falls.
-void search_catalogue_effects(DataCalibration& out, const std::vector<RunData>& runs) {
+/// error falls. Returns the errors of the machine it leaves on the fitting
+/// runs (the replay the last judgement made of it).
+FitRunErrors search_catalogue_effects(DataCalibration& out, const std::vector<RunData>& runs) {
   const double dt = runs.front().run->sample_period_s;
   const double q = measured_position_step(out, runs);
   FitRunErrors current = errors_on_fit_runs(runs, out.final_machine, out.axes, out.rounding, out.replays);
-  if (!current.ok) return;
+  if (!current.ok) return current;
   const auto detectors = from_data_search_order();
   for (const AxisFromData& ax : out.axis) {
     if (!ax.identified) continue;
@@ -1362,6 +1363,7 @@ void search_catalogue_effects(DataCalibration& out, const std::vector<RunData>& 
     s.fine = q <= 0.005;
     for (const EffectEntry* e : detectors) e->from_data(s);
   }
+  return current;
 }
 
 }  // namespace
@@ -1925,6 +1927,28 @@ void rechoose_velocity_loops(DataCalibration& out, const std::vector<RunData>& r
   }
 }
 
+/// Calls f(r, k, last) on every fitting row k of every run r where the
+/// axis's command has stood still for 0.2 s (interior rows only). `last` is
+/// the direction the command last moved in within the segment, 0 before it
+/// has moved there (a stitched segment starts from an unseen approach).
+template <class F>
+void for_settled_rest_rows(const std::vector<RunData>& runs, Axis a, F&& f) {
+  const std::size_t i = index(a);
+  for (std::size_t r = 0; r < runs.size(); ++r) {
+    const RunData& rd = runs[r];
+    const auto settle = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.2 / rd.run->sample_period_s)));
+    std::size_t still = 0;
+    int last = 0;
+    for (std::size_t k = 0; k < rd.n_fit; ++k) {
+      const int d = direction(rd.kin[i].v_mm_per_s[k], rd.v_move[i]);
+      if (d != 0) last = d;
+      if (k > 0 && !rd.interior[k - 1]) last = 0;
+      still = d == 0 ? still + 1 : 0;
+      if (still >= settle && rd.interior[k]) f(r, k, last);
+    }
+  }
+}
+
 /// What a stopped axis holds off the constant load, mean over the fitting
 /// rows where the command has stood still for 0.2 s: in the log and in the
 /// replay of the identified machine.
@@ -1934,21 +1958,18 @@ struct RestHolding {
 };
 RestHolding rest_holding(const std::vector<RunData>& runs, const FitRunErrors& id_replay, const AxisFromData& ax) {
   RestHolding h;
-  for (std::size_t r = 0; id_replay.ok && r < runs.size(); ++r) {
-    const RunData& rd = runs[r];
-    const auto& T = rd.run->trace.at(ax.channel.column);
-    const auto* Tm = model_channel(id_replay.replays[r], ax.axis, ax.channel, true);
-    if (Tm == nullptr) continue;
-    const auto settle = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.2 / rd.run->sample_period_s)));
-    std::size_t still = 0;
-    for (std::size_t k = 0; k < rd.n_fit; ++k) {
-      still = direction(rd.kin[index(ax.axis)].v_mm_per_s[k], rd.v_move[index(ax.axis)]) == 0 ? still + 1 : 0;
-      if (still < settle || !rd.interior[k]) continue;
-      h.log += std::abs(T[k] - ax.c);
-      h.model += std::abs((*Tm)[k] - ax.c);
-      ++h.rows;
-    }
+  if (!id_replay.ok) return h;
+  std::vector<const std::vector<double>*> T, Tm;
+  for (std::size_t r = 0; r < runs.size(); ++r) {
+    T.push_back(&runs[r].run->trace.at(ax.channel.column));
+    Tm.push_back(model_channel(id_replay.replays[r], ax.axis, ax.channel, true));
   }
+  for_settled_rest_rows(runs, ax.axis, [&](std::size_t r, std::size_t k, int) {
+    if (Tm[r] == nullptr) return;
+    h.log += std::abs((*T[r])[k] - ax.c);
+    h.model += std::abs((*Tm[r])[k] - ax.c);
+    ++h.rows;
+  });
   if (h.rows > 0) {
     h.log /= static_cast<double>(h.rows);
     h.model /= static_cast<double>(h.rows);
@@ -2059,22 +2080,13 @@ struct DirectionalHold {
 };
 DirectionalHold directional_hold(const std::vector<RunData>& runs, const AxisFromData& ax) {
   DirectionalHold h;
-  const std::size_t i = index(ax.axis);
-  for (const RunData& rd : runs) {
-    const auto& T = rd.run->trace.at(ax.channel.column);
-    const auto settle = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.2 / rd.run->sample_period_s)));
-    std::size_t still = 0;
-    int last = 0;
-    for (std::size_t k = 0; k < rd.n_fit; ++k) {
-      const int d = direction(rd.kin[i].v_mm_per_s[k], rd.v_move[i]);
-      if (d != 0) last = d;
-      if (k > 0 && !rd.interior[k - 1]) last = 0;  // a stitched segment starts from an unseen approach
-      still = d == 0 ? still + 1 : 0;
-      if (still < settle || !rd.interior[k] || last == 0) continue;
-      (last > 0 ? h.after_pos : h.after_neg) += T[k] - ax.c;
-      ++(last > 0 ? h.rows_pos : h.rows_neg);
-    }
-  }
+  std::vector<const std::vector<double>*> T;
+  for (const RunData& rd : runs) T.push_back(&rd.run->trace.at(ax.channel.column));
+  for_settled_rest_rows(runs, ax.axis, [&](std::size_t r, std::size_t k, int last) {
+    if (last == 0) return;
+    (last > 0 ? h.after_pos : h.after_neg) += (*T[r])[k] - ax.c;
+    ++(last > 0 ? h.rows_pos : h.rows_neg);
+  });
   if (h.rows_pos > 0) h.after_pos /= static_cast<double>(h.rows_pos);
   if (h.rows_neg > 0) h.after_neg /= static_cast<double>(h.rows_neg);
   return h;
@@ -2095,15 +2107,14 @@ DirectionalHold directional_hold(const std::vector<RunData>& runs, const AxisFro
 /// independently, so one replay scores a grid point on every axis); kept
 /// where the held-out error of the fitting runs falls by more than
 /// kKeepMargin without the tracking error rising by more than kRiseAllowed.
-void try_rising_friction(DataCalibration& out, const std::vector<RunData>& runs) {
+/// `now`: the machine so far on the fitting runs.
+void try_rising_friction(DataCalibration& out, const std::vector<RunData>& runs, const FitRunErrors& now) {
   std::vector<const AxisFromData*> axes;
   for (const AxisFromData& ax : out.axis)
     if (ax.identified && ax.channel.present() &&
         !out.final_machine.axes[index(ax.axis)].drive.effects.stribeck.enabled)
       axes.push_back(&ax);
-  if (axes.empty()) return;
-  const FitRunErrors now = errors_on_fit_runs(runs, out.final_machine, out.axes, out.rounding, out.replays);
-  if (!now.ok) return;
+  if (axes.empty() || !now.ok) return;
   struct Best {
     double fit{1e300}, share{0.0}, ws{0.0};
     ChannelErrors held;
@@ -2352,8 +2363,8 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
   choose_velocity_loops(out, runs);
   try_smooth_friction(out, runs);
   rechoose_velocity_loops(out, runs);
-  search_catalogue_effects(out, runs);
-  try_rising_friction(out, runs);
+  const FitRunErrors after_catalogue = search_catalogue_effects(out, runs);
+  try_rising_friction(out, runs, after_catalogue);
   const AxisArray<Regression> reg = fit_regressions(out, runs);
   errors_on_fit_part(out, runs, nominal, reg);
   errors_on_validation_runs(out, validate, nominal, reg);

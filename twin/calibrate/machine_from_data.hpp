@@ -128,8 +128,8 @@ struct DataEffect {
   std::string evidence;
   double before{0.0}, after{0.0};  ///< held-out channel NRMS without / with
   /// Held-out NRMS of every channel of the axis (torque, tracking error,
-  /// velocity command) without and with the effect (empty for smooth_friction,
-  /// which is judged on the torque channel alone).
+  /// velocity command) without and with the effect (empty for smooth_friction
+  /// and rising_friction, whose before and after are the torque channel's).
   std::map<std::string, double> before_channels, after_channels;
   bool kept{false};
 
