@@ -109,6 +109,17 @@ struct AxisFromData {
   double J{0.0}, B{0.0}, Tc_pos{0.0}, Tc_neg{0.0}, c{0.0};  ///< channel unit, rg = 1 mm/rad
   double J_se{0.0}, B_se{0.0}, Tc_pos_se{0.0}, Tc_neg_se{0.0}, c_se{0.0};
   std::size_t fit_rows{0};
+  /// The drive fitted with one Coulomb level for both directions (where the
+  /// axis moves both ways): the two levels are a parameter more, kept only
+  /// where they replay the held-out rows better than one level does.
+  struct OneLevel {
+    bool ok{false};
+    double J{0.0}, B{0.0}, Tc{0.0}, c{0.0};
+    double J_se{0.0}, B_se{0.0}, Tc_se{0.0}, c_se{0.0};
+    std::vector<std::string> clamped;  ///< physical floors applied, as for the two-level fit
+  } one_level;
+  bool one_coulomb_level{false};  ///< the one-level drive was taken
+  std::string coulomb_choice;     ///< how the Coulomb levels were chosen, for the report
   /// Where the velocity loop is fitted from data: the lag (in samples of the
   /// log) at which the logged torque follows the PI law on the speed error
   /// best, and the gains fitted at that lag. A lag beyond 0 is a delay

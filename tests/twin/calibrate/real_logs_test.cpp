@@ -144,6 +144,10 @@ TEST(RealLogs, CascadeAtOneKilohertzWithRawTorque) {
   const double scale = sp.cascade.raw_per_Nm;
   EXPECT_NEAR(ax.Tc_pos + ax.c, scale * (0.25 + 0.05), 0.1 * scale * 0.30);
   EXPECT_NEAR(ax.Tc_neg - ax.c, scale * (0.15 - 0.05), 0.1 * scale * 0.30);
+  // The truth's levels differ by 0.1 N m: one level for both would miss each
+  // direction by half that, and the held-out replay keeps the two.
+  EXPECT_FALSE(ax.one_coulomb_level) << ax.coulomb_choice;
+  EXPECT_THAT(ax.coulomb_choice, HasSubstr("a Coulomb level per direction"));
   // Another program, never fitted: the following error within 1 % NRMS.
   ASSERT_EQ(r.validation_runs.size(), 1u);
   const auto& e = r.validation_runs[0].calibrated.nrms;
@@ -227,6 +231,47 @@ TEST(RealLogs, CoarseRoundedStitchedCurrentLog) {
   const auto j = data_calibration_report_json(r);
   EXPECT_TRUE(j.contains("baseline"));
   EXPECT_TRUE(j["effects_skipped"].contains("cogging"));
+}
+
+// One Coulomb level where the log does not support two. The truth's
+// friction is the same both ways (0.2 N m, no load), so one level is its
+// structure. The fitting part moves + at 10 and 11 mm/s and - at 40 and
+// 42: a level per direction leaves the viscous slope to speed spans of 1 and
+// 2 mm/s, under the noise of positions logged every 0.1 s to 0.1 mm (that
+// fit comes out with a negative slope, set to 0, and levels 2.3 and 7.9 A
+// against the truth's 0.42 A); one level ties the midpoint of the moving
+// levels to the rest level and takes the slope from 10 against 40 mm/s. The
+// held-out part moves + at 45 and - at 12 mm/s. Checked against the truth's
+// structure: one level is taken here, and (CascadeAtOneKilohertzWithRawTorque)
+// two where the truth's levels differ.
+TEST(RealLogs, OneCoulombLevelWhereTheLogDoesNotSupportTwo) {
+  const double Ts = 1e-3;
+  truth::RunSpec sp = cascade_spec(Ts);
+  sp.plant.Tc_pos = sp.plant.Tc_neg = 0.2;
+  sp.effects.load_Nm = 0.0;
+  sp.cascade.raw_per_Nm = 0.0;
+  sp.cascade.log_velocities = false;
+  sp.cascade.kff = 0.0;
+  sp.log_every = 100;
+  sp.log_significant_figures = 3;
+  sp.current_noise_A = 0.05;
+  sp.reference_mm = truth::moves_program(
+      Ts, {10.0, -40.0, 11.0, -42.0, 10.0, -40.0, 11.0, -42.0, 10.0, -40.0, 11.0, -42.0, 45.0, -12.0, 45.0, -12.0, 45.0,
+           -12.0, 45.0, -12.0},
+      40.0);
+  const auto d = work("one_level");
+  truth::write_truth_run(d, sp);
+  const MeasuredRun run = load_run(d);
+  const DataCalibration r = calibrate_from_data({run}, {}, machine_for_run(run, "", nullptr));
+  ASSERT_EQ(r.axis.size(), 1u);
+  const AxisFromData& ax = r.axis[0];
+  ASSERT_TRUE(ax.identified) << ax.note;
+  EXPECT_TRUE(ax.one_coulomb_level) << ax.coulomb_choice;
+  EXPECT_DOUBLE_EQ(ax.Tc_pos, ax.Tc_neg);
+  EXPECT_THAT(ax.coulomb_choice, HasSubstr("one Coulomb level for both directions"));
+  const auto j = data_calibration_report_json(r);
+  EXPECT_EQ(j["parameters_identified"]["x"]["coulomb_levels"], 1);
+  EXPECT_EQ(j["parameters_identified"]["x"]["Tc_pos"], j["parameters_identified"]["x"]["Tc_neg"]);
 }
 
 }  // namespace
