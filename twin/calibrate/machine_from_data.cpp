@@ -1892,6 +1892,14 @@ void choose_velocity_loops(DataCalibration& out, const std::vector<RunData>& run
 /// their channel error is lower and the tracking error rises by no more
 /// than kRiseAllowed, else the one level is taken. The report says which,
 /// with both errors.
+/// The first velocity loop of `ax` on a drive of inertia J: the same
+/// bandwidth (Kvp in proportion to J) where the loop is not fitted from the log.
+controller::CascadeGains first_loop_at(const AxisFromData& ax, double J) {
+  controller::CascadeGains g = ax.gains;
+  if (!ax.velocity_loop_from_data && ax.J > 0.0) g.Kvp_torque_s_per_rad *= J / ax.J;
+  return g;
+}
+
 void choose_coulomb_levels(DataCalibration& out, const std::vector<RunData>& runs) {
   sim::MachineDefinition trial = out.identified;
   bool any = false;
@@ -1899,6 +1907,7 @@ void choose_coulomb_levels(DataCalibration& out, const std::vector<RunData>& run
     if (!ax.identified || !ax.one_level.ok) continue;
     const auto& o = ax.one_level;
     set_drive(trial.axes[index(ax.axis)].drive, DriveRefit{o.J, o.B, o.Tc, o.Tc, o.c});
+    trial.axes[index(ax.axis)].loop.cascade = first_loop_at(ax, o.J);
     any = true;
   }
   if (!any) return;
@@ -1911,22 +1920,24 @@ void choose_coulomb_levels(DataCalibration& out, const std::vector<RunData>& run
     if (e2 == two.nrms.end() || e1 == one.nrms.end()) continue;
     const auto t2 = two.nrms.find(col(ax.axis, "_err_mm"));
     const auto t1 = one.nrms.find(col(ax.axis, "_err_mm"));
-    const bool tracking_ok = t2 == two.nrms.end() || t1 == one.nrms.end() || t1->second <= t2->second * (1.0 + kRiseAllowed);
+    const bool tracking_ok =
+        t2 == two.nrms.end() || t1 == one.nrms.end() || t1->second <= t2->second * (1.0 + kRiseAllowed);
     const auto& o = ax.one_level;
     const std::string u = ax.channel.unit == "raw" ? "in the log's unit" : ax.channel.unit;
     if (!(e1->second < e2->second && tracking_ok)) {
-      ax.coulomb_choice = fmt::format("a Coulomb level per direction: one level for both ({:.3g} {}, {:.3g} per mm/s) "
-                                      "replays the held-out rows' {} to {:.4g} against {:.4g} with two{}",
-                                      o.Tc, u, o.B, ax.channel.column, e1->second, e2->second,
+      ax.coulomb_choice = fmt::format("a Coulomb level per direction: one level for both ({:.3g} {}, and {:.3g} {} "
+                                      "per mm/s) replays the held-out rows' {} to {:.4g} against {:.4g} with two{}",
+                                      o.Tc, u, o.B, u, ax.channel.column, e1->second, e2->second,
                                       tracking_ok ? "" : ", and raises the tracking error");
       continue;
     }
-    ax.coulomb_choice = fmt::format("one Coulomb level for both directions: fitted apart ({:.3g} in +, {:.3g} in -, "
-                                    "{:.3g} per mm/s) the levels replay the held-out rows' {} to {:.4g}, one level "
-                                    "to {:.4g}{}",
-                                    ax.Tc_pos, ax.Tc_neg, ax.B, ax.channel.column, e2->second, e1->second,
+    ax.coulomb_choice = fmt::format("one Coulomb level for both directions: fitted apart ({:.3g} {} in +, {:.3g} in "
+                                    "-, and {:.3g} {} per mm/s) the levels replay the held-out rows' {} to {:.4g}, "
+                                    "one level to {:.4g}{}",
+                                    ax.Tc_pos, u, ax.Tc_neg, ax.B, u, ax.channel.column, e2->second, e1->second,
                                     o.clamped.empty() ? "" : fmt::format(" ({})", fmt::join(o.clamped, "; ")));
     ax.one_coulomb_level = true;
+    ax.gains = first_loop_at(ax, o.J);
     ax.J = o.J;
     ax.B = o.B;
     ax.Tc_pos = ax.Tc_neg = o.Tc;
@@ -1936,6 +1947,7 @@ void choose_coulomb_levels(DataCalibration& out, const std::vector<RunData>& run
     ax.Tc_pos_se = ax.Tc_neg_se = o.Tc_se;
     ax.c_se = o.c_se;
     set_drive(out.identified.axes[index(ax.axis)].drive, DriveRefit{ax.J, ax.B, ax.Tc_pos, ax.Tc_neg, ax.c});
+    out.identified.axes[index(ax.axis)].loop.cascade = ax.gains;
   }
   out.final_machine = out.identified;
 }

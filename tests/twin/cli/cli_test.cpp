@@ -199,6 +199,8 @@ TEST(Cli, CalibrateRunOfAnUnnamedMachineWithAnAxisUnmeasured) {
   // is tried on every axis the drive is identified on).
   EXPECT_THAT(report, HasSubstr("## Effects tried"));
   EXPECT_THAT(report, HasSubstr("- rising_friction on x"));
+  // x moves both ways: whether it has one Coulomb level or two is said, with why.
+  EXPECT_THAT(report, HasSubstr("- Coulomb levels: "));
   EXPECT_THAT(report, Not(HasSubstr("plots not drawn")));
   EXPECT_TRUE(std::filesystem::exists(out / "overlay.png") || report.find("gnuplot") != std::string::npos);
 }
