@@ -1939,7 +1939,7 @@ void choose_coulomb_levels(DataCalibration& out, const std::vector<RunData>& run
                                     "-, and {:.3g} {} per mm/s) the levels replay the held-out rows' {} to {:.4g}, "
                                     "one level to {:.4g}{}",
                                     ax.Tc_pos, u, ax.Tc_neg, ax.B, u, ax.channel.column, e2->second, e1->second,
-                                    o.clamped.empty() ? "" : fmt::format(" ({})", fmt::join(o.clamped, "; ")));
+                                    o.clamped.empty() ? "" : fmt::format("; {}", fmt::join(o.clamped, "; ")));
     ax.one_coulomb_level = true;
     ax.gains = first_loop_at(ax, o.J);
     ax.J = o.J;
