@@ -1937,9 +1937,13 @@ void choose_coulomb_levels(DataCalibration& out, const std::vector<RunData>& run
     }
     ax.coulomb_choice = fmt::format("one Coulomb level for both directions: fitted apart ({:.3g} {} in +, {:.3g} in "
                                     "-, and {:.3g} {} per mm/s) the levels replay the held-out rows' {} to {:.4g}, "
-                                    "one level to {:.4g}{}",
-                                    ax.Tc_pos, u, ax.Tc_neg, ax.B, u, ax.channel.column, e2->second, e1->second,
-                                    o.clamped.empty() ? "" : fmt::format("; {}", fmt::join(o.clamped, "; ")));
+                                    "one level to {:.4g}",
+                                    ax.Tc_pos, u, ax.Tc_neg, ax.B, u, ax.channel.column, e2->second, e1->second);
+    // The run's notes give the floors of the drive taken, not of the two-level fit.
+    if (const auto it = std::find(out.notes.begin(), out.notes.end(), ax.note); !ax.note.empty() && it != out.notes.end())
+      out.notes.erase(it);
+    ax.note = o.clamped.empty() ? "" : fmt::format("axis {}: {}", axis_name(ax.axis), fmt::join(o.clamped, "; "));
+    if (!ax.note.empty()) out.notes.push_back(ax.note);
     ax.one_coulomb_level = true;
     ax.gains = first_loop_at(ax, o.J);
     ax.J = o.J;
