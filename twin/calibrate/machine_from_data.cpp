@@ -1879,6 +1879,14 @@ void choose_velocity_loops(DataCalibration& out, const std::vector<RunData>& run
   out.final_machine = out.identified;
 }
 
+/// The first velocity loop of `ax` on a drive of inertia J: the same
+/// bandwidth (Kvp in proportion to J) where the loop is not fitted from the log.
+controller::CascadeGains first_loop_at(const AxisFromData& ax, double J) {
+  controller::CascadeGains g = ax.gains;
+  if (!ax.velocity_loop_from_data && ax.J > 0.0) g.Kvp_torque_s_per_rad *= J / ax.J;
+  return g;
+}
+
 /// One Coulomb level or two. The drive's two levels (one per direction) are
 /// a parameter more than the rigid-body regression's one: with two, the
 /// rest level (the constant) is free of the moving levels; with one, it is
@@ -1895,14 +1903,6 @@ void choose_velocity_loops(DataCalibration& out, const std::vector<RunData>& run
 /// the margin sends the rest of the calibration down another path of loop
 /// and effect choices, by as much as 0.62 against 0.67 on umich10 y, but is
 /// not evidence). The report says which, with both errors.
-/// The first velocity loop of `ax` on a drive of inertia J: the same
-/// bandwidth (Kvp in proportion to J) where the loop is not fitted from the log.
-controller::CascadeGains first_loop_at(const AxisFromData& ax, double J) {
-  controller::CascadeGains g = ax.gains;
-  if (!ax.velocity_loop_from_data && ax.J > 0.0) g.Kvp_torque_s_per_rad *= J / ax.J;
-  return g;
-}
-
 void choose_coulomb_levels(DataCalibration& out, const std::vector<RunData>& runs) {
   sim::MachineDefinition trial = out.identified;
   bool any = false;
@@ -1931,8 +1931,10 @@ void choose_coulomb_levels(DataCalibration& out, const std::vector<RunData>& run
       ax.coulomb_choice = fmt::format("a Coulomb level per direction: one level for both ({:.3g} {}, and {:.3g} {} "
                                       "per mm/s) replays the held-out rows' {} to {:.4g} against {:.4g} with two{}",
                                       o.Tc, u, o.B, u, ax.channel.column, e1->second, e2->second,
-                                      tracking_ok ? " (one level is taken where it lowers that by more than 1 %)"
-                                                  : ", and raises the tracking error");
+                                      tracking_ok ? fmt::format(" (one level is taken where it lowers that by "
+                                                                "more than {:g} %)",
+                                                                100.0 * kKeepMargin)
+                                                  : std::string(", and raises the tracking error"));
       continue;
     }
     ax.coulomb_choice = fmt::format("one Coulomb level for both directions: fitted apart ({:.3g} {} in +, {:.3g} in "

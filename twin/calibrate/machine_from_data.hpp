@@ -110,8 +110,8 @@ struct AxisFromData {
   double J_se{0.0}, B_se{0.0}, Tc_pos_se{0.0}, Tc_neg_se{0.0}, c_se{0.0};
   std::size_t fit_rows{0};
   /// The drive fitted with one Coulomb level for both directions (where the
-  /// axis moves both ways): the two levels are a parameter more, kept only
-  /// where they replay the held-out rows better than one level does.
+  /// axis moves both ways): taken in place of the two levels where it lowers
+  /// the held-out error by more than the keep margin (choose_coulomb_levels).
   struct OneLevel {
     bool ok{false};
     double J{0.0}, B{0.0}, Tc{0.0}, c{0.0};
