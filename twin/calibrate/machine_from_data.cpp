@@ -1387,6 +1387,30 @@ void check_fit_runs(const std::vector<MeasuredRun>& fit, DataCalibration& out) {
     for (const auto& n : r.notes) out.notes.push_back(n);
 }
 
+/// A position this far from its command on any row: the logged loop ran
+/// away (no machine tool's following error reaches a metre).
+constexpr double kRunawayError_mm = 1000.0;
+
+/// A run whose axis ran away from its command cannot be calibrated on or
+/// validated against: said in one line, with where.
+void check_no_runaway(const MeasuredRun& r) {
+  const auto* t = r.trace.find("t_s");
+  for (Axis a : r.axes) {
+    const auto* ref = r.trace.find(col(a, "_ref_mm"));
+    const auto* x = r.trace.find(col(a, "_mm"));
+    if (ref == nullptr || x == nullptr) continue;
+    for (std::size_t k = 0; k < ref->size(); ++k) {
+      const double e = std::abs((*ref)[k] - (*x)[k]);
+      if (!(e > kRunawayError_mm)) continue;
+      throw ConfigError(fmt::format("{}: axis {} is {:.4g} mm from its command at {} (row {}): the logged loop ran "
+                                    "away (an unstable loop, or position columns that do not belong together); "
+                                    "nothing to calibrate on",
+                                    r.dir.string(), axis_name(a), e,
+                                    t != nullptr ? fmt::format("t = {:g} s", (*t)[k]) : std::string("the row"), k + 1));
+    }
+  }
+}
+
 /// Rounding: the coarsest all fitting runs agree with.
 void choose_rounding(const std::vector<MeasuredRun>& fit, DataCalibration& out) {
   out.rounding = detect_rounding(fit.front());
@@ -2469,6 +2493,8 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
   DataCalibration out;
   out.fit_fraction = options.fit_fraction;
   check_fit_runs(fit, out);
+  for (const auto& r : fit) check_no_runaway(r);
+  for (const auto& r : validate) check_no_runaway(r);
   choose_rounding(fit, out);
   const MeasuredRun& r0 = fit.front();
   const double Ts = controller_period(r0, options, out);

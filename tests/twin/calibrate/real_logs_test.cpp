@@ -16,6 +16,7 @@
 
 #include "truth_sim.hpp"
 #include "twin/calibrate/machine_from_data.hpp"
+#include "twin/core/error.hpp"
 #include "twin/io/atomic_file.hpp"
 #include "twin/io/machine_file.hpp"
 
@@ -99,6 +100,28 @@ TEST(RealLogs, StitchedSegmentsAreFoundWhereThePositionJumps) {
   EXPECT_EQ(segs[1].begin, 30u);
   EXPECT_EQ(segs[2].begin, 60u);
   EXPECT_THAT(note, HasSubstr("stitched from 3 segments"));
+}
+
+// A log whose position leaves its command by more than a metre (an unstable
+// loop's, or columns that do not belong together) is refused in one line
+// that names the run, the axis and the row, before anything is fitted.
+TEST(RealLogs, RunawayLogIsRefusedWithWhereItRanAway) {
+  std::string csv = "t_s,x_ref_mm,x_mm,x_i_A\n";
+  for (int k = 0; k < 60; ++k) {
+    const double ref = 10.0 + 0.5 * k;
+    const double x = k < 40 ? ref : ref - 3.0 * std::pow(2.0, k - 40);
+    csv += std::to_string(0.1 * k) + "," + std::to_string(ref) + "," + std::to_string(x) + ",1\n";
+  }
+  const MeasuredRun run = run_from_csv("runaway", csv);
+  try {
+    calibrate_from_data({run}, {}, machine_for_run(run, "", nullptr));
+    FAIL() << "a runaway log was calibrated";
+  } catch (const ConfigError& e) {
+    // 3 x 2^9 = 1536 mm at row 50 (t = 4.9 s), the first beyond 1000 mm.
+    EXPECT_THAT(e.what(), HasSubstr("axis x is 1536 mm from its command at t = 4.9 s (row 50)"));
+    EXPECT_THAT(e.what(), HasSubstr("ran away"));
+    EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos);
+  }
 }
 
 // A reference of moves back and forth at several speeds with dwells, long
