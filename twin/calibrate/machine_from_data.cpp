@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <numeric>
@@ -158,15 +159,35 @@ RunData prepare_run(const MeasuredRun& run, const std::vector<Axis>& axes, const
 
 int direction(double v, double v_move) { return v > v_move ? 1 : (v < -v_move ? -1 : 0); }
 
+/// Rows a torque limit holds before the limit is taken for one (as many as
+/// the saturation detector asks for).
+constexpr std::size_t kClippedRows = 10;
+
+/// A torque limit seen in the log: a row is held by it where its |torque| is
+/// within 10 % of the largest and a first fit of the law asks for more than
+/// the log, the same way, by over 2 % of that largest value.
+struct TorqueClip {
+  std::vector<double> theta;  ///< the first fit's Kvp, Kvp / Tn, constant
+  double T_abs_max{0.0};
+  bool holds(double law, double T) const {
+    return std::abs(T) >= 0.9 * T_abs_max && law * T > 0.0 && std::abs(law) > std::abs(T) + 0.02 * T_abs_max;
+  }
+};
+
 /// The PI velocity law fitted on the fitting rows: the logged torque at row k
 /// against the speed error (vcmd - v) and its integral at row k - lag (within
-/// a segment), and a constant.
+/// a segment), and a constant. With `clip`, the rows a torque limit holds
+/// are left out (the limit sets the torque there, not the law).
 struct VelocityLoopFit {
   LsqResult ls;
   double T_rms{0.0};
+  /// The largest |torque| of the rows fitted, and how many of those rows a
+  /// limit at it holds by this fit (TorqueClip).
+  double T_abs_max{0.0};
+  std::size_t held_by_limit{0};
 };
 VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, const std::string& channel,
-                                  std::size_t lag) {
+                                  std::size_t lag, const TorqueClip* clip = nullptr) {
   std::vector<double> ev, iev, c1, Tm;
   std::vector<std::size_t> vrows;
   for (const auto& rd : runs) {
@@ -190,15 +211,26 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
         iev.push_back(j >= lag ? ie[j - lag] : 0.0);
         c1.push_back(1.0);
         Tm.push_back(ch[k]);
-        if (k >= s.begin + 2 + lag) vrows.push_back(ev.size() - 1);
+        if (k < s.begin + 2 + lag) continue;
+        if (clip && clip->holds(clip->theta[0] * ev.back() + clip->theta[1] * iev.back() + clip->theta[2], ch[k]))
+          continue;
+        vrows.push_back(ev.size() - 1);
       }
     }
   }
   VelocityLoopFit f;
   f.ls = least_squares({&ev, &iev, &c1}, Tm, vrows);
   double t2 = 0.0;
-  for (std::size_t k : vrows) t2 += Tm[k] * Tm[k];
+  for (std::size_t k : vrows) {
+    t2 += Tm[k] * Tm[k];
+    f.T_abs_max = std::max(f.T_abs_max, std::abs(Tm[k]));
+  }
   f.T_rms = vrows.empty() ? 0.0 : std::sqrt(t2 / static_cast<double>(vrows.size()));
+  if (f.ls.ok) {
+    const TorqueClip c{f.ls.theta, f.T_abs_max};
+    for (std::size_t k : vrows)
+      if (c.holds(f.ls.theta[0] * ev[k] + f.ls.theta[1] * iev[k] + f.ls.theta[2], Tm[k])) ++f.held_by_limit;
+  }
   return f;
 }
 
@@ -989,14 +1021,33 @@ void detect_current_saturation_in_data(DataSearch& s) {
     if (v >= 0.98 * log_max) top.push_back(v);
   }
   if (!(log_max > 0.0 && model_max > 1.05 * log_max && top.size() >= 10)) return;
-  std::nth_element(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(top.size() / 2), top.end());
-  const double level = top[top.size() / 2];
+  auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  // The level: the log's median where the replay asks, the same way, for
+  // more than the log ever shows (the limit surely holds there; the largest
+  // value itself sits the noise above the limit), or else the median of the
+  // samples within 2 % of the largest.
+  std::vector<double> held;
+  for (std::size_t k : rows.all) {
+    const auto [run, row] = rows.at[k];
+    const double T = s.runs[run].run->trace.at(ax.channel.column)[row], m = s.model_at(k);
+    if (m * T > 0.0 && std::abs(m) > log_max) held.push_back(std::abs(T));
+  }
+  const bool from_held = held.size() >= 10;
+  const double level = median(from_held ? held : top);
   Trial t;
   t.kind = EffectKind::kCurrentSaturation;
   t.sets = {{{EffectParam::current_saturation_i_max_A, level}}};
-  t.evidence = fmt::format("the log's {} holds {} samples within 2 % of its largest value {:.4g} while the "
-                           "replay asks for up to {:.4g}: a limit at {:.4g} (in the channel's unit)",
-                           ax.channel.column, top.size(), log_max, model_max, level);
+  t.evidence = fmt::format(
+      "the log's {} holds {} samples within 2 % of its largest value {:.4g} while the replay asks for up to {:.4g}: "
+      "a limit at {:.4g} (in the channel's unit; {})",
+      ax.channel.column, top.size(), log_max, model_max, level,
+      from_held ? fmt::format("the log's median over the {} samples where the replay asks for more than that largest "
+                              "value",
+                              held.size())
+                : std::string("the median of those samples"));
   s.attempt(t);
 }
 
@@ -1669,12 +1720,12 @@ bool identify_drive_in_channel(const AxisFit& f, AxisFromData& ax, DataCalibrati
 /// The same law a few samples later: a torque that follows its command late
 /// (a delay beyond the loop) fits best at that lag. A lag that lowers the
 /// residual by less than a fifth is the law's own noise.
-void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, AxisFromData& ax) {
+void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueClip* clip, AxisFromData& ax) {
   ax.gains_at_lag = ax.gains;
   double best = vl.ls.residual_rms;
   const auto max_lag = static_cast<std::size_t>(std::clamp(std::lround(0.01 / f.r0.sample_period_s), 1L, 10L));
   for (std::size_t lag = 1; lag <= max_lag; ++lag) {
-    const VelocityLoopFit vlag = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, lag);
+    const VelocityLoopFit vlag = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, lag, clip);
     if (!(vlag.ls.ok && vlag.ls.theta[0] > 0.0 && vlag.ls.theta[1] >= 0.0 && vlag.ls.residual_rms < best)) continue;
     best = vlag.ls.residual_rms;
     ax.torque_lag_samples = lag;
@@ -1696,15 +1747,37 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
   ax.gains.tau_i_s = 0.0;
   ax.gains.T_max = 1e9;
   if (have_vcmd && f.r0.sample_period_s <= 2e-3 + 1e-12 && all_runs_log(f.runs, col(ax.axis, "_v_mm_s"))) {
-    const VelocityLoopFit vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, 0);
+    VelocityLoopFit vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, 0);
+    // A torque limit: the logged torque flattens near its largest value where
+    // the law asks for more. Those rows follow the limit, not the law; the
+    // law is fitted on the rest.
+    std::optional<TorqueClip> clip;
+    std::string clipped;
+    if (vl.ls.ok && vl.held_by_limit >= kClippedRows) {
+      const std::size_t held = vl.held_by_limit;
+      // The rows held are found with the law fitted so far; a fit without
+      // them asks for the unlimited torque more nearly, so twice more.
+      TorqueClip c{vl.ls.theta, vl.T_abs_max};
+      for (int pass = 0; pass < 3; ++pass) {
+        const VelocityLoopFit inside = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, 0, &c);
+        if (!inside.ls.ok) break;
+        clip = c;
+        vl = inside;
+        c.theta = inside.ls.theta;
+      }
+      if (clip)
+        clipped = fmt::format("; the logged torque flattens near {:.4g} where the law asks for more ({} rows): the "
+                              "rows a limit holds are left out of the law's fit",
+                              c.T_abs_max, held);
+    }
     if (vl.ls.ok && vl.ls.theta[0] > 0.0 && vl.ls.theta[1] >= 0.0 && vl.ls.residual_rms < 0.3 * vl.T_rms) {
       ax.gains.Kvp_torque_s_per_rad = vl.ls.theta[0];
       ax.gains.Tn_s = vl.ls.theta[1] > 0.0 ? vl.ls.theta[0] / vl.ls.theta[1] : 0.0;
       ax.velocity_loop_from_data = true;
       ax.loop_source += fmt::format("; velocity loop from the logged torque against the speed error (residual "
-                                    "{:.3g} of an RMS {:.3g})",
-                                    vl.ls.residual_rms, vl.T_rms);
-      velocity_loop_lag(f, vl, ax);
+                                    "{:.3g} of an RMS {:.3g}){}",
+                                    vl.ls.residual_rms, vl.T_rms, clipped);
+      velocity_loop_lag(f, vl, clip ? &*clip : nullptr, ax);
     }
   }
   if (!ax.velocity_loop_from_data)

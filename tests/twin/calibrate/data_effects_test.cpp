@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "truth_sim.hpp"
@@ -51,8 +52,12 @@ struct Outcome {
   std::vector<std::string> kept;
 };
 
-Outcome calibrate_truth(const std::string& name, const truth::Effects& fx) {
+// `noise_Nm` >= 0: the standard deviation of the noise on the logged torque
+// (the truth's current_noise_A, which it adds to the torque in N m where the
+// torque is logged raw); else the cascade spec's 0.002.
+Outcome calibrate_truth(const std::string& name, const truth::Effects& fx, double noise_Nm = -1.0) {
   truth::RunSpec sp = cascade_spec();
+  if (noise_Nm >= 0.0) sp.current_noise_A = noise_Nm;
   const double load = sp.effects.load_Nm;
   sp.effects = fx;
   sp.effects.load_Nm = load;
@@ -242,6 +247,37 @@ TEST(DataEffects, CurrentSaturationIsFound) {
   expect_only(o, "current_saturation");
   const double limit_raw = kRawPerNm * 0.4769 * 8.0;
   EXPECT_NEAR(kept_effect(o, "current_saturation").params.at("i_max_A"), limit_raw, 0.01 * limit_raw) << describe(o);
+  expect_validation_improves(o);
+}
+
+// A current limit of 7.2 A (137.3 raw) that holds the torque for about 190
+// samples of the fitting program (the unlimited run asks for up to 170 raw),
+// under noise of 0.05 N m on the logged torque (2 raw per sample, 25 times
+// the other tests'). The clipped rows do not follow the PI law, so the law is fitted
+// without them: Kvp within 2 % of the truth's 0.5 N m s/rad (12.57 raw per
+// mm/s of the identified drive, whose rg is 1 mm/rad: 0.5 x 40 / 1.5915) and
+// Tn within 3 % of its 8 ms (fitted on all rows they came out at 11.4 and
+// 8.4 ms on the same run without noise). The limit within 1 %: the log's median where the replay asks for
+// more than the log's largest value, which itself sits the noise's extremes
+// above the limit (142.6 raw). Judged as the held-out machine will be: the
+// validation program's tracking-error NRMS at most 0.01, its torque below
+// the rigid-body regression's.
+TEST(DataEffects, HeavySaturationUnderNoiseLeavesTheLoopAndTheLimitRight) {
+  const Outcome o = calibrate_truth("heavy_saturation", {.i_max_A = 7.2}, 0.05);
+  expect_only(o, "current_saturation");
+  ASSERT_EQ(o.r.axis.size(), 1u);
+  const AxisFromData& ax = o.r.axis[0];
+  ASSERT_TRUE(ax.velocity_loop_from_data) << ax.loop_source;
+  EXPECT_THAT(ax.loop_source, ::testing::HasSubstr("left out of the law's fit"));
+  const double Kvp = 0.5 * kRawPerNm / kRg;
+  EXPECT_NEAR(ax.gains.Kvp_torque_s_per_rad, Kvp, 0.02 * Kvp) << ax.loop_source;
+  EXPECT_NEAR(ax.gains.Tn_s, 0.008, 0.03 * 0.008) << ax.loop_source;
+  const double limit_raw = kRawPerNm * 0.4769 * 7.2;
+  EXPECT_NEAR(kept_effect(o, "current_saturation").params.at("i_max_A"), limit_raw, 0.01 * limit_raw) << describe(o);
+  ASSERT_EQ(o.r.validation_runs.size(), 1u);
+  const RunErrors& v = o.r.validation_runs[0];
+  EXPECT_LT(v.calibrated.nrms.at("x_err_mm"), 0.01);
+  EXPECT_LT(v.calibrated.nrms.at("x_torque_raw"), v.regression.nrms.at("x_torque_raw"));
   expect_validation_improves(o);
 }
 
