@@ -185,10 +185,14 @@ struct VelocityLoopFit {
   /// limit at it holds by this fit (TorqueClip).
   double T_abs_max{0.0};
   std::size_t held_by_limit{0};
+  /// The white noise on the logged torque: from the median |second
+  /// difference| within segments (6 sigma^2 for white noise; a smooth torque
+  /// adds little at the loop's rate, a filtered noise shows less).
+  double noise_rms{0.0};
 };
 VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, const std::string& channel,
                                   std::size_t lag, const TorqueClip* clip = nullptr) {
-  std::vector<double> ev, iev, c1, Tm;
+  std::vector<double> ev, iev, c1, Tm, d2;
   std::vector<std::size_t> vrows;
   for (const auto& rd : runs) {
     const auto& t = rd.run->trace;
@@ -198,6 +202,7 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
     for (const Segment& s : rd.segments) {
       const std::size_t end = std::min(s.end, rd.n_fit);
       if (end <= s.begin) continue;
+      for (std::size_t k = s.begin + 1; k + 1 < end; ++k) d2.push_back(std::abs(ch[k + 1] - 2.0 * ch[k] + ch[k - 1]));
       std::vector<double> e(end - s.begin), ie(end - s.begin);
       double integral = 0.0;
       for (std::size_t k = s.begin; k < end; ++k) {
@@ -226,6 +231,10 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
     f.T_abs_max = std::max(f.T_abs_max, std::abs(Tm[k]));
   }
   f.T_rms = vrows.empty() ? 0.0 : std::sqrt(t2 / static_cast<double>(vrows.size()));
+  if (!d2.empty()) {
+    std::nth_element(d2.begin(), d2.begin() + static_cast<std::ptrdiff_t>(d2.size() / 2), d2.end());
+    f.noise_rms = d2[d2.size() / 2] / 0.6745 / std::sqrt(6.0);
+  }
   if (f.ls.ok) {
     const TorqueClip c{f.ls.theta, f.T_abs_max};
     for (std::size_t k : vrows)
@@ -1719,7 +1728,9 @@ bool identify_drive_in_channel(const AxisFit& f, AxisFromData& ax, DataCalibrati
 
 /// The same law a few samples later: a torque that follows its command late
 /// (a delay beyond the loop) fits best at that lag. A lag that lowers the
-/// residual by less than a fifth is the law's own noise.
+/// residual by less than a fifth is the law's own noise: the residual less
+/// the white noise on the logged torque (which no lag fits), so that noise
+/// on the log does not hide a lag the law shows.
 void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueClip* clip, AxisFromData& ax) {
   ax.gains_at_lag = ax.gains;
   double best = vl.ls.residual_rms;
@@ -1732,7 +1743,9 @@ void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const Torque
     ax.gains_at_lag.Kvp_torque_s_per_rad = vlag.ls.theta[0];
     ax.gains_at_lag.Tn_s = vlag.ls.theta[1] > 0.0 ? vlag.ls.theta[0] / vlag.ls.theta[1] : 0.0;
   }
-  if (ax.torque_lag_samples > 0 && best > 0.8 * vl.ls.residual_rms) {
+  const double n2 = vl.noise_rms * vl.noise_rms;
+  const auto law_rms = [n2](double r) { return std::sqrt(std::max(r * r - n2, 0.0)); };
+  if (ax.torque_lag_samples > 0 && law_rms(best) > 0.8 * law_rms(vl.ls.residual_rms)) {
     ax.torque_lag_samples = 0;
     ax.gains_at_lag = ax.gains;
   }
