@@ -8,6 +8,7 @@
 #include <optional>
 #include <numeric>
 #include <sstream>
+#include <utility>
 
 #include <fmt/format.h>
 
@@ -159,18 +160,33 @@ RunData prepare_run(const MeasuredRun& run, const std::vector<Axis>& axes, const
 
 int direction(double v, double v_move) { return v > v_move ? 1 : (v < -v_move ? -1 : 0); }
 
+/// The RMS of white noise from the |second differences| of a signal: their
+/// median over 0.6745 is their standard deviation, 6 sigma^2 for white noise.
+/// A smooth signal adds little where it is sampled at its loop's rate.
+double white_noise_rms(std::vector<double> abs_d2) {
+  if (abs_d2.empty()) return 0.0;
+  const auto mid = abs_d2.begin() + static_cast<std::ptrdiff_t>(abs_d2.size() / 2);
+  std::nth_element(abs_d2.begin(), mid, abs_d2.end());
+  return *mid / 0.6745 / std::sqrt(6.0);
+}
+
 /// Rows a torque limit holds before the limit is taken for one (as many as
 /// the saturation detector asks for).
 constexpr std::size_t kClippedRows = 10;
 
 /// A torque limit seen in the log: a row is held by it where its |torque| is
-/// within 10 % of the largest and a first fit of the law asks for more than
-/// the log, the same way, by over 2 % of that largest value.
+/// within 10 % of the largest (less three times the white noise on the log:
+/// the largest value of a noisy log sits some noise above the limit, and the
+/// samples held scatter by the noise about it) and a first fit of the law
+/// asks for more than the log, the same way, by over 2 % of that largest
+/// value.
 struct TorqueClip {
   std::vector<double> theta;  ///< the first fit's Kvp, Kvp / Tn, constant
   double T_abs_max{0.0};
+  double noise_rms{0.0};
   bool holds(double law, double T) const {
-    return std::abs(T) >= 0.9 * T_abs_max && law * T > 0.0 && std::abs(law) > std::abs(T) + 0.02 * T_abs_max;
+    return std::abs(T) >= 0.9 * T_abs_max - 3.0 * noise_rms && law * T > 0.0 &&
+           std::abs(law) > std::abs(T) + 0.02 * T_abs_max;
   }
 };
 
@@ -189,6 +205,9 @@ struct VelocityLoopFit {
   /// difference| within segments (6 sigma^2 for white noise; a smooth torque
   /// adds little at the loop's rate, a filtered noise shows less).
   double noise_rms{0.0};
+  /// An RMS of the logged torque (or of a residual of it) less the white
+  /// noise, which no law fits.
+  double less_noise(double rms) const { return std::sqrt(std::max(rms * rms - noise_rms * noise_rms, 0.0)); }
 };
 VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, const std::string& channel,
                                   std::size_t lag, const TorqueClip* clip = nullptr) {
@@ -231,12 +250,9 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
     f.T_abs_max = std::max(f.T_abs_max, std::abs(Tm[k]));
   }
   f.T_rms = vrows.empty() ? 0.0 : std::sqrt(t2 / static_cast<double>(vrows.size()));
-  if (!d2.empty()) {
-    std::nth_element(d2.begin(), d2.begin() + static_cast<std::ptrdiff_t>(d2.size() / 2), d2.end());
-    f.noise_rms = d2[d2.size() / 2] / 0.6745 / std::sqrt(6.0);
-  }
+  f.noise_rms = white_noise_rms(std::move(d2));
   if (f.ls.ok) {
-    const TorqueClip c{f.ls.theta, f.T_abs_max};
+    const TorqueClip c{f.ls.theta, f.T_abs_max, f.noise_rms};
     for (std::size_t k : vrows)
       if (c.holds(f.ls.theta[0] * ev[k] + f.ls.theta[1] * iev[k] + f.ls.theta[2], Tm[k])) ++f.held_by_limit;
   }
@@ -828,6 +844,34 @@ std::pair<double, LsqResult> scan_period(double P_min, double P_max, const std::
 
 }  // namespace
 
+// The white noise on the detector's logged channel, from its second
+// differences over consecutive fitting rows.
+double channel_noise_rms(const AxisRows& rows) {
+  std::vector<double> d2;
+  for (std::size_t k = 1; k + 1 < rows.all.size(); ++k) {
+    const auto [r0, k0] = rows.at[k - 1];
+    const auto [r1, k1] = rows.at[k];
+    const auto [r2, k2] = rows.at[k + 1];
+    if (r0 != r1 || r1 != r2 || k1 != k0 + 1 || k2 != k1 + 1) continue;
+    d2.push_back(std::abs(rows.T[k + 1] - 2.0 * rows.T[k] + rows.T[k - 1]));
+  }
+  return white_noise_rms(std::move(d2));
+}
+
+// The rows over which the drive fit's residual is correlated, for the
+// detectors' standard errors: a model error stays for about 10 ms, white
+// noise on the log for one row, each counted by its share of the residual's
+// variance (a log whose residual is mostly noise is not taken as ten times
+// fewer independent rows than it has).
+double residual_correlation_rows(const AxisRows& rows, const std::vector<const std::vector<double>*>& base_cols,
+                                 double noise_rms, double dt) {
+  const double corr = std::max(1.0, 0.01 / dt);
+  const LsqResult base = least_squares(base_cols, rows.T, rows.all);
+  if (!(base.ok && base.residual_rms > 0.0)) return corr;
+  const double white = std::min(1.0, noise_rms * noise_rms / (base.residual_rms * base.residual_rms));
+  return white + (1.0 - white) * corr;
+}
+
 /// A detector's view of one identified axis: the runs, the axis's rows with
 /// the torque the machine so far leaves, the replays of that machine, and
 /// the rule every candidate is kept by (attempt).
@@ -842,6 +886,7 @@ struct DataSearch {
   double dt{0.0};    ///< the log's sample period
   double q{0.0};     ///< the logged positions' step
   double corr{1.0};  ///< rows over which the residual is correlated
+  double noise_rms{0.0};  ///< the white noise on the logged channel (fast logs; else 0)
   bool fast{false};  ///< samples every 2 ms or faster
   bool fine{false};  ///< positions to 5 um or finer
 
@@ -1014,6 +1059,10 @@ void detect_delay_in_data(DataSearch& s) {
 }
 
 // current_saturation: the log's torque clips where the replay's goes beyond.
+// Under noise the log's largest value sits about four noise RMS above the
+// limit (the largest of some hundred held samples), so the band the held
+// samples are looked for in, and the level the replay must ask beyond, are
+// widened and lowered by the noise the channel shows.
 void detect_current_saturation_in_data(DataSearch& s) {
   const AxisFromData& ax = s.ax;
   const AxisRows& rows = s.rows;
@@ -1023,26 +1072,31 @@ void detect_current_saturation_in_data(DataSearch& s) {
     log_max = std::max(log_max, std::abs(s.runs[run].run->trace.at(ax.channel.column)[row]));
     model_max = std::max(model_max, std::abs(s.model_at(k)));
   }
+  const double noise = s.noise_rms;
+  const double band = std::max(0.02 * log_max, 4.0 * noise);
+  // The largest level the log surely shows held: its largest value less the
+  // noise's reach.
+  const double held_max = log_max - 3.0 * noise;
   std::vector<double> top;
   for (std::size_t k : rows.all) {
     const auto [run, row] = rows.at[k];
     const double v = std::abs(s.runs[run].run->trace.at(ax.channel.column)[row]);
-    if (v >= 0.98 * log_max) top.push_back(v);
+    if (v >= log_max - band) top.push_back(v);
   }
-  if (!(log_max > 0.0 && model_max > 1.05 * log_max && top.size() >= 10)) return;
+  if (!(held_max > 0.0 && model_max > 1.05 * held_max && top.size() >= 10)) return;
   auto median = [](std::vector<double> v) {
     std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
     return v[v.size() / 2];
   };
   // The level: the log's median where the replay asks, the same way, for
-  // more than the log ever shows (the limit surely holds there; the largest
-  // value itself sits the noise above the limit), or else the median of the
-  // samples within 2 % of the largest.
+  // more than the log surely shows held (the limit surely holds there; the
+  // largest value itself sits the noise above the limit), or else the median
+  // of the samples in the band below the largest.
   std::vector<double> held;
   for (std::size_t k : rows.all) {
     const auto [run, row] = rows.at[k];
     const double T = s.runs[run].run->trace.at(ax.channel.column)[row], m = s.model_at(k);
-    if (m * T > 0.0 && std::abs(m) > log_max) held.push_back(std::abs(T));
+    if (m * T > 0.0 && std::abs(m) > held_max) held.push_back(std::abs(T));
   }
   const bool from_held = held.size() >= 10;
   const double level = median(from_held ? held : top);
@@ -1050,12 +1104,11 @@ void detect_current_saturation_in_data(DataSearch& s) {
   t.kind = EffectKind::kCurrentSaturation;
   t.sets = {{{EffectParam::current_saturation_i_max_A, level}}};
   t.evidence = fmt::format(
-      "the log's {} holds {} samples within 2 % of its largest value {:.4g} while the replay asks for up to {:.4g}: "
-      "a limit at {:.4g} (in the channel's unit; {})",
-      ax.channel.column, top.size(), log_max, model_max, level,
-      from_held ? fmt::format("the log's median over the {} samples where the replay asks for more than that largest "
-                              "value",
-                              held.size())
+      "the log's {} holds {} samples within {:.3g} of its largest value {:.4g} (noise {:.3g} RMS) while the replay "
+      "asks for up to {:.4g}: a limit at {:.4g} (in the channel's unit; {})",
+      ax.channel.column, top.size(), band, log_max, noise, model_max, level,
+      from_held ? fmt::format("the log's median over the {} samples where the replay asks for more than {:.4g}",
+                              held.size(), held_max)
                 : std::string("the median of those samples"));
   s.attempt(t);
 }
@@ -1424,8 +1477,11 @@ FitRunErrors search_catalogue_effects(DataCalibration& out, const std::vector<Ru
     s.base_cols = {&s.rows.acc, &s.rows.vel, &s.rows.pos, &s.rows.neg, &s.rows.one};
     s.dt = dt;
     s.q = q;
-    s.corr = std::max(1.0, 0.01 / dt);
     s.fast = dt <= 2e-3 + 1e-12;
+    // The second difference shows the noise only where the torque is smooth
+    // from sample to sample: at the loop's rate, not every 100 ms.
+    s.noise_rms = s.fast ? channel_noise_rms(s.rows) : 0.0;
+    s.corr = residual_correlation_rows(s.rows, s.base_cols, s.noise_rms, dt);
     s.fine = q <= 0.005;
     for (const EffectEntry* e : detectors) e->from_data(s);
   }
@@ -1743,9 +1799,7 @@ void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const Torque
     ax.gains_at_lag.Kvp_torque_s_per_rad = vlag.ls.theta[0];
     ax.gains_at_lag.Tn_s = vlag.ls.theta[1] > 0.0 ? vlag.ls.theta[0] / vlag.ls.theta[1] : 0.0;
   }
-  const double n2 = vl.noise_rms * vl.noise_rms;
-  const auto law_rms = [n2](double r) { return std::sqrt(std::max(r * r - n2, 0.0)); };
-  if (ax.torque_lag_samples > 0 && law_rms(best) > 0.8 * law_rms(vl.ls.residual_rms)) {
+  if (ax.torque_lag_samples > 0 && vl.less_noise(best) > 0.8 * vl.less_noise(vl.ls.residual_rms)) {
     ax.torque_lag_samples = 0;
     ax.gains_at_lag = ax.gains;
   }
@@ -1770,7 +1824,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
       const std::size_t held = vl.held_by_limit;
       // The rows held are found with the law fitted so far; a fit without
       // them asks for the unlimited torque more nearly, so twice more.
-      TorqueClip c{vl.ls.theta, vl.T_abs_max};
+      TorqueClip c{vl.ls.theta, vl.T_abs_max, vl.noise_rms};
       for (int pass = 0; pass < 3; ++pass) {
         const VelocityLoopFit inside = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, 0, &c);
         if (!inside.ls.ok) break;
@@ -1783,7 +1837,12 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
                               "rows a limit holds are left out of the law's fit",
                               c.T_abs_max, held);
     }
-    if (vl.ls.ok && vl.ls.theta[0] > 0.0 && vl.ls.theta[1] >= 0.0 && vl.ls.residual_rms < 0.3 * vl.T_rms) {
+    // The law must explain most of the torque: its residual under 0.3 of
+    // the torque's RMS, both less the white noise on the log (which no law
+    // fits; at 0.2 N m of noise on a torque of 0.75 N m RMS the residual is
+    // mostly the noise).
+    if (vl.ls.ok && vl.ls.theta[0] > 0.0 && vl.ls.theta[1] >= 0.0 &&
+        vl.less_noise(vl.ls.residual_rms) < 0.3 * vl.less_noise(vl.T_rms)) {
       ax.gains.Kvp_torque_s_per_rad = vl.ls.theta[0];
       ax.gains.Tn_s = vl.ls.theta[1] > 0.0 ? vl.ls.theta[0] / vl.ls.theta[1] : 0.0;
       ax.velocity_loop_from_data = true;

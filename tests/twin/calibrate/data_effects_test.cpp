@@ -91,6 +91,16 @@ std::string describe(const Outcome& o) {
   return s;
 }
 
+// The check the held-out machine is judged by, on the validation program:
+// tracking-error NRMS at most 0.01, the torque below the rigid-body
+// regression's.
+void expect_held_out_machine_check(const Outcome& o) {
+  ASSERT_EQ(o.r.validation_runs.size(), 1u);
+  const RunErrors& v = o.r.validation_runs[0];
+  EXPECT_LT(v.calibrated.nrms.at("x_err_mm"), 0.01) << describe(o);
+  EXPECT_LT(v.calibrated.nrms.at("x_torque_raw"), v.regression.nrms.at("x_torque_raw")) << describe(o);
+}
+
 // The validation run (another program, never fitted) improves: the sum of
 // the NRMS of the channels where the effect shows (the torque, or the
 // tracking error for a lead error or lost motion) of the final machine is
@@ -294,11 +304,45 @@ TEST(DataEffects, HeavySaturationUnderNoiseLeavesTheLoopAndTheLimitRight) {
   EXPECT_NEAR(ax.gains.Tn_s, 0.008, 0.03 * 0.008) << ax.loop_source;
   const double limit_raw = kRawPerNm * 0.4769 * 7.2;
   EXPECT_NEAR(kept_effect(o, "current_saturation").params.at("i_max_A"), limit_raw, 0.01 * limit_raw) << describe(o);
-  ASSERT_EQ(o.r.validation_runs.size(), 1u);
-  const RunErrors& v = o.r.validation_runs[0];
-  EXPECT_LT(v.calibrated.nrms.at("x_err_mm"), 0.01);
-  EXPECT_LT(v.calibrated.nrms.at("x_torque_raw"), v.regression.nrms.at("x_torque_raw"));
+  expect_held_out_machine_check(o);
   expect_validation_improves(o);
+}
+
+// The same 7.2 A limit under noise of 0.2 N m (8 raw a sample, near the
+// truth's Coulomb level): the log's largest value sits 21 raw above the limit,
+// and within 2 % of it (as asked without noise) there are too few samples to
+// call a limit. The band the held samples are looked for in, the level the
+// replay must ask beyond, and the rows left out of the PI law's fit are
+// widened by the white noise the log shows (its second differences); the law
+// is then judged on its residual less that noise. The limit within 2 % (the
+// median of noisy held samples), the loop from the data, and the validation
+// program as the held-out machine is judged: tracking NRMS at most 0.01 (0.034
+// when the limit was missed), torque below the regression's.
+TEST(DataEffects, SaturationIsFoundUnderHeavyTorqueNoise) {
+  const Outcome o = calibrate_truth("saturation_noise", {.i_max_A = 7.2}, 0.2);
+  expect_only(o, "current_saturation");
+  ASSERT_EQ(o.r.axis.size(), 1u);
+  EXPECT_TRUE(o.r.axis[0].velocity_loop_from_data) << o.r.axis[0].loop_source;
+  const double limit_raw = kRawPerNm * 0.4769 * 7.2;
+  EXPECT_NEAR(kept_effect(o, "current_saturation").params.at("i_max_A"), limit_raw, 0.02 * limit_raw) << describe(o);
+  expect_held_out_machine_check(o);
+}
+
+// The ripple of CoggingIsFound under noise of 0.2 N m (a ripple of a third
+// of the noise's RMS). The detector's standard errors count the residual's
+// correlation over 10 ms only for the share of its variance that is not the
+// log's white noise: taken whole as correlated, the noise held the ripple's
+// t at about 7 against the 8 asked, and the ripple was missed. Found with
+// its period within 0.5 %; nothing is kept on the same noise without an
+// effect (DelayIsFoundUnderHeavyTorqueNoise).
+TEST(DataEffects, CoggingIsFoundUnderHeavyTorqueNoise) {
+  const Outcome o = calibrate_truth("cogging_noise", {.cogging_A = 0.06, .cogging_n = 4.0}, 0.2);
+  expect_only(o, "cogging");
+  const double n_identified = 2.0 * M_PI / (2.0 * M_PI * kRg / 4.0);
+  EXPECT_NEAR(kept_effect(o, "cogging").params.at("cycles_per_rev"), n_identified, 0.005 * n_identified)
+      << describe(o);
+  expect_validation_improves(o);
+  expect_held_out_machine_check(o);
 }
 
 // A log at 100 ms with positions to 0.1 mm (as the U-Mich logs): the
