@@ -2632,6 +2632,62 @@ void errors_on_validation_runs(DataCalibration& out, const std::vector<MeasuredR
 // ---------------------------------------------------------------------------
 // Calibration
 
+namespace {
+
+/// A log at 2 ms or faster with positions to 5 um or finer but no speed
+/// column (a CNC that traces its position loop's command and output, and not
+/// the speed it feeds back): the axis's speed is the central difference of
+/// its logged position within each segment (one-sided at a segment's ends,
+/// never across a jump), added to a copy of the run as `<a>_v_mm_s` with a
+/// note. The velocity loop's law and the drive are then fitted on the axis's
+/// own motion, as where the speed is logged; without it the drive's inertia
+/// came out of the commanded acceleration, which the loop's torque does not
+/// follow, and the velocity loop was not seen. At 1 um and 1 ms a count is
+/// 1 mm/s of speed and 1000 mm/s^2 of acceleration, so the position is
+/// low-passed (zero phase, 100 Hz: above a velocity loop's bandwidth, with
+/// the count's noise, which rises with frequency in a derivative, mostly
+/// above it) before it is differentiated.
+/// The speed taken from the position: its low-pass, and the shortest segment
+/// it is applied to (a shorter one is differentiated as logged).
+constexpr double kSpeedCutoff_Hz = 100.0;
+constexpr std::size_t kSpeedFilterRows = 64;
+
+std::vector<MeasuredRun> with_speed_from_position(const std::vector<MeasuredRun>& runs, DataCalibration& out) {
+  std::vector<MeasuredRun> own = runs;
+  const double q = out.rounding.kind == PositionRounding::Kind::kNone ? 0.0 : out.rounding.quantum_mm;
+  for (MeasuredRun& r : own) {
+    const double dt = r.sample_period_s;
+    if (!(dt <= 2e-3 + 1e-12 && q <= 0.005)) continue;
+    std::string ignored;
+    const std::vector<Segment> segs = find_segments(r, out.rounding.quantum_mm, std::nullopt, &ignored);
+    std::vector<std::string> derived;
+    for (Axis a : out.axes) {
+      const auto* x = r.trace.find(col(a, "_mm"));
+      if (x == nullptr || r.trace.find(col(a, "_v_mm_s")) != nullptr) continue;
+      std::vector<double> v(x->size(), 0.0);
+      for (const Segment& sg : segs) {
+        if (sg.end < sg.begin + 2) continue;
+        const std::span<const double> xs(x->data() + sg.begin, sg.end - sg.begin);
+        const std::vector<double> xf = xs.size() >= kSpeedFilterRows ? lowpass(xs, kSpeedCutoff_Hz, 1.0 / dt)
+                                                                      : std::vector<double>(xs.begin(), xs.end());
+        const std::vector<double> vs = derivative(xf, dt);
+        std::copy(vs.begin(), vs.end(), v.begin() + static_cast<std::ptrdiff_t>(sg.begin));
+      }
+      r.trace.names.push_back(col(a, "_v_mm_s"));
+      r.trace.columns.push_back(std::move(v));
+      derived.push_back(std::string(axis_name(a)));
+    }
+    if (!derived.empty())
+      out.notes.push_back(fmt::format("{}: no speed logged for {}: taken as the central difference of the logged "
+                                      "position (every {:g} s, to {:g} mm), low-passed at {:g} Hz without phase",
+                                      r.dir.string(), fmt::join(derived, ", "), dt, q > 0.0 ? q : 1e-6,
+                                      kSpeedCutoff_Hz));
+  }
+  return own;
+}
+
+}  // namespace
+
 DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const std::vector<MeasuredRun>& validate,
                                     const sim::MachineDefinition& nominal, const DataCalibrationOptions& options) {
   if (fit.empty()) throw ConfigError("calibrate: no run to fit");
@@ -2641,10 +2697,12 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
   for (const auto& r : fit) check_no_runaway(r);
   for (const auto& r : validate) check_no_runaway(r);
   choose_rounding(fit, out);
-  const MeasuredRun& r0 = fit.front();
+  const std::vector<MeasuredRun> fit_own = with_speed_from_position(fit, out);
+  const MeasuredRun& r0 = fit_own.front();
   const double Ts = controller_period(r0, options, out);
   std::vector<RunData> runs;
-  for (const auto& r : fit) runs.push_back(prepare_run(r, out.axes, out.rounding, options.fit_fraction, out.notes));
+  for (const auto& r : fit_own)
+    runs.push_back(prepare_run(r, out.axes, out.rounding, options.fit_fraction, out.notes));
   out.identified = identify_machine(AxisFit{runs, Fitter{runs}, r0, Ts}, out);
   out.final_machine = out.identified;
   skip_unseen_effects(fit, out);

@@ -6,7 +6,7 @@
 //
 //   calibrate_sweep [--example RUN_DIR] [--filter NAME] [--program NAME] [--magnitudes 0.5,1,2]
 //                   [--log-every M] [--current-only] [--keep DIR] [--verbose]
-//   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--keep DIR]
+//   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed] [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
 // measured run, each on the truth's X plant, and its y reference on the Y
@@ -151,7 +151,7 @@ std::vector<std::string> split_sorted(const std::string& list) {
 }
 
 int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filter, double noise_Nm,
-                  const std::string& keep) {
+                  bool log_motor_speed, const std::string& keep) {
   namespace ta = twin::analysis;
   const std::vector<double> fit_speeds{20.0, -35.0, 3.0, -12.0, 50.0, -30.0, 8.0, -4.0, 25.0, -25.0};
   const std::vector<double> val_speeds{30.0, -45.0, 5.0, -15.0, 40.0, -6.0, 12.0, -20.0};
@@ -165,6 +165,7 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     const auto dir = (keep.empty() ? tmp : std::filesystem::path(keep)) / folder;
     twin::truth::RunSpec sp = twin::truth::cascade_run_spec(40.0, 0.001);
     sp.current_noise_A = noise_Nm;  // the truth adds it to the torque in N m where the torque is logged raw
+    sp.cascade.log_motor_speed = log_motor_speed;
     const double load = sp.effects.load_Nm;
     c.set(sp.effects);
     sp.effects.load_Nm = load;
@@ -223,6 +224,7 @@ int main(int argc, char** argv) {
   long log_every = 1;
   bool verbose = false, current_only = false, cascade = false;
   double noise_Nm = 0.002;
+  bool log_motor_speed = true;
   for (int i = 1; i < argc; ++i) {
     const bool has_value = i + 1 < argc;
     if (!std::strcmp(argv[i], "--verbose")) {
@@ -260,6 +262,8 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "calibrate_sweep: --noise takes a torque in N m >= 0, not '%s'\n", t);
         return 2;
       }
+    } else if (!std::strcmp(argv[i], "--no-motor-speed")) {
+      log_motor_speed = false;
     } else if (!std::strcmp(argv[i], "--current-only")) {
       current_only = true;
     } else if (!std::strcmp(argv[i], "--keep") && has_value) {
@@ -269,7 +273,7 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  if (cascade) return cascade_sweep(magnitudes, filter, noise_Nm, keep);
+  if (cascade) return cascade_sweep(magnitudes, filter, noise_Nm, log_motor_speed, keep);
   // A program: a reference and the drive that follows it (the X plant, or
   // the Y plant written as axis y).
   struct Program {

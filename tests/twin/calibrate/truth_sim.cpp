@@ -129,7 +129,8 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   };
   if (cl.on) {
     std::fprintf(f, "t_s,%s_ref_mm,%s_mm", a, a);
-    if (cl.log_velocities) std::fprintf(f, ",%s_vcmd_mm_s,%s_v_mm_s", a, a);
+    if (cl.log_velocities) std::fprintf(f, ",%s_vcmd_mm_s", a);
+    if (cl.log_velocities && cl.log_motor_speed) std::fprintf(f, ",%s_v_mm_s", a);
     std::fprintf(f, cl.raw_per_Nm > 0.0 ? ",%s_torque_raw\n" : ",%s_i_A\n", a);
   } else if (sp.log_current_only)
     std::fprintf(f, "t_s,%s_ref_mm,%s_mm,%s_i_A\n", a, a, a);
@@ -175,7 +176,8 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     const double i_measured = i_logged + noise(rng);
     if (k % every == 0 && cl.on) {
       std::fprintf(f, "%.4f,%.10g,%.10g", static_cast<double>(k) * Ts, pos(ref[k]), pos(x_meas));
-      if (cl.log_velocities) std::fprintf(f, ",%.6f,%.6f", vcmd, v_motor);
+      if (cl.log_velocities) std::fprintf(f, ",%.6f", vcmd);
+      if (cl.log_velocities && cl.log_motor_speed) std::fprintf(f, ",%.6f", v_motor);
       std::fprintf(f, ",%.6f\n", cl.raw_per_Nm > 0.0 ? cl.raw_per_Nm * (Tm + noise(rng)) : i_measured);
     } else if (k % every == 0) {
       if (sp.log_current_only)

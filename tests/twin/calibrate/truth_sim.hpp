@@ -74,6 +74,10 @@ struct CascadeLaw {
   double Kv{60.0}, kff{0.0}, Kvp{0.4}, Tn{0.01}, tau_i{0.0};
   double raw_per_Nm{0.0};  ///< > 0: log <a>_torque_raw; 0: log <a>_i_A
   bool log_velocities{true};
+  /// With log_velocities: also the motor's speed (false: the velocity
+  /// command alone, as a CNC that traces its loop's output but not the
+  /// speed it feeds back).
+  bool log_motor_speed{true};
 };
 
 struct RunSpec {
