@@ -351,17 +351,17 @@ TEST(DataEffects, CoggingIsFoundUnderHeavyTorqueNoise) {
 
 // A log with the velocity command and the encoder's position (1 um) but not
 // the motor's speed, every 1 ms. The speed is the central difference of the
-// position low-passed at 100 Hz (zero phase; the velocity loop's bandwidth
-// is 36 Hz), so the velocity loop's law and the drive are fitted on the axis's
-// own motion as where the speed is logged. Without it the inertia came from
-// the commanded acceleration and the velocity loop was not seen: validation
-// tracking NRMS 0.025 on every run of the cascade sweep, none under 0.01;
-// unfiltered, a count a millisecond is 1000 mm/s^2 of acceleration and the
-// inertia came out at half the truth's. Checked against the truth's
-// constants: J within 5 % of 0.211 raw s^2/mm (the low-pass takes a little
-// of the fastest accelerations), Kvp within 5 % of 12.57 raw per mm/s, Tn
-// within 10 % of 8 ms; nothing kept, and the held-out machine's check on the
-// validation program.
+// position low-passed at 50 Hz without phase, and the torque and velocity
+// command the law and the drive are fitted with go through the same filter
+// (a linear law holds through it), so the velocity loop's law and the drive
+// are fitted on the axis's own motion as where the speed is logged. Without
+// it the inertia came from the commanded acceleration and the velocity loop
+// was not seen: validation tracking NRMS 0.025 on every run of the cascade
+// sweep. Unfiltered, a count a millisecond is 1000 mm/s^2 of acceleration
+// and the inertia came out at half the truth's (0.165 at 200 Hz, 0.204 at
+// 100 Hz, 0.211 at 50 Hz). Checked against the truth's constants: J within
+// 5 %, Kvp within 5 % of 12.57 raw per mm/s, Tn within 10 % of 8 ms;
+// nothing kept, and the held-out machine's check on the validation program.
 TEST(DataEffects, CascadeLogWithoutTheMotorSpeed) {
   const Outcome o = calibrate_truth("no_motor_speed", {}, -1.0, false);
   EXPECT_TRUE(o.kept.empty()) << describe(o);
