@@ -6,7 +6,8 @@
 //
 //   calibrate_sweep [--example RUN_DIR] [--filter NAME] [--program NAME] [--magnitudes 0.5,1,2]
 //                   [--log-every M] [--current-only] [--keep DIR] [--verbose]
-//   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed] [--keep DIR]
+//   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed]
+//                            [--encoder-mm Q] [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
 // measured run, each on the truth's X plant, and its y reference on the Y
@@ -151,7 +152,7 @@ std::vector<std::string> split_sorted(const std::string& list) {
 }
 
 int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filter, double noise_Nm,
-                  bool log_motor_speed, const std::string& keep) {
+                  bool log_motor_speed, double encoder_mm, const std::string& keep) {
   namespace ta = twin::analysis;
   const std::vector<double> fit_speeds{20.0, -35.0, 3.0, -12.0, 50.0, -30.0, 8.0, -4.0, 25.0, -25.0};
   const std::vector<double> val_speeds{30.0, -45.0, 5.0, -15.0, 40.0, -6.0, 12.0, -20.0};
@@ -166,6 +167,7 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     twin::truth::RunSpec sp = twin::truth::cascade_run_spec(40.0, 0.001);
     sp.current_noise_A = noise_Nm;  // the truth adds it to the torque in N m where the torque is logged raw
     sp.cascade.log_motor_speed = log_motor_speed;
+    sp.resolution_mm = encoder_mm;
     const double load = sp.effects.load_Nm;
     c.set(sp.effects);
     sp.effects.load_Nm = load;
@@ -225,6 +227,7 @@ int main(int argc, char** argv) {
   bool verbose = false, current_only = false, cascade = false;
   double noise_Nm = 0.002;
   bool log_motor_speed = true;
+  double encoder_mm = 0.001;
   for (int i = 1; i < argc; ++i) {
     const bool has_value = i + 1 < argc;
     if (!std::strcmp(argv[i], "--verbose")) {
@@ -262,6 +265,14 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "calibrate_sweep: --noise takes a torque in N m >= 0, not '%s'\n", t);
         return 2;
       }
+    } else if (!std::strcmp(argv[i], "--encoder-mm") && has_value) {
+      char* end = nullptr;
+      const char* t = argv[++i];
+      encoder_mm = std::strtod(t, &end);
+      if (end == t || *end != '\0' || !(encoder_mm > 0.0)) {
+        std::fprintf(stderr, "calibrate_sweep: --encoder-mm takes a resolution in mm > 0, not '%s'\n", t);
+        return 2;
+      }
     } else if (!std::strcmp(argv[i], "--no-motor-speed")) {
       log_motor_speed = false;
     } else if (!std::strcmp(argv[i], "--current-only")) {
@@ -273,7 +284,7 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  if (cascade) return cascade_sweep(magnitudes, filter, noise_Nm, log_motor_speed, keep);
+  if (cascade) return cascade_sweep(magnitudes, filter, noise_Nm, log_motor_speed, encoder_mm, keep);
   // A program: a reference and the drive that follows it (the X plant, or
   // the Y plant written as axis y).
   struct Program {
