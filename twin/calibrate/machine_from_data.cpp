@@ -858,6 +858,8 @@ std::pair<double, LsqResult> scan_period(double P_min, double P_max, const std::
 
 }  // namespace
 
+namespace {
+
 // The white noise on the detector's logged channel, from its second
 // differences over consecutive fitting rows.
 double channel_noise_rms(const AxisRows& rows) {
@@ -885,6 +887,8 @@ double residual_correlation_rows(const AxisRows& rows, const std::vector<const s
   const double white = std::min(1.0, noise_rms * noise_rms / (base.residual_rms * base.residual_rms));
   return white + (1.0 - white) * corr;
 }
+
+}  // namespace
 
 /// A detector's view of one identified axis: the runs, the axis's rows with
 /// the torque the machine so far leaves, the replays of that machine, and
@@ -2649,6 +2653,11 @@ void errors_on_validation_runs(DataCalibration& out, const std::vector<MeasuredR
 
 namespace {
 
+/// The speed taken from the position: its low-pass, and the shortest segment
+/// it is applied to (a shorter one is differentiated as logged).
+constexpr double kSpeedCutoff_Hz = 50.0;
+constexpr std::size_t kSpeedFilterRows = 64;
+
 /// A log at 2 ms or faster with positions to 5 um or finer but no speed
 /// column (a CNC that traces its position loop's command and output, and not
 /// the speed it feeds back): the axis's speed is the central difference of
@@ -2663,14 +2672,10 @@ namespace {
 /// differentiated, and the velocity command and the torque channels are
 /// added low-passed alike (`lowpassed`): the velocity loop's law and the
 /// drive are fitted through the same filter, which a linear law passes, so
-/// the cut-off does not bias them (on the truth runs of the tests the
-/// inertia was 0.165, 0.204 and 0.211 raw s^2/mm for 0.211 at 200, 100 and
-/// 50 Hz: the count's noise, which a derivative raises with frequency).
-/// The speed taken from the position: its low-pass, and the shortest segment
-/// it is applied to (a shorter one is differentiated as logged).
-constexpr double kSpeedCutoff_Hz = 50.0;
-constexpr std::size_t kSpeedFilterRows = 64;
-
+/// the filter's shape does not bias them. The count's noise does, and more
+/// the higher the cut-off, as a derivative raises it with frequency: on the
+/// truth runs of the tests the inertia was 0.165, 0.204 and 0.211 raw
+/// s^2/mm, for 0.211, at 200, 100 and 50 Hz.
 std::vector<MeasuredRun> with_speed_from_position(const std::vector<MeasuredRun>& runs, DataCalibration& out) {
   std::vector<MeasuredRun> own = runs;
   const double q = out.rounding.kind == PositionRounding::Kind::kNone ? 0.0 : out.rounding.quantum_mm;
