@@ -535,11 +535,13 @@ ReplayResult replay_segments(const MeasuredRun& run, const sim::MachineDefinitio
     const ReplayResult r = replay_run(sub, machine, 0, {}, ChannelSampling::kMeanOverNeighbours);
     for (Axis a : out.axes) {
       const std::size_t i = index(a);
+      // The torque channels in the log's sign.
+      const double sign = machine.axes[i].logged_torque_sign;
       for (std::size_t k = 0; k < r.t_s.size(); ++k) {
         out.x_mm[i][s.begin + k] = rounding.round(r.x_mm[i][k]);
-        out.u_V[i][s.begin + k] = r.u_V[i][k];
-        out.i_A[i][s.begin + k] = r.i_A[i][k];
-        out.Tm[i][s.begin + k] = r.Tm[i][k];
+        out.u_V[i][s.begin + k] = sign * r.u_V[i][k];
+        out.i_A[i][s.begin + k] = sign * r.i_A[i][k];
+        out.Tm[i][s.begin + k] = sign * r.Tm[i][k];
         out.vcmd_mm_per_s[i][s.begin + k] = r.vcmd_mm_per_s[i][k];
       }
     }
@@ -2728,6 +2730,53 @@ std::vector<MeasuredRun> with_speed_from_position(const std::vector<MeasuredRun>
   return own;
 }
 
+/// The axes whose logged torque channel counts against the motion: the
+/// inverse dynamics T = J a + B v + Tc sgn(v) + c, fitted on the fitting
+/// rows as the drive is, gives both a negative inertia and a negative
+/// Coulomb level, each by more than five standard errors (an inertia and a
+/// friction are positive in any unit; a channel logged the other way round
+/// turns both). Such a channel is negated in the runs calibrated here and
+/// the machine carries torque_sign -1, so that its replays give the
+/// channel as the log does.
+AxisArray<bool> torque_against_motion(const std::vector<MeasuredRun>& fit, const DataCalibration& out,
+                                      const DataCalibrationOptions& options) {
+  AxisArray<bool> flip{};
+  std::vector<std::string> ignored;
+  std::vector<RunData> runs;
+  for (const auto& r : fit) runs.push_back(prepare_run(r, out.axes, out.rounding, options.fit_fraction, ignored));
+  const AxisFit f{runs, Fitter{runs}, fit.front(), fit.front().sample_period_s};
+  for (Axis a : out.axes) {
+    AxisFromData ax;
+    ax.axis = a;
+    ax.channel = torque_channel(fit.front(), a);
+    if (!ax.channel.present()) continue;
+    const DriveRows d = drive_rows(f, ax);
+    std::vector<double> sgn(d.pos.size());
+    for (std::size_t k = 0; k < sgn.size(); ++k) sgn[k] = d.pos[k] + d.neg[k];
+    const LsqResult ls = least_squares({&d.acc, &d.vel, &sgn, &d.one}, d.T, d.rows);
+    if (!ls.ok) continue;
+    flip[index(a)] = ls.theta[0] < -5.0 * ls.stderr_theta[0] && ls.theta[2] < -5.0 * ls.stderr_theta[2];
+  }
+  return flip;
+}
+
+/// The torque channels of `a` negated, in copies of the runs.
+void negate_torque_channels(std::vector<MeasuredRun>& runs, Axis a) {
+  for (MeasuredRun& r : runs)
+    for (const char* c : {"_torque_Nm", "_torque_raw", "_i_A", "_u_V"})
+      for (const std::string& name : {col(a, c), lowpassed(col(a, c))})
+        for (std::size_t j = 0; j < r.trace.names.size(); ++j)
+          if (r.trace.names[j] == name)
+            for (double& v : r.trace.columns[j]) v = -v;
+}
+
+/// The replay's torque channels of `a` negated (back to the log's sign).
+void negate_replay_torque(ReplayResult& rr, Axis a) {
+  const std::size_t i = index(a);
+  for (auto* ch : {&rr.u_V, &rr.i_A, &rr.Tm})
+    for (double& v : (*ch)[i]) v = -v;
+}
+
 }  // namespace
 
 DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const std::vector<MeasuredRun>& validate,
@@ -2739,7 +2788,18 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
   for (const auto& r : fit) check_no_runaway(r);
   for (const auto& r : validate) check_no_runaway(r);
   choose_rounding(fit, out);
-  const std::vector<MeasuredRun> fit_own = with_speed_from_position(fit, out);
+  std::vector<MeasuredRun> fit_own = with_speed_from_position(fit, out);
+  std::vector<MeasuredRun> validate_own = validate;
+  const AxisArray<bool> flip = torque_against_motion(fit_own, out, options);
+  for (Axis a : out.axes)
+    if (flip[index(a)]) {
+      negate_torque_channels(fit_own, a);
+      negate_torque_channels(validate_own, a);
+      out.notes.push_back(fmt::format("axis {}: {} counts against the motion (the inverse dynamics on it give a "
+                                      "negative inertia and a negative friction): calibrated on its negative, "
+                                      "and the machine logs it with torque_sign -1",
+                                      axis_name(a), torque_channel(fit.front(), a).column));
+    }
   const MeasuredRun& r0 = fit_own.front();
   const double Ts = controller_period(r0, options, out);
   std::vector<RunData> runs;
@@ -2756,7 +2816,14 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
   try_rising_friction(out, runs, after_catalogue);
   const AxisArray<Regression> reg = fit_regressions(out, runs);
   errors_on_fit_part(out, runs, nominal, reg);
-  errors_on_validation_runs(out, validate, nominal, reg);
+  errors_on_validation_runs(out, validate_own, nominal, reg);
+  for (Axis a : out.axes)
+    if (flip[index(a)]) {
+      out.identified.axes[index(a)].logged_torque_sign = -1.0;
+      out.final_machine.axes[index(a)].logged_torque_sign = -1.0;
+      negate_replay_torque(out.replay_before, a);
+      negate_replay_torque(out.replay_after, a);
+    }
   return out;
 }
 

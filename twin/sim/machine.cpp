@@ -50,6 +50,8 @@ std::vector<AxisParamSpec> make_axis_specs() {
       TWIN_AXIS_PARAM("travel_min", "mm", "lower end of travel", a.travel_min_mm),
       TWIN_AXIS_PARAM("travel_max", "mm", "upper end of travel", a.travel_max_mm),
       TWIN_AXIS_PARAM("following_error_limit", "mm", "following-error alarm", a.following_error_limit_mm),
+      TWIN_AXIS_PARAM("torque_sign", "1", "sign of the logged torque, current or command against the axis's motion (1 or -1)",
+                      a.logged_torque_sign),
       // The drive effects' parameters (feeddrive/effect_catalogue.hpp), as "<effect>.<name>".
 #define TWIN_EFFECT_ROW(EFFECT, NAME, FIELD, UNIT, DOC) TWIN_EFFECT_PARAM(#EFFECT "." #NAME, UNIT, DOC, EFFECT, FIELD),
       TWIN_DRIVE_EFFECT_PARAMS(TWIN_EFFECT_ROW)
@@ -139,6 +141,8 @@ void MachineDefinition::validate() const {
     pos("a_max", ax.a_max_mm_per_s2);
     pos("j_max", ax.j_max_mm_per_s3);
     pos("following_error_limit", ax.following_error_limit_mm);
+    if (ax.logged_torque_sign != 1.0 && ax.logged_torque_sign != -1.0)
+      throw ConfigError(fmt::format("{}: torque_sign = {} must be 1 or -1", w, ax.logged_torque_sign));
     if (!std::isfinite(ax.travel_min_mm) || !std::isfinite(ax.travel_max_mm) ||
         !(ax.travel_min_mm < ax.travel_max_mm))
       throw ConfigError(fmt::format("{}: travel [{}, {}] mm must be finite with min < max", w,

@@ -30,6 +30,12 @@ struct AxisDefinition {
   /// A real CNC's following-error alarm: a tracking error beyond this stops
   /// the run as unstable (or mis-tuned) and says where.
   double following_error_limit_mm{1.0};
+  /// The sign a measured run logs the axis's torque, current or amplifier
+  /// command with, against the twin's (which accelerates the axis in + when
+  /// positive): -1 where the log counts it the other way (a motor mounted
+  /// the other way round, a drive's direction parameter). Replays of measured
+  /// runs give those channels with it; the simulation itself does not use it.
+  double logged_torque_sign{1.0};
 };
 
 /// The machine's structure (`structure:` in a machine file): masses, stacking,

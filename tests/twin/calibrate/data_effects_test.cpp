@@ -375,6 +375,55 @@ TEST(DataEffects, CascadeLogWithoutTheMotorSpeed) {
   expect_held_out_machine_check(o);
 }
 
+// A torque logged the other way round (a motor mounted against the axis, a
+// drive's direction parameter): the truth run with its raw torque negated.
+// Oracle: the same run as logged; the calibration is symmetric in the sign,
+// so everything must come out the same. The inverse dynamics on the negated
+// channel give a negative inertia and a negative friction; the channel is
+// calibrated on its negative, the machine carries torque_sign -1, and its
+// replay of the negated validation run (as `twin replay --machine` does it)
+// gives the errors of the machine identified on the run as logged (to
+// 1e-9: the same arithmetic, the sign applied last).
+TEST(DataEffects, TorqueLoggedAgainstTheMotionIsTakenWithItsSign) {
+  truth::RunSpec sp = cascade_spec();
+  sp.reference_mm = program(sp.Ts_s, kFitSpeeds, 24.0);
+  const auto fit_dir = work("sign_fit");
+  truth::write_truth_run(fit_dir, sp);
+  sp.reference_mm = program(sp.Ts_s, kValSpeeds, 16.0);
+  sp.seed = 7;
+  const auto val_dir = work("sign_val");
+  truth::write_truth_run(val_dir, sp);
+  const MeasuredRun fit = load_run(fit_dir), val = load_run(val_dir);
+  auto negated = [](MeasuredRun r) {
+    for (std::size_t j = 0; j < r.trace.names.size(); ++j)
+      if (r.trace.names[j] == "x_torque_raw")
+        for (double& v : r.trace.columns[j]) v = -v;
+    return r;
+  };
+  const MeasuredRun fit_n = negated(fit), val_n = negated(val);
+  const auto nominal = machine_for_run(fit, "", nullptr);
+  const DataCalibration as_logged = calibrate_from_data({fit}, {val}, nominal);
+  const DataCalibration other_way = calibrate_from_data({fit_n}, {val_n}, nominal);
+  EXPECT_EQ(as_logged.final_machine.axes[0].logged_torque_sign, 1.0);
+  EXPECT_EQ(other_way.final_machine.axes[0].logged_torque_sign, -1.0);
+  EXPECT_TRUE(std::any_of(other_way.notes.begin(), other_way.notes.end(),
+                          [](const std::string& n) { return n.find("counts against the motion") != std::string::npos; }));
+  ASSERT_EQ(as_logged.axis.size(), 1u);
+  ASSERT_EQ(other_way.axis.size(), 1u);
+  EXPECT_NEAR(other_way.axis[0].J, as_logged.axis[0].J, 1e-9 * as_logged.axis[0].J);
+  EXPECT_NEAR(other_way.axis[0].Tc_pos, as_logged.axis[0].Tc_pos, 1e-9 * as_logged.axis[0].Tc_pos);
+  EXPECT_NEAR(other_way.axis[0].gains.Kvp_torque_s_per_rad, as_logged.axis[0].gains.Kvp_torque_s_per_rad,
+              1e-9 * as_logged.axis[0].gains.Kvp_torque_s_per_rad);
+  ASSERT_EQ(other_way.validation_runs.size(), 1u);
+  for (const auto& [key, e] : as_logged.validation_runs[0].calibrated.nrms)
+    EXPECT_NEAR(other_way.validation_runs[0].calibrated.nrms.at(key), e, 1e-9) << key;
+  const RunErrors replayed = evaluate_machine_on_run(val_n, other_way.final_machine, nullptr, nullptr);
+  const RunErrors replayed_as_logged = evaluate_machine_on_run(val, as_logged.final_machine, nullptr, nullptr);
+  for (const auto& [key, e] : replayed_as_logged.calibrated.nrms)
+    EXPECT_NEAR(replayed.calibrated.nrms.at(key), e, 1e-9) << key;
+  EXPECT_LT(replayed.calibrated.nrms.at("x_torque_raw"), 0.2);
+}
+
 // A log at 100 ms with positions to 0.1 mm (as the U-Mich logs): the
 // effects the rate and the rounding hide are listed as skipped, each with
 // its reason, and none of them is tried.
