@@ -33,8 +33,9 @@ struct AxisDefinition {
   /// The sign a measured run logs the axis's torque, current or amplifier
   /// command with, against the twin's (which accelerates the axis in + when
   /// positive): -1 where the log counts it the other way (a motor mounted
-  /// the other way round, a drive's direction parameter). Replays of measured
-  /// runs give those channels with it; the simulation itself does not use it.
+  /// the other way round, a drive's direction parameter). The replays of
+  /// measured runs on a machine identified from data (calibrate, `twin replay
+  /// --machine`) give those channels with it; the simulation does not use it.
   double logged_torque_sign{1.0};
 };
 
