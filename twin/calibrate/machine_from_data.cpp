@@ -191,14 +191,16 @@ constexpr std::size_t kClippedRows = 10;
 /// the largest value of a noisy log sits some noise above the limit, and the
 /// samples held scatter by the noise about it) and a first fit of the law
 /// asks for more than the log, the same way, by over 2 % of that largest
-/// value.
+/// value and three times the noise (else the samples the noise takes below
+/// the law read as held: a 2 ms delay under 0.2 N m of noise was said to
+/// flatten at a limit it does not have).
 struct TorqueClip {
   std::vector<double> theta;  ///< the first fit's Kvp, Kvp / Tn, constant
   double T_abs_max{0.0};
   double noise_rms{0.0};
   bool holds(double law, double T) const {
     return std::abs(T) >= 0.9 * T_abs_max - 3.0 * noise_rms && law * T > 0.0 &&
-           std::abs(law) > std::abs(T) + 0.02 * T_abs_max;
+           std::abs(law) > std::abs(T) + 0.02 * T_abs_max + 3.0 * noise_rms;
   }
 };
 

@@ -263,6 +263,10 @@ TEST(DataEffects, DelayIsFound) {
 TEST(DataEffects, DelayIsFoundUnderHeavyTorqueNoise) {
   const Outcome o = calibrate_truth("delay_noise", {.delay_ticks = 2}, 0.2);
   expect_only(o, "delay");
+  // No torque limit is said where there is none: the law at no lag misses
+  // the late torque, and the noise must not make that read as a limit.
+  ASSERT_EQ(o.r.axis.size(), 1u);
+  EXPECT_THAT(o.r.axis[0].loop_source, ::testing::Not(::testing::HasSubstr("flattens"))) << o.r.axis[0].loop_source;
   EXPECT_NEAR(kept_effect(o, "delay").params.at("delay_s"), 0.002, 1e-9) << describe(o);
   ASSERT_EQ(o.r.validation_runs.size(), 1u);
   EXPECT_LT(o.r.validation_runs[0].calibrated.nrms.at("x_err_mm"), 0.01);
@@ -270,6 +274,7 @@ TEST(DataEffects, DelayIsFoundUnderHeavyTorqueNoise) {
   EXPECT_TRUE(none.kept.empty()) << describe(none);
   ASSERT_EQ(none.r.axis.size(), 1u);
   EXPECT_EQ(none.r.axis[0].torque_lag_samples, 0u) << none.r.axis[0].loop_source;
+  EXPECT_THAT(none.r.axis[0].loop_source, ::testing::Not(::testing::HasSubstr("flattens")));
 }
 
 // A current limit of 8 A (152.6 raw: 40 raw per N m times Kt 0.4769 N m/A)
