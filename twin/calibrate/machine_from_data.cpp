@@ -23,7 +23,7 @@ namespace {
 std::string col(Axis a, const char* suffix) { return std::string(axis_name(a)) + suffix; }
 
 /// A column filtered as the speed taken from the position was (see
-/// with_speed_from_position), beside the column as logged.
+/// add_speed_from_position), beside the column as logged.
 std::string lowpassed(const std::string& column) { return column + "@lowpassed"; }
 
 /// The column filtered alike where the speed was taken from the position,
@@ -1743,13 +1743,20 @@ std::vector<std::string> clamp_drive(const DriveRows& d, double Ts, AxisFromData
   return clamped;
 }
 
+/// The direction of motion of each row (+1, -1, 0): one Coulomb column for
+/// both directions.
+std::vector<double> direction_signs(const DriveRows& d) {
+  std::vector<double> sgn(d.pos.size());
+  for (std::size_t k = 0; k < sgn.size(); ++k) sgn[k] = d.pos[k] + d.neg[k];
+  return sgn;
+}
+
 /// The drive with one Coulomb level for both directions (columns a, v,
 /// sgn v, 1) on the same rows, under the same floors; not ok where the axis
 /// moves one way only or the fit is rank deficient.
 AxisFromData::OneLevel fit_one_level(const DriveRows& d, double Ts, const AxisFromData& two) {
   AxisFromData::OneLevel one;
-  std::vector<double> sgn(d.pos.size());
-  for (std::size_t k = 0; k < sgn.size(); ++k) sgn[k] = d.pos[k] + d.neg[k];
+  const std::vector<double> sgn = direction_signs(d);
   const LsqResult ls = least_squares({&d.acc, &d.vel, &sgn, &d.one}, d.T, d.rows);
   if (!ls.ok) return one;
   AxisFromData ax = two;
@@ -2666,8 +2673,8 @@ constexpr std::size_t kSpeedFilterRows = 64;
 /// column (a CNC that traces its position loop's command and output, and not
 /// the speed it feeds back): the axis's speed is the central difference of
 /// its logged position within each segment (one-sided at a segment's ends,
-/// never across a jump), added to a copy of the run as `<a>_v_mm_s` with a
-/// note. The velocity loop's law and the drive are then fitted on the axis's
+/// never across a jump), added to the run (the calibration's own copy) as
+/// `<a>_v_mm_s` with a note. The velocity loop's law and the drive are then fitted on the axis's
 /// own motion, as where the speed is logged; without it the drive's inertia
 /// came out of the commanded acceleration, which the loop's torque does not
 /// follow, and the velocity loop was not seen. At 1 um and 1 ms a count is
@@ -2680,14 +2687,13 @@ constexpr std::size_t kSpeedFilterRows = 64;
 /// the higher the cut-off, as a derivative raises it with frequency: on the
 /// truth runs of the tests the inertia was 0.165, 0.204 and 0.211 raw
 /// s^2/mm, for 0.211, at 200, 100 and 50 Hz.
-std::vector<MeasuredRun> with_speed_from_position(const std::vector<MeasuredRun>& runs, DataCalibration& out) {
-  std::vector<MeasuredRun> own = runs;
+void add_speed_from_position(std::vector<MeasuredRun>& own, const std::vector<RunData>& runs, DataCalibration& out) {
   const double q = out.rounding.kind == PositionRounding::Kind::kNone ? 0.0 : out.rounding.quantum_mm;
-  for (MeasuredRun& r : own) {
+  for (std::size_t i = 0; i < own.size(); ++i) {
+    MeasuredRun& r = own[i];
+    const std::vector<Segment>& segs = runs[i].segments;
     const double dt = r.sample_period_s;
     if (!(dt <= 2e-3 + 1e-12 && q <= 0.005)) continue;
-    std::string ignored;
-    const std::vector<Segment> segs = find_segments(r, out.rounding.quantum_mm, std::nullopt, &ignored);
     std::vector<std::string> derived;
     for (Axis a : out.axes) {
       const auto* x = r.trace.find(col(a, "_mm"));
@@ -2713,8 +2719,8 @@ std::vector<MeasuredRun> with_speed_from_position(const std::vector<MeasuredRun>
       }
       // The channels a law on this speed is fitted with, through the same filter.
       std::vector<std::pair<std::string, std::vector<double>>> alike;
-      for (const char* c : {"_vcmd_mm_s", "_torque_Nm", "_torque_raw", "_i_A", "_u_V"})
-        if (const auto* y = r.trace.find(col(a, c))) alike.emplace_back(lowpassed(col(a, c)), filtered(*y));
+      for (const std::string& c : {col(a, "_vcmd_mm_s"), torque_channel(r, a).column})
+        if (const auto* y = c.empty() ? nullptr : r.trace.find(c)) alike.emplace_back(lowpassed(c), filtered(*y));
       r.trace.names.push_back(col(a, "_v_mm_s"));
       r.trace.columns.push_back(std::move(v));
       for (auto& [name, y] : alike) {
@@ -2729,7 +2735,6 @@ std::vector<MeasuredRun> with_speed_from_position(const std::vector<MeasuredRun>
                                       r.dir.string(), fmt::join(derived, ", "), dt, q > 0.0 ? q : 1e-6,
                                       kSpeedCutoff_Hz));
   }
-  return own;
 }
 
 /// The axes whose logged torque channel counts against the motion: the
@@ -2740,21 +2745,15 @@ std::vector<MeasuredRun> with_speed_from_position(const std::vector<MeasuredRun>
 /// turns both). Such a channel is negated in the runs calibrated here and
 /// the machine carries torque_sign -1, so that its replays give the
 /// channel as the log does.
-AxisArray<bool> torque_against_motion(const std::vector<MeasuredRun>& fit, const DataCalibration& out,
-                                      const DataCalibrationOptions& options) {
+AxisArray<bool> torque_against_motion(const AxisFit& f, const DataCalibration& out) {
   AxisArray<bool> flip{};
-  std::vector<std::string> ignored;
-  std::vector<RunData> runs;
-  for (const auto& r : fit) runs.push_back(prepare_run(r, out.axes, out.rounding, options.fit_fraction, ignored));
-  const AxisFit f{runs, Fitter{runs}, fit.front(), fit.front().sample_period_s};
   for (Axis a : out.axes) {
     AxisFromData ax;
     ax.axis = a;
-    ax.channel = torque_channel(fit.front(), a);
+    ax.channel = torque_channel(f.r0, a);
     if (!ax.channel.present()) continue;
     const DriveRows d = drive_rows(f, ax);
-    std::vector<double> sgn(d.pos.size());
-    for (std::size_t k = 0; k < sgn.size(); ++k) sgn[k] = d.pos[k] + d.neg[k];
+    const std::vector<double> sgn = direction_signs(d);
     const LsqResult ls = least_squares({&d.acc, &d.vel, &sgn, &d.one}, d.T, d.rows);
     if (!ls.ok) continue;
     flip[index(a)] = ls.theta[0] < -5.0 * ls.stderr_theta[0] && ls.theta[2] < -5.0 * ls.stderr_theta[2];
@@ -2762,14 +2761,15 @@ AxisArray<bool> torque_against_motion(const std::vector<MeasuredRun>& fit, const
   return flip;
 }
 
-/// The torque channels of `a` negated, in copies of the runs.
-void negate_torque_channels(std::vector<MeasuredRun>& runs, Axis a) {
-  for (MeasuredRun& r : runs)
-    for (const char* c : {"_torque_Nm", "_torque_raw", "_i_A", "_u_V"})
-      for (const std::string& name : {col(a, c), lowpassed(col(a, c))})
-        for (std::size_t j = 0; j < r.trace.names.size(); ++j)
-          if (r.trace.names[j] == name)
-            for (double& v : r.trace.columns[j]) v = -v;
+/// The torque channel of `a` the calibration reads (torque_channel), and its
+/// low-passed twin, negated in the calibration's own copies of the runs.
+void negate_torque_channel(std::vector<MeasuredRun>& runs, Axis a) {
+  for (MeasuredRun& r : runs) {
+    const std::string c = torque_channel(r, a).column;
+    for (std::size_t j = 0; j < r.trace.names.size(); ++j)
+      if (!c.empty() && (r.trace.names[j] == c || r.trace.names[j] == lowpassed(c)))
+        for (double& v : r.trace.columns[j]) v = -v;
+  }
 }
 
 /// The replay's torque channels of `a` negated (back to the log's sign).
@@ -2790,23 +2790,26 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
   for (const auto& r : fit) check_no_runaway(r);
   for (const auto& r : validate) check_no_runaway(r);
   choose_rounding(fit, out);
-  std::vector<MeasuredRun> fit_own = with_speed_from_position(fit, out);
-  std::vector<MeasuredRun> validate_own = validate;
-  const AxisArray<bool> flip = torque_against_motion(fit_own, out, options);
-  for (Axis a : out.axes)
-    if (flip[index(a)]) {
-      negate_torque_channels(fit_own, a);
-      negate_torque_channels(validate_own, a);
-      out.notes.push_back(fmt::format("axis {}: {} counts against the motion (the inverse dynamics on it give a "
-                                      "negative inertia and a negative friction): calibrated on its negative, "
-                                      "and the machine logs it with torque_sign -1",
-                                      axis_name(a), torque_channel(fit.front(), a).column));
-    }
+  std::vector<MeasuredRun> fit_own = fit;  // the speed taken from the position and the torque's sign go in here
   const MeasuredRun& r0 = fit_own.front();
   const double Ts = controller_period(r0, options, out);
   std::vector<RunData> runs;
   for (const auto& r : fit_own)
     runs.push_back(prepare_run(r, out.axes, out.rounding, options.fit_fraction, out.notes));
+  add_speed_from_position(fit_own, runs, out);
+  const AxisArray<bool> flip = torque_against_motion(AxisFit{runs, Fitter{runs}, r0, Ts}, out);
+  std::vector<MeasuredRun> validate_flipped;
+  for (Axis a : out.axes)
+    if (flip[index(a)]) {
+      if (validate_flipped.empty()) validate_flipped = validate;
+      negate_torque_channel(fit_own, a);
+      negate_torque_channel(validate_flipped, a);
+      out.notes.push_back(fmt::format("axis {}: {} counts against the motion (the inverse dynamics on it give a "
+                                      "negative inertia and a negative friction): calibrated on its negative, "
+                                      "and the machine logs it with torque_sign -1",
+                                      axis_name(a), torque_channel(fit.front(), a).column));
+    }
+  const std::vector<MeasuredRun>& validate_own = validate_flipped.empty() ? validate : validate_flipped;
   out.identified = identify_machine(AxisFit{runs, Fitter{runs}, r0, Ts}, out);
   out.final_machine = out.identified;
   skip_unseen_effects(fit, out);

@@ -50,7 +50,8 @@ std::vector<AxisParamSpec> make_axis_specs() {
       TWIN_AXIS_PARAM("travel_min", "mm", "lower end of travel", a.travel_min_mm),
       TWIN_AXIS_PARAM("travel_max", "mm", "upper end of travel", a.travel_max_mm),
       TWIN_AXIS_PARAM("following_error_limit", "mm", "following-error alarm", a.following_error_limit_mm),
-      TWIN_AXIS_PARAM("torque_sign", "1", "sign of the logged torque, current or command against the axis's motion (1 or -1)",
+      TWIN_AXIS_PARAM("torque_sign", "1",
+                      "sign of the logged torque, current or command against the axis's motion (1 or -1)",
                       a.logged_torque_sign),
       // The drive effects' parameters (feeddrive/effect_catalogue.hpp), as "<effect>.<name>".
 #define TWIN_EFFECT_ROW(EFFECT, NAME, FIELD, UNIT, DOC) TWIN_EFFECT_PARAM(#EFFECT "." #NAME, UNIT, DOC, EFFECT, FIELD),

@@ -15,6 +15,7 @@
 #include <cmath>
 #include <filesystem>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <gmock/gmock.h>
@@ -55,6 +56,19 @@ struct Outcome {
 // `noise_Nm` >= 0: the standard deviation of the noise on the logged torque
 // (the truth's current_noise_A, which it adds to the torque in N m where the
 // torque is logged raw); else the cascade spec's 0.002.
+// The fitting program's run and the validation program's (another seed) of
+// the truth with `sp`, written under `name` and read back as measured runs.
+std::pair<MeasuredRun, MeasuredRun> truth_runs(const std::string& name, truth::RunSpec sp) {
+  sp.reference_mm = program(sp.Ts_s, kFitSpeeds, 24.0);
+  const auto fit_dir = work(name + "_fit");
+  truth::write_truth_run(fit_dir, sp);
+  sp.reference_mm = program(sp.Ts_s, kValSpeeds, 16.0);
+  sp.seed = 7;
+  const auto val_dir = work(name + "_val");
+  truth::write_truth_run(val_dir, sp);
+  return {load_run(fit_dir), load_run(val_dir)};
+}
+
 // `motor_speed`: whether the motor's speed is logged beside the velocity
 // command (a CNC may trace its loop's command and not the speed it feeds back).
 Outcome calibrate_truth(const std::string& name, const truth::Effects& fx, double noise_Nm = -1.0,
@@ -65,14 +79,7 @@ Outcome calibrate_truth(const std::string& name, const truth::Effects& fx, doubl
   const double load = sp.effects.load_Nm;
   sp.effects = fx;
   sp.effects.load_Nm = load;
-  sp.reference_mm = program(sp.Ts_s, kFitSpeeds, 24.0);
-  const auto fit_dir = work(name + "_fit");
-  truth::write_truth_run(fit_dir, sp);
-  sp.reference_mm = program(sp.Ts_s, kValSpeeds, 16.0);
-  sp.seed = 7;
-  const auto val_dir = work(name + "_val");
-  truth::write_truth_run(val_dir, sp);
-  const MeasuredRun fit = load_run(fit_dir), val = load_run(val_dir);
+  const auto [fit, val] = truth_runs(name, sp);
   Outcome o{calibrate_from_data({fit}, {val}, machine_for_run(fit, "", nullptr)), {}};
   for (const DataEffect& e : o.r.effects)
     if (e.kept) o.kept.push_back(e.effect);
@@ -390,15 +397,7 @@ TEST(DataEffects, CascadeLogWithoutTheMotorSpeed) {
 // gives the errors of the machine identified on the run as logged (to
 // 1e-9: the same arithmetic, the sign applied last).
 TEST(DataEffects, TorqueLoggedAgainstTheMotionIsTakenWithItsSign) {
-  truth::RunSpec sp = cascade_spec();
-  sp.reference_mm = program(sp.Ts_s, kFitSpeeds, 24.0);
-  const auto fit_dir = work("sign_fit");
-  truth::write_truth_run(fit_dir, sp);
-  sp.reference_mm = program(sp.Ts_s, kValSpeeds, 16.0);
-  sp.seed = 7;
-  const auto val_dir = work("sign_val");
-  truth::write_truth_run(val_dir, sp);
-  const MeasuredRun fit = load_run(fit_dir), val = load_run(val_dir);
+  const auto [fit, val] = truth_runs("sign", cascade_spec());
   auto negated = [](MeasuredRun r) {
     for (std::size_t j = 0; j < r.trace.names.size(); ++j)
       if (r.trace.names[j] == "x_torque_raw")
