@@ -195,7 +195,8 @@ constexpr std::size_t kClippedRows = 10;
 /// the law read as held: a 2 ms delay under 0.2 N m of noise was said to
 /// flatten at a limit it does not have).
 struct TorqueClip {
-  std::vector<double> theta;  ///< the first fit's Kvp, Kvp / Tn, constant
+  std::vector<double> theta;  ///< the first fit's Kvp, Kvp / Tn
+  std::vector<double> c_seg;  ///< and its constant per segment (VelocityLoopFit::c_seg)
   double T_abs_max{0.0};
   double noise_rms{0.0};
   bool holds(double law, double T) const {
@@ -206,10 +207,18 @@ struct TorqueClip {
 
 /// The PI velocity law fitted on the fitting rows: the logged torque at row k
 /// against the speed error (vcmd - v) and its integral at row k - lag (within
-/// a segment), and a constant. With `clip`, the rows a torque limit holds
-/// are left out (the limit sets the torque there, not the law).
+/// a segment), and a constant per segment: the integral's value where the
+/// segment starts, which a log that starts (or resumes after a stitch or a
+/// gap) with the axis under load or in motion does not hold. Fitted on the
+/// rows less their segment's means, which gives the gains of the fit with a
+/// constant per segment without a column for each. With `clip`, the rows a
+/// torque limit holds are left out (the limit sets the torque there, not the
+/// law).
 struct VelocityLoopFit {
-  LsqResult ls;
+  LsqResult ls;  ///< Kvp, Kvp / Tn
+  /// The constant of each segment, in the order of the runs' segments
+  /// (0 where a segment has no row fitted).
+  std::vector<double> c_seg;
   double T_rms{0.0};
   /// The largest |torque| of the rows fitted, and how many of those rows a
   /// limit at it holds by this fit (TorqueClip).
@@ -225,15 +234,17 @@ struct VelocityLoopFit {
 };
 VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, const std::string& channel,
                                   std::size_t lag, const TorqueClip* clip = nullptr) {
-  std::vector<double> ev, iev, c1, Tm, d2;
-  std::vector<std::size_t> vrows;
+  std::vector<double> ev, iev, Tm, d2;
+  std::vector<std::size_t> vrows, seg_of_row;
+  std::size_t g = 0;  // the segment's index over all runs
   for (const auto& rd : runs) {
     const auto& t = rd.run->trace;
     const auto& vc = *filtered_alike(t, col(a, "_vcmd_mm_s"));
     const auto& v = t.at(col(a, "_v_mm_s"));
     const auto& ch = *filtered_alike(t, channel);
     const auto& ch_logged = t.at(channel);
-    for (const Segment& s : rd.segments) {
+    for (std::size_t si = 0; si < rd.segments.size(); ++si, ++g) {
+      const Segment& s = rd.segments[si];
       const std::size_t end = std::min(s.end, rd.n_fit);
       if (end <= s.begin) continue;
       for (std::size_t k = s.begin + 1; k + 1 < end; ++k)
@@ -249,17 +260,43 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
         const std::size_t j = k - s.begin;
         ev.push_back(j >= lag ? e[j - lag] : 0.0);
         iev.push_back(j >= lag ? ie[j - lag] : 0.0);
-        c1.push_back(1.0);
         Tm.push_back(ch[k]);
+        seg_of_row.push_back(g);
         if (k < s.begin + 2 + lag) continue;
-        if (clip && clip->holds(clip->theta[0] * ev.back() + clip->theta[1] * iev.back() + clip->theta[2], ch[k]))
+        if (clip && clip->holds(clip->theta[0] * ev.back() + clip->theta[1] * iev.back() + clip->c_seg[g], ch[k]))
           continue;
         vrows.push_back(ev.size() - 1);
       }
     }
   }
+  // Each segment's means over its rows fitted, taken off.
+  std::vector<double> n_seg(g, 0.0), me(g, 0.0), mie(g, 0.0), mT(g, 0.0);
+  for (std::size_t k : vrows) {
+    const std::size_t sg = seg_of_row[k];
+    n_seg[sg] += 1.0;
+    me[sg] += ev[k];
+    mie[sg] += iev[k];
+    mT[sg] += Tm[k];
+  }
+  for (std::size_t sg = 0; sg < g; ++sg)
+    if (n_seg[sg] > 0.0) {
+      me[sg] /= n_seg[sg];
+      mie[sg] /= n_seg[sg];
+      mT[sg] /= n_seg[sg];
+    }
+  std::vector<double> ev0(ev.size()), iev0(ev.size()), Tm0(ev.size());
+  for (std::size_t k = 0; k < ev.size(); ++k) {
+    const std::size_t sg = seg_of_row[k];
+    ev0[k] = ev[k] - me[sg];
+    iev0[k] = iev[k] - mie[sg];
+    Tm0[k] = Tm[k] - mT[sg];
+  }
   VelocityLoopFit f;
-  f.ls = least_squares({&ev, &iev, &c1}, Tm, vrows);
+  f.ls = least_squares({&ev0, &iev0}, Tm0, vrows);
+  f.c_seg.assign(g, 0.0);
+  if (f.ls.ok)
+    for (std::size_t sg = 0; sg < g; ++sg)
+      if (n_seg[sg] > 0.0) f.c_seg[sg] = mT[sg] - f.ls.theta[0] * me[sg] - f.ls.theta[1] * mie[sg];
   double t2 = 0.0;
   for (std::size_t k : vrows) {
     t2 += Tm[k] * Tm[k];
@@ -268,9 +305,9 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
   f.T_rms = vrows.empty() ? 0.0 : std::sqrt(t2 / static_cast<double>(vrows.size()));
   f.noise_rms = white_noise_rms(std::move(d2));
   if (f.ls.ok) {
-    const TorqueClip c{f.ls.theta, f.T_abs_max, f.noise_rms};
+    const TorqueClip c{f.ls.theta, f.c_seg, f.T_abs_max, f.noise_rms};
     for (std::size_t k : vrows)
-      if (c.holds(f.ls.theta[0] * ev[k] + f.ls.theta[1] * iev[k] + f.ls.theta[2], Tm[k])) ++f.held_by_limit;
+      if (c.holds(f.ls.theta[0] * ev[k] + f.ls.theta[1] * iev[k] + f.c_seg[seg_of_row[k]], Tm[k])) ++f.held_by_limit;
   }
   return f;
 }
@@ -1854,13 +1891,14 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
       const std::size_t held = vl.held_by_limit;
       // The rows held are found with the law fitted so far; a fit without
       // them asks for the unlimited torque more nearly, so twice more.
-      TorqueClip c{vl.ls.theta, vl.T_abs_max, vl.noise_rms};
+      TorqueClip c{vl.ls.theta, vl.c_seg, vl.T_abs_max, vl.noise_rms};
       for (int pass = 0; pass < 3; ++pass) {
         const VelocityLoopFit inside = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, 0, &c);
         if (!inside.ls.ok) break;
         clip = c;
         vl = inside;
         c.theta = inside.ls.theta;
+        c.c_seg = inside.c_seg;
       }
       if (clip)
         clipped = fmt::format("; the logged torque flattens near {:.4g} where the law asks for more ({} rows): the "
