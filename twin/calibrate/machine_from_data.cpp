@@ -415,7 +415,15 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
   std::vector<Segment> segs;
   std::size_t start = 0, jumps = 0;
   double largest = 0.0;
+  auto next_break = run.time_breaks.begin();
   for (std::size_t k = 1; k < n; ++k) {
+    // A gap in the log's clock ends a segment too (load_run's note says so).
+    if (next_break != run.time_breaks.end() && *next_break == k) {
+      ++next_break;
+      segs.push_back({start, k});
+      start = k;
+      continue;
+    }
     double step = 0.0;
     bool jump = false;
     for (const auto& ac : axes)

@@ -91,28 +91,75 @@ void drop_unrecorded_channels(MeasuredRun& run) {
   }
 }
 
-// The sample period of the trace's t_s, uniform within 1 %; a time stamp
-// that jitters by up to a fifth of a period about the uniform grid (a
-// logger's clock, not the loop's) is taken as on the grid and said; a
-// missing or doubled row is an error.
+/// A step of t_s longer than this many periods is a gap in the log.
+constexpr double kGapPeriods = 1.5;
+/// At most one gap in this many rows: more is not a log sampled at a period.
+constexpr std::size_t kRowsPerGap = 20;
+
+// The sample period of the trace's t_s, uniform within 1 % between gaps. A
+// step of over 1.5 times the median step is a gap (rows missing, or the
+// logger paused): recorded in run.time_breaks and said. A time stamp that
+// jitters by up to a fifth of a period about the uniform grid of its part (a
+// logger's clock, not the loop's) is taken as on the grid, and said.
 double uniform_sample_period(MeasuredRun& run) {
   const auto& t = run.trace.at("t_s");
-  if (t.size() < 3) throw IoError(fmt::format("{}: {} rows are too few to replay", run.trace.source, t.size()));
-  const double dt = (t.back() - t.front()) / static_cast<double>(t.size() - 1);
-  double max_dev = 0.0;
-  for (std::size_t r = 0; r < t.size(); ++r)
-    max_dev = std::max(max_dev, std::abs(t[r] - t.front() - static_cast<double>(r) * dt));
-  for (std::size_t r = 1; r < t.size(); ++r) {
-    const double d = t[r] - t[r - 1];
-    const double tol = max_dev <= 0.2 * dt ? 0.4 * dt : 0.01 * dt + 2e-6;
-    if (std::abs(d - dt) > tol)
-      throw IoError(fmt::format("{}: sampling is not uniform: rows {} to {} are {} s apart, the mean period is {} s",
-                                run.trace.source, r + 1, r + 2, d, dt));
+  const std::size_t n = t.size();
+  if (n < 3) throw IoError(fmt::format("{}: {} rows are too few to replay", run.trace.source, n));
+  std::vector<double> steps(n - 1);
+  for (std::size_t r = 1; r < n; ++r) steps[r - 1] = t[r] - t[r - 1];
+  std::vector<double> sorted = steps;
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
+  const double median = sorted[sorted.size() / 2];
+  run.time_breaks.clear();
+  double widest = 0.0;
+  std::size_t widest_row = 0;
+  for (std::size_t r = 1; r < n; ++r)
+    if (steps[r - 1] > kGapPeriods * median) {
+      run.time_breaks.push_back(r);
+      if (steps[r - 1] > widest) {
+        widest = steps[r - 1];
+        widest_row = r;
+      }
+    }
+  if (run.time_breaks.size() * kRowsPerGap > n)
+    throw IoError(fmt::format("{}: sampling is not uniform: t_s steps by more than {} times its median step of {} s "
+                              "on {} of {} rows (first at rows {} to {})",
+                              run.trace.source, kGapPeriods, median, run.time_breaks.size(), n,
+                              run.time_breaks.front() + 1, run.time_breaks.front() + 2));
+  // The parts between gaps: the period is their mean step, and each part's
+  // stamps lie on a grid of that period from the part's first row.
+  std::vector<std::size_t> bounds{0};
+  bounds.insert(bounds.end(), run.time_breaks.begin(), run.time_breaks.end());
+  bounds.push_back(n);
+  double span = 0.0;
+  std::size_t counted = 0;
+  for (std::size_t p = 0; p + 1 < bounds.size(); ++p) {
+    span += t[bounds[p + 1] - 1] - t[bounds[p]];
+    counted += bounds[p + 1] - 1 - bounds[p];
   }
+  const double dt = counted > 0 ? span / static_cast<double>(counted) : median;
+  double max_dev = 0.0;
+  for (std::size_t p = 0; p + 1 < bounds.size(); ++p)
+    for (std::size_t r = bounds[p]; r < bounds[p + 1]; ++r)
+      max_dev = std::max(max_dev, std::abs(t[r] - t[bounds[p]] - static_cast<double>(r - bounds[p]) * dt));
+  const double tol = max_dev <= 0.2 * dt ? 0.4 * dt : 0.01 * dt + 2e-6;
+  for (std::size_t p = 0; p + 1 < bounds.size(); ++p)
+    for (std::size_t r = bounds[p] + 1; r < bounds[p + 1]; ++r) {
+      const double d = steps[r - 1];
+      if (std::abs(d - dt) > tol)
+        throw IoError(fmt::format("{}: sampling is not uniform: rows {} to {} are {} s apart, the mean period is {} s",
+                                  run.trace.source, r + 1, r + 2, d, dt));
+    }
   if (max_dev > 0.01 * dt + 2e-6)
     run.notes.push_back(fmt::format("{}: t_s jitters by up to {:.3g} s ({:.0f} % of the period) about a uniform grid: the "
                                     "rows are taken as sampled every {} s",
                                     run.trace.source, max_dev, 100.0 * max_dev / dt, dt));
+  if (!run.time_breaks.empty())
+    run.notes.push_back(fmt::format(
+        "{}: t_s has {} gap{} (rows missing, or the log paused; the widest {:.4g} s, {:.3g} periods, before t = {:.6g} "
+        "s): each of the {} parts is replayed from its own start, as a stitched segment",
+        run.trace.source, run.time_breaks.size(), run.time_breaks.size() == 1 ? "" : "s", widest, widest / dt,
+        t[widest_row], run.time_breaks.size() + 1));
   return dt;
 }
 
@@ -340,10 +387,76 @@ void mean_over_neighbours(const TickSums& sums, const MeasuredRun& run, std::int
   }
 }
 
+/// Rows [begin, end) of a run, every column, as a run of their own.
+MeasuredRun rows_of(const MeasuredRun& run, std::size_t begin, std::size_t end) {
+  MeasuredRun part;
+  part.dir = run.dir;
+  part.meta = run.meta;
+  part.axes = run.axes;
+  part.sample_period_s = run.sample_period_s;
+  part.trace.source = run.trace.source;
+  part.trace.names = run.trace.names;
+  for (const auto& c : run.trace.columns)
+    part.trace.columns.emplace_back(c.begin() + static_cast<std::ptrdiff_t>(begin),
+                                    c.begin() + static_cast<std::ptrdiff_t>(end));
+  return part;
+}
+
+/// A run with gaps in its clock, replayed part by part, each from its own
+/// start (the loop cannot be followed through time the log does not hold).
+/// A part of fewer than 3 rows is not replayed: the twin is put on its
+/// command there, with no output, and a note says so.
+ReplayResult replay_parts(const MeasuredRun& run, const sim::MachineDefinition& machine, std::size_t n_rows,
+                          feeddrive::IntegratorOptions options, ChannelSampling sampling) {
+  ReplayResult res;
+  res.axes = run.axes;
+  std::vector<std::size_t> bounds{0};
+  for (std::size_t b : run.time_breaks)
+    if (b < n_rows) bounds.push_back(b);
+  bounds.push_back(n_rows);
+  const auto& t = run.trace.at("t_s");
+  std::size_t unreplayed = 0;
+  for (std::size_t p = 0; p + 1 < bounds.size(); ++p) {
+    const std::size_t b = bounds[p], e = bounds[p + 1];
+    if (e - b < 3) {
+      unreplayed += e - b;
+      for (std::size_t k = b; k < e; ++k) {
+        res.t_s.push_back(t[k]);
+        for (Axis a : run.axes) {
+          const double r = run.trace.at(std::string(axis_name(a)) + "_ref_mm")[k];
+          res.x_ref_mm[index(a)].push_back(r);
+          res.x_mm[index(a)].push_back(r);
+          for (auto* v : {&res.u_V, &res.i_A, &res.Tm, &res.vcmd_mm_per_s}) (*v)[index(a)].push_back(0.0);
+        }
+      }
+      continue;
+    }
+    const ReplayResult r = replay_run(rows_of(run, b, e), machine, 0, options, sampling);
+    res.t_s.insert(res.t_s.end(), r.t_s.begin(), r.t_s.end());
+    for (Axis a : run.axes)
+      for (auto m : {&ReplayResult::x_ref_mm, &ReplayResult::x_mm, &ReplayResult::u_V, &ReplayResult::i_A,
+                     &ReplayResult::Tm, &ReplayResult::vcmd_mm_per_s}) {
+        auto& dst = (res.*m)[index(a)];
+        const auto& src = (r.*m)[index(a)];
+        dst.insert(dst.end(), src.begin(), src.end());
+      }
+    for (const auto& note : r.notes)
+      if (std::find(res.notes.begin(), res.notes.end(), note) == res.notes.end()) res.notes.push_back(note);
+  }
+  if (unreplayed > 0)
+    res.notes.push_back(fmt::format("{} rows between two gaps of t_s are too few to replay: the twin is put on its "
+                                    "command there, with no output",
+                                    unreplayed));
+  return res;
+}
+
 }  // namespace
 
 ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& machine_in, std::size_t rows,
                         feeddrive::IntegratorOptions options, ChannelSampling sampling) {
+  if (!run.time_breaks.empty())
+    return replay_parts(run, machine_in, rows == 0 ? run.trace.num_rows() : std::min(rows, run.trace.num_rows()),
+                        options, sampling);
   ReplayResult res;
   res.axes = run.axes;
   sim::MachineDefinition machine = machine_in;

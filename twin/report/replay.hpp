@@ -28,6 +28,9 @@ struct MeasuredRun {
   io::TraceTable trace;
   std::vector<Axis> axes;          ///< axes with a <a>_ref_mm column
   double sample_period_s{0.0};     ///< from the time column (uniform within 1 %)
+  /// Rows where t_s steps by more than 1.5 periods (rows missing, or the
+  /// logger paused): each starts a part replayed from its own start.
+  std::vector<std::size_t> time_breaks;
   std::vector<std::string> notes;  ///< what load_run left out of the trace, and why
 };
 
@@ -35,7 +38,9 @@ struct MeasuredRun {
 /// A u or current column that holds one value over the whole run while its
 /// axis moves (a channel that was not recorded) is left out, with a note.
 /// t_s must be uniform within 1 %, or jitter by at most a fifth of a period
-/// about a uniform grid (taken as on it, with a note).
+/// about a uniform grid (taken as on it, with a note), between gaps: a step of
+/// over 1.5 periods is a gap (`time_breaks`, with a note), and a gap on more
+/// than one row in 20 is an error.
 MeasuredRun load_run(const std::filesystem::path& dir);
 
 /// The machine a run is replayed on: `machine_override` (name or path; one

@@ -5,6 +5,7 @@
 // - identification against the truth simulator of these tests (written apart
 //   from the twin), run with the cascade law and logged as a real CNC logs:
 //   no machine named, torque in an unstated unit, positions rounded.
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -254,6 +255,75 @@ TEST(RealLogs, CoarseRoundedStitchedCurrentLog) {
   const auto j = data_calibration_report_json(r);
   EXPECT_TRUE(j.contains("baseline"));
   EXPECT_TRUE(j["effects_skipped"].contains("cogging"));
+}
+
+// A log whose clock has gaps: the 1 kHz run of CascadeAtOneKilohertzWithRawTorque
+// with 700 rows cut out while the axis moves (the logger paused) and single
+// rows dropped at three other places where it moves (one in the held-out
+// part). Taken as uniform, a dropped row would be a sample in which the
+// command moves twice as far; replayed through a gap, the loop would follow
+// a command that jumps. Each part between gaps is a segment replayed from its
+// own start, so the calibration must find what it finds on the whole log:
+// the same tolerances as that test (the gains from the logged loop signals to
+// 1 %, the velocity loop to 5 and 10 %), and another program's following
+// error within 1 % NRMS.
+TEST(RealLogs, GapsInTheClockAreSegments) {
+  const double Ts = 1e-3;
+  truth::RunSpec sp = cascade_spec(Ts);
+  sp.reference_mm = program(Ts, 1.0, 24.0);
+  const std::vector<double> ref = sp.reference_mm;
+  const auto whole = work("gaps_whole");
+  truth::write_truth_run(whole, sp);
+  sp.reference_mm = program(Ts, 1.6, 12.0);
+  const auto val_dir = work("gaps_val");
+  truth::write_truth_run(val_dir, sp);
+  // Rows where the command moves faster than 5 mm/s, from a given row on.
+  auto moving_from = [&](std::size_t k) {
+    while (k + 1 < ref.size() && std::abs(ref[k + 1] - ref[k]) < 5.0 * Ts) ++k;
+    return k;
+  };
+  const std::size_t cut = moving_from(4000);
+  std::vector<std::size_t> dropped;
+  for (std::size_t k = cut; k < cut + 700; ++k) dropped.push_back(k);
+  for (std::size_t from : {9000u, 12000u, 20000u}) dropped.push_back(moving_from(from));
+  std::ifstream in(whole / "trace.csv");
+  const auto d = work("gaps");
+  std::filesystem::copy_file(whole / "meta.json", d / "meta.json");
+  std::ofstream out(d / "trace.csv");
+  std::string line;
+  std::getline(in, line);
+  out << line << "\n";
+  for (std::size_t k = 0; std::getline(in, line); ++k)
+    if (std::find(dropped.begin(), dropped.end(), k) == dropped.end()) out << line << "\n";
+  out.close();
+
+  const MeasuredRun run = load_run(d);
+  EXPECT_NEAR(run.sample_period_s, Ts, 1e-9);
+  ASSERT_EQ(run.time_breaks.size(), 4u);
+  EXPECT_EQ(run.time_breaks[0], cut);
+  bool said = false;
+  for (const auto& n : run.notes) said = said || n.find("t_s has 4 gaps") != std::string::npos;
+  EXPECT_TRUE(said);
+  const auto segs = find_segments(run, 0.0, std::nullopt, nullptr);
+  ASSERT_EQ(segs.size(), 5u);
+  for (std::size_t i = 0; i < 4; ++i) EXPECT_EQ(segs[i + 1].begin, run.time_breaks[i]);
+
+  const MeasuredRun val = load_run(val_dir);
+  const DataCalibration r = calibrate_from_data({run}, {val}, machine_for_run(run, "", nullptr));
+  ASSERT_EQ(r.axis.size(), 1u);
+  const AxisFromData& ax = r.axis[0];
+  ASSERT_TRUE(ax.identified) << ax.note;
+  EXPECT_NEAR(ax.gains.Kv_per_s, 45.0, 0.45);
+  EXPECT_NEAR(ax.gains.kff, 0.6, 0.01);
+  EXPECT_NEAR(ax.gains.Kvp_torque_s_per_rad, 0.5 / sp.plant.rg * 40.0, 0.05 * 0.5 / sp.plant.rg * 40.0);
+  EXPECT_NEAR(ax.gains.Tn_s, 0.008, 0.0008);
+  ASSERT_EQ(r.validation_runs.size(), 1u);
+  const auto& e = r.validation_runs[0].calibrated.nrms;
+  ASSERT_TRUE(e.count("x_err_mm"));
+  EXPECT_LT(e.at("x_err_mm"), 0.01);
+  EXPECT_LT(e.at("x_torque_raw"), r.validation_runs[0].regression.nrms.at("x_torque_raw"));
+  // The twin's own trace holds every logged row, at its logged time.
+  EXPECT_EQ(r.replay_after.t_s, run.trace.at("t_s"));
 }
 
 // One Coulomb level where the log does not support two. The truth's

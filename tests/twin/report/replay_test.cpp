@@ -6,6 +6,7 @@
 // low-pass is the zero-phase 4th-order Butterworth of spec/interfaces.md,
 // built here from its textbook definition (bilinear transform, two
 // biquads, forward-backward).
+#include <algorithm>
 #include <cmath>
 #include <complex>
 #include <filesystem>
@@ -233,7 +234,8 @@ TEST(Replay, UnknownMachineIsAssumedToBeTheShippedOneAndSaid) {
 
 // Time stamps that jitter by up to a fifth of a period about a uniform grid
 // (a logger's clock) are taken as on the grid, and said; a missing row (a
-// step of two periods) stays an error naming the rows.
+// step of two periods) is a gap that starts a new part, and said; a gap on
+// more than one row in 20 is an error naming the rows.
 TEST(Replay, JitteringTimeStampsAreTakenAsUniformAndSaid) {
   std::string csv = "t_s,x_ref_mm\n";
   for (int i = 0; i < 100; ++i) csv += std::to_string(i * 1e-3 + (i % 3 == 1 ? 1.5e-4 : (i % 3 == 2 ? -1e-4 : 0.0))) + ",0\n";
@@ -244,7 +246,53 @@ TEST(Replay, JitteringTimeStampsAreTakenAsUniformAndSaid) {
   EXPECT_THAT(run.notes[0], HasSubstr("jitters by up to"));
   std::string gap = "t_s,x_ref_mm\n";
   for (int i = 0; i < 100; ++i) gap += std::to_string((i < 50 ? i : i + 1) * 1e-3) + ",0\n";
-  EXPECT_THROW(analysis::load_run(make_run("gap", meta, gap)), Error);
+  const auto with_gap = analysis::load_run(make_run("gap", meta, gap));
+  EXPECT_NEAR(with_gap.sample_period_s, 1e-3, 1e-9);
+  EXPECT_EQ(with_gap.time_breaks, std::vector<std::size_t>{50});
+  ASSERT_EQ(with_gap.notes.size(), 1u);
+  EXPECT_THAT(with_gap.notes[0], HasSubstr("t_s has 1 gap"));
+  std::string gappy = "t_s,x_ref_mm\n";
+  for (int i = 0; i < 100; ++i) gappy += std::to_string((i + i / 10) * 1e-3) + ",0\n";
+  try {
+    analysis::load_run(make_run("gappy", meta, gappy));
+    ADD_FAILURE() << "no error for a gap every 10 rows";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("on 9 of 100 rows (first at rows 11 to 12)"));
+  }
+}
+
+// A run whose clock has a gap (here 40 ms missing while the axis moves at
+// 60 mm/s) is replayed part by part, each from its own start: the outputs
+// are those of the two parts replayed as runs of their own, row for row, at
+// the logged times. Replayed as if uniform, the command would step 2.4 mm in
+// one period and the loop would saturate at the gap.
+TEST(Replay, ARunWithAGapInItsClockIsReplayedPartByPart) {
+  auto rows = [](int from, int to, int skip) {
+    std::string csv;
+    for (int i = from; i < to; ++i) {
+      const int k = i < 300 ? i : i + skip;
+      const double t = k * 1e-4, x = 60.0 * std::max(0.0, t - 0.005);
+      csv += std::to_string(t) + "," + std::to_string(x) + "," + std::to_string(x) + "\n";
+    }
+    return csv;
+  };
+  const std::string head = "t_s,x_ref_mm,x_mm\n";
+  const auto run = analysis::load_run(make_run("clock_gap", kMeta, head + rows(0, 600, 400)));
+  ASSERT_EQ(run.time_breaks, std::vector<std::size_t>{300});
+  const auto m = analysis::machine_for_run(run, "", nullptr);
+  const analysis::ReplayResult whole = analysis::replay_run(run, m);
+  const analysis::ReplayResult a = analysis::replay_run(analysis::load_run(make_run("part_a", kMeta, head + rows(0, 300, 400))), m);
+  const analysis::ReplayResult b = analysis::replay_run(analysis::load_run(make_run("part_b", kMeta, head + rows(300, 600, 400))), m);
+  ASSERT_EQ(whole.t_s.size(), 600u);
+  EXPECT_EQ(whole.t_s, run.trace.at("t_s"));
+  for (std::size_t k = 0; k < 600; ++k) {
+    const auto& part = k < 300 ? a : b;
+    const std::size_t j = k < 300 ? k : k - 300;
+    ASSERT_DOUBLE_EQ(whole.x_mm[0][k], part.x_mm[0][j]) << "row " << k;
+    ASSERT_DOUBLE_EQ(whole.u_V[0][k], part.u_V[0][j]) << "row " << k;
+  }
+  // The second part starts where its log does: no jump to close.
+  EXPECT_NEAR(whole.x_mm[0][300], run.trace.at("x_mm")[300], 0.01);
 }
 
 // A current channel that holds one value while its axis moves was not
