@@ -3,8 +3,10 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <memory>
 
+#include <Eigen/Dense>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
@@ -323,6 +325,74 @@ Start replay_start(const MeasuredRun& run, std::size_t n_rows, std::int64_t m, s
   return st;
 }
 
+/// The time a replay runs before a log that begins in motion: a few time
+/// constants of position loops down to Kv = 15 1/s.
+constexpr double kRunIn_s = 0.2;
+
+/// A log that begins in motion (recorded, or resumed after a stitch or a gap,
+/// mid-move) is not replayed from rest: a drive started at rest under a
+/// moving command runs a transient the machine never ran. Where an axis's
+/// first two steps go the same way, its reference is extended back by
+/// kRunIn_s along the quadratic fitted to its first rows (10 ms of them, 3 to
+/// 10 rows), and held where that quadratic comes to rest (a move that started
+/// within the run-in). The replay starts there, in steady motion at the
+/// extension's speed (sim::start_in_steady_motion), and runs the extension
+/// before the log's first row; its outputs are not kept. Other axes hold
+/// their first reference through it.
+struct RunIn {
+  std::int64_t ticks{0};
+  AxisArray<std::vector<double>> ref{};  ///< the extension, ticks values per axis
+  AxisArray<bool> moving{};               ///< the log begins in motion on the axis
+  AxisArray<std::optional<sim::ReferenceAtStart>> start{};  ///< where the extension is in motion at its start
+};
+RunIn run_in_before(const MeasuredRun& run, std::size_t n_rows, const Start& st, double Ts) {
+  RunIn out;
+  if (n_rows < 3) return out;
+  const auto& t = run.trace.at("t_s");
+  const std::size_t K = std::min<std::size_t>(
+      n_rows, std::clamp<std::size_t>(static_cast<std::size_t>(std::lround(0.01 / run.sample_period_s)), 3, 10));
+  AxisArray<std::optional<std::array<double, 2>>> va{};  // speed and acceleration at the first row
+  for (Axis a : run.axes) {
+    const auto& r = run.trace.at(std::string(axis_name(a)) + "_ref_mm");
+    if (!((r[1] - r[0]) * (r[2] - r[1]) > 0.0)) continue;
+    // Least squares of r - r[0] on tau and tau^2 / 2 over the first K rows.
+    Eigen::Matrix2d A = Eigen::Matrix2d::Zero();
+    Eigen::Vector2d y = Eigen::Vector2d::Zero();
+    for (std::size_t k = 1; k < K; ++k) {
+      const double tau = t[k] - t[0];
+      const Eigen::Vector2d phi(tau, 0.5 * tau * tau);
+      A += phi * phi.transpose();
+      y += phi * (r[k] - r[0]);
+    }
+    const Eigen::Vector2d th = A.ldlt().solve(y);
+    if (!th.allFinite()) continue;
+    va[index(a)] = std::array<double, 2>{th(0), th(1)};
+  }
+  if (std::none_of(va.begin(), va.end(), [](const auto& x) { return x.has_value(); })) return out;
+  out.ticks = static_cast<std::int64_t>(std::llround(kRunIn_s / Ts));
+  for (Axis a : run.axes) {
+    const double x0 = st.ref[index(a)].front();
+    auto& ext = out.ref[index(a)];
+    ext.assign(static_cast<std::size_t>(out.ticks), x0);
+    if (!va[index(a)]) continue;
+    out.moving[index(a)] = true;
+    const auto [v0, a0] = *va[index(a)];
+    // Going back in time, the speed v0 + a0 tau reaches 0 at tau = -v0 / a0
+    // where the move accelerates away from rest; before that it stood there.
+    const double tau_rest = v0 * a0 > 0.0 ? -v0 / a0 : -std::numeric_limits<double>::infinity();
+    auto at = [&](double tau) {
+      const double te = std::max(tau, tau_rest);
+      return std::array<double, 2>{x0 + v0 * te + 0.5 * a0 * te * te, tau < tau_rest ? 0.0 : v0 + a0 * te};
+    };
+    for (std::int64_t j = 0; j < out.ticks; ++j) ext[static_cast<std::size_t>(j)] = at(-static_cast<double>(out.ticks - j) * Ts)[0];
+    const auto first = at(-static_cast<double>(out.ticks) * Ts);
+    if (first[1] != 0.0)
+      out.start[index(a)] = sim::ReferenceAtStart{first[0], at(-static_cast<double>(out.ticks + 1) * Ts)[0],
+                                                  at(-static_cast<double>(out.ticks + 2) * Ts)[0], first[1]};
+  }
+  return out;
+}
+
 void reserve_rows(ReplayResult& res, std::size_t n_rows) {
   res.t_s.reserve(n_rows);
   for (Axis a : res.axes)
@@ -472,8 +542,19 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
                                     run.sample_period_s, m, Ts));
   const std::int64_t n_ticks = static_cast<std::int64_t>(n_rows - 1) * m + 1;
   Start st = replay_start(run, n_rows, m, machine, res);
+  const RunIn run_in = run_in_before(run, n_rows, st, Ts);
+  AxisArray<double> x0 = st.x0;
+  if (run_in.ticks > 0)
+    for (Axis a : run.axes) {
+      auto& ref = st.ref[index(a)];
+      ref.insert(ref.begin(), run_in.ref[index(a)].begin(), run_in.ref[index(a)].end());
+      if (run_in.moving[index(a)]) x0[index(a)] = ref.front();
+    }
   auto reference = std::make_shared<sim::SampledReference>(std::move(st.ref), Ts);
-  sim::CoSimulation cosim(machine, reference, nullptr, st.x0, options);
+  sim::CoSimulation cosim(machine, reference, nullptr, x0, options);
+  if (std::any_of(run_in.start.begin(), run_in.start.end(), [](const auto& r) { return r.has_value(); }))
+    sim::start_in_steady_motion(cosim, run_in.start, 0);
+  for (std::int64_t k = 0; k < run_in.ticks; ++k) cosim.step();
   reserve_rows(res, n_rows);
   const bool window = sampling == ChannelSampling::kMeanOverNeighbours && m > 1;
   TickSums sums{};

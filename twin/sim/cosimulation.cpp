@@ -4,6 +4,7 @@
 
 #include <fmt/format.h>
 
+#include "controller/law.hpp"
 #include "twin/core/check.hpp"
 #include "twin/core/error.hpp"
 #include "twin/core/units.hpp"
@@ -219,6 +220,42 @@ void CoSimulation::set_state(const CoSimState& s) {
   if (s.process) process_ = s.process->clone();
   last_ = s.last;
   clamp_watch_ = s.clamp_watch.size() == axes_.size() ? s.clamp_watch : std::vector<ClampWatch>(axes_.size());
+}
+
+void start_in_steady_motion(CoSimulation& cosim, const AxisArray<std::optional<ReferenceAtStart>>& reference,
+                            std::int64_t k0) {
+  CoSimState st = cosim.get_state();
+  const double Ts = cosim.Ts_s();
+  const auto& axes = cosim.axes();
+  for (std::size_t i = 0; i < axes.size(); ++i) {
+    const auto& r = reference[index(axes[i])];
+    if (!r) continue;
+    const AxisDefinition& def = cosim.machine().axes[index(axes[i])];
+    const auto& d = def.drive;
+    const double v = (r->x_prev_mm - r->x_prev2_mm) / Ts;
+    const double w = r->v_mm_per_s / d.rg_mm_per_rad;
+    const double Tc = w > 0.0 ? d.Tc_pos_Nm : (w < 0.0 ? -d.Tc_neg_Nm : 0.0);
+    const double load = d.effects.constant_load.enabled ? d.effects.constant_load.torque_Nm : 0.0;
+    const controller::SteadyMotion motion{Ts, v, w, d.B_kg_m2_per_s * w + Tc + load,
+                                          controller::DriveScale{d.rg_mm_per_rad, d.Ka_A_per_V, d.Kt_Nm_per_A}};
+    controller::PositionLoopState& ls = st.loops[i];
+    ls = controller::PositionLoopState{};
+    const double e = controller::law_of(def.loop.law).steady_state(def.loop, motion, r->x_mm, ls);
+    feeddrive::DriveState& ds = st.drives[i];
+    ds.x_mm = r->x_mm - e;
+    ds.w_rad_per_s = w;
+    ds.stuck = w == 0.0;
+    ds.x_load_mm = ds.x_mm;
+    ds.w_load_rad_per_s = w;
+    ds.x_table_mm = ds.x_mm;
+    ds.load_stuck = ds.stuck;
+    ls.x_ref_prev_mm = r->x_prev_mm;
+    ls.v_ref_prev_mm_per_s = v;
+    ls.last_k = k0 - 1;
+  }
+  st.k = k0;
+  st.last.k = k0 - 1;
+  cosim.set_state(st);
 }
 
 }  // namespace twin::sim

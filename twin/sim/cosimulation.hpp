@@ -138,4 +138,20 @@ class CoSimulation {
   std::vector<ClampWatch> clamp_watch_;
 };
 
+/// The reference of an axis where a simulation starts in steady motion:
+/// its position at the starting tick k0 and at the two ticks before (the
+/// law's own backward-difference speed), and its speed at k0.
+struct ReferenceAtStart {
+  double x_mm{0.0}, x_prev_mm{0.0}, x_prev2_mm{0.0};
+  double v_mm_per_s{0.0};
+};
+
+/// Puts each axis given in steady motion at tick k0 (the next tick `cosim`
+/// runs): the drive at the reference's speed, the loop's integrators holding
+/// what the feedforward does not give of B w, the Coulomb level and the
+/// constant load, and the drive behind the reference by the error the law
+/// holds there (controller::Law::steady_state). Axes not given keep their state.
+void start_in_steady_motion(CoSimulation& cosim, const AxisArray<std::optional<ReferenceAtStart>>& reference,
+                            std::int64_t k0);
+
 }  // namespace twin::sim

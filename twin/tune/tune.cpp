@@ -111,50 +111,17 @@ SimulationWindow corner_window(const PlannedScenario& planned, double before_s, 
 
 namespace {
 
-/// Drive and loop state of axis `a` in steady motion at tick k0 (r0: the reference
-/// at k0, r1 and r2 at the two ticks before): the drive at the reference speed, the
-/// integrators holding what the feedforward does not give of B w + Tc, the drive
-/// behind the reference by the error the law holds (controller::Law::steady_state).
-void steady_axis_state(const sim::AxisDefinition& def, std::size_t a, double Ts, std::int64_t k0,
-                       const controller::ReferenceSample& r0, const controller::ReferenceSample& r1,
-                       const controller::ReferenceSample& r2, feeddrive::DriveState& ds,
-                       controller::PositionLoopState& ls) {
-  const auto& d = def.drive;
-  const auto& g = def.loop;
-  const double v = (r1.x_mm[a] - r2.x_mm[a]) / Ts;
-  const double w = r0.v_mm_per_s[a] / d.rg_mm_per_rad;
-  ls = controller::PositionLoopState{};
-  const double Tc = w > 0.0 ? d.Tc_pos_Nm : (w < 0.0 ? -d.Tc_neg_Nm : 0.0);
-  const controller::SteadyMotion motion{Ts, v, w, d.B_kg_m2_per_s * w + Tc,
-                                        controller::DriveScale{d.rg_mm_per_rad, d.Ka_A_per_V, d.Kt_Nm_per_A}};
-  const double e = controller::law_of(g.law).steady_state(g, motion, r0.x_mm[a], ls);
-  ds.x_mm = r0.x_mm[a] - e;
-  ds.w_rad_per_s = w;
-  ds.stuck = w == 0.0;
-  ds.x_load_mm = ds.x_mm;
-  ds.w_load_rad_per_s = w;
-  ds.x_table_mm = ds.x_mm;
-  ds.load_stuck = ds.stuck;
-  ls.x_ref_prev_mm = r1.x_mm[a];
-  ls.v_ref_prev_mm_per_s = v;
-  ls.last_k = k0 - 1;
-}
-
 /// Puts the co-simulation in steady motion at tick k0 > 0 of the planned program.
-void start_in_motion(sim::CoSimulation& cosim, const sim::MachineDefinition& machine,
-                     const controller::Trajectory& trajectory, std::int64_t k0) {
-  sim::CoSimState st = cosim.get_state();
+void start_in_motion(sim::CoSimulation& cosim, const controller::Trajectory& trajectory, std::int64_t k0) {
   const auto r0 = trajectory.sample(k0);
   const auto r1 = trajectory.sample(k0 - 1);
   const auto r2 = trajectory.sample(std::max<std::int64_t>(0, k0 - 2));
-  const auto& axes = cosim.axes();
-  for (std::size_t i = 0; i < axes.size(); ++i) {
-    const std::size_t a = index(axes[i]);
-    steady_axis_state(machine.axes[a], a, machine.Ts_s, k0, r0, r1, r2, st.drives[i], st.loops[i]);
+  AxisArray<std::optional<sim::ReferenceAtStart>> ref{};
+  for (Axis ax : cosim.axes()) {
+    const std::size_t a = index(ax);
+    ref[a] = sim::ReferenceAtStart{r0.x_mm[a], r1.x_mm[a], r2.x_mm[a], r0.v_mm_per_s[a]};
   }
-  st.k = k0;
-  st.last.k = k0 - 1;
-  cosim.set_state(st);
+  sim::start_in_steady_motion(cosim, ref, k0);
 }
 
 /// The figures of a window, one tick after the other: command peaks, saturation and
@@ -231,7 +198,7 @@ ScenarioMetrics simulate_window(const io::Scenario& scenario, const PlannedScena
       scenario,
       {.machine = &machine, .reference = std::make_shared<sim::ProgramReference>(planned.trajectory), .start_mm = x0});
   const auto& axes = cosim.axes();
-  if (k0 > 0) start_in_motion(cosim, machine, planned.trajectory, k0);
+  if (k0 > 0) start_in_motion(cosim, planned.trajectory, k0);
   if (trace) *trace = CornerTrace{};
   WindowFigures figures(axes, window);
   try {

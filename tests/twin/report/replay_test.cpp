@@ -295,6 +295,65 @@ TEST(Replay, ARunWithAGapInItsClockIsReplayedPartByPart) {
   EXPECT_NEAR(whole.x_mm[0][300], run.trace.at("x_mm")[300], 0.01);
 }
 
+// A log that begins in steady motion (recorded mid-move, or resumed after a
+// gap): the cascade's P loop with a PI velocity loop lags a ramp by
+// (1 - kff) v / Kv in steady state, whatever the friction (the integral holds
+// it). Logged every 1 ms at 30 mm/s on the shipped cascade machine (Kv 50,
+// kff 0.9): 60 um from the first row, within one encoder count (1 um, the
+// quantisation the loop acts on). Replayed from rest, the drive would have to
+// accelerate under the moving command, and the error would run through a
+// transient of several 1 / Kv.
+TEST(Replay, ALogThatBeginsInMotionIsReplayedInMotion) {
+  std::string csv = "t_s,x_ref_mm,x_mm\n";
+  const double v = 30.0, e_ss = (1.0 - 0.9) * v / 50.0;
+  for (int i = 0; i < 200; ++i) {
+    const double t = i * 1e-3, r = 10.0 + v * t;
+    csv += fmt::format("{:.4f},{:.6f},{:.6f}\n", t, r, r - e_ss);
+  }
+  const auto meta = R"({"machine": "fadal2216_cascade", "controller_period_s": 0.0001, "encoder_resolution_mm": 0.001})";
+  const auto run = analysis::load_run(make_run("in_motion", meta, csv));
+  const auto m = analysis::machine_for_run(run, "", nullptr);
+  const analysis::ReplayResult r = analysis::replay_run(run, m);
+  ASSERT_EQ(r.x_mm[0].size(), 200u);
+  for (std::size_t k = 0; k < 200; ++k) ASSERT_NEAR(r.x_ref_mm[0][k] - r.x_mm[0][k], e_ss, 1.0e-3) << "row " << k;
+}
+
+// A log that begins while the axis accelerates from rest (a constant 500
+// mm/s^2 since 20 ms before its first row): replayed, it must give what the
+// whole move replayed from rest gives at the same times. The extension before
+// the first row is the quadratic of its first rows, held where it comes to
+// rest, so the replay runs the same history. Logged at the loop's rate on the
+// FADAL (10 kHz): x within one encoder count (1 um) and u within what one count
+// moves the PID by (Kp 1 um plus its derivative over one period), as the two
+// replays may round one tick's position differently.
+TEST(Replay, ALogThatBeginsInAnAccelerationIsReplayedAsTheWholeMove) {
+  auto csv = [](int from) {
+    std::string s = "t_s,x_ref_mm\n";
+    for (int i = from; i < 1500; ++i) {
+      const double t = i * 1e-4, r = 5.0 + (t > 0.01 ? 0.5 * 500.0 * (t - 0.01) * (t - 0.01) : 0.0);
+      s += fmt::format("{:.4f},{:.9f}\n", t, r);
+    }
+    return s;
+  };
+  const auto whole_run = analysis::load_run(make_run("accel_whole", kMeta, csv(0)));
+  const auto cut_run = analysis::load_run(make_run("accel_cut", kMeta, csv(300)));
+  const auto m = analysis::machine_for_run(whole_run, "", nullptr);
+  const analysis::ReplayResult whole = analysis::replay_run(whole_run, m);
+  const analysis::ReplayResult cut = analysis::replay_run(cut_run, m);
+  ASSERT_EQ(cut.x_mm[0].size(), 1200u);
+  double dx = 0.0, du = 0.0;
+  for (std::size_t k = 0; k < 1200; ++k) {
+    dx = std::max(dx, std::abs(cut.x_mm[0][k] - whole.x_mm[0][k + 300]));
+    du = std::max(du, std::abs(cut.u_V[0][k] - whole.u_V[0][k + 300]));
+  }
+  const auto& g = m.axes[0].loop;
+  EXPECT_LE(dx, 1.0e-3 + 1e-9);
+  EXPECT_LE(du, (g.Kp_V_per_mm + g.Kd_V_s_per_mm / m.Ts_s) * 1.0e-3 + 1e-9);
+  // Replayed from rest at its first row, the axis would start 4 ms late into
+  // a command already at 10 mm/s.
+  EXPECT_GT(whole.x_ref_mm[0][300] - whole.x_mm[0][300], 0.0);
+}
+
 // A current channel that holds one value while its axis moves was not
 // recorded: load_run leaves it out and says so; on an axis that stands still
 // a constant current is a measurement and stays.
