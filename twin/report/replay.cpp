@@ -335,7 +335,8 @@ constexpr double kRunIn_s = 0.2;
 /// first two steps go the same way, its reference is extended back by
 /// kRunIn_s along the quadratic fitted to its first rows (10 ms of them, 3 to
 /// 10 rows), and held where that quadratic comes to rest (a move that started
-/// within the run-in). The replay starts there, in steady motion at the
+/// within the run-in; one that started within the sample before the first
+/// row is replayed from rest at the first row, as before). The replay starts there, in steady motion at the
 /// extension's speed (sim::start_in_steady_motion), and runs the extension
 /// before the log's first row; its outputs are not kept. Other axes hold
 /// their first reference through it.
@@ -366,6 +367,9 @@ RunIn run_in_before(const MeasuredRun& run, std::size_t n_rows, const Start& st,
     }
     const Eigen::Vector2d th = A.ldlt().solve(y);
     if (!th.allFinite()) continue;
+    // A move that starts from rest within the sample before the first row is
+    // replayed from rest there, as a log that begins at rest.
+    if (th(0) * th(1) > 0.0 && th(0) / th(1) < run.sample_period_s) continue;
     va[index(a)] = std::array<double, 2>{th(0), th(1)};
   }
   if (std::none_of(va.begin(), va.end(), [](const auto& x) { return x.has_value(); })) return out;
