@@ -336,7 +336,8 @@ constexpr double kRunIn_s = 0.2;
 /// kRunIn_s along the quadratic fitted to its first rows (10 ms of them, 3 to
 /// 10 rows), and held where that quadratic comes to rest (a move that started
 /// within the run-in; one that started within the sample before the first
-/// row is replayed from rest at the first row, as before). The replay starts there, in steady motion at the
+/// row is replayed from rest at the first row, as before), or, where it
+/// brakes, at twice the first row's speed before the braking began. The replay starts there, in steady motion at the
 /// extension's speed (sim::start_in_steady_motion), and runs the extension
 /// before the log's first row; its outputs are not kept. Other axes hold
 /// their first reference through it.
@@ -382,11 +383,15 @@ RunIn run_in_before(const MeasuredRun& run, std::size_t n_rows, const Start& st,
     out.moving[index(a)] = true;
     const auto [v0, a0] = *va[index(a)];
     // Going back in time, the speed v0 + a0 tau reaches 0 at tau = -v0 / a0
-    // where the move accelerates away from rest; before that it stood there.
-    const double tau_rest = v0 * a0 > 0.0 ? -v0 / a0 : -std::numeric_limits<double>::infinity();
+    // where the move accelerates away from rest: before that it stood there.
+    // Where it brakes, the speed going back grows; it is taken to have
+    // braked as long (from twice the speed), and to have run at that speed
+    // before, rather than to grow without bound.
+    const double tau_start = a0 != 0.0 ? -std::abs(v0 / a0) : -std::numeric_limits<double>::infinity();
     auto at = [&](double tau) {
-      const double te = std::max(tau, tau_rest);
-      return std::array<double, 2>{x0 + v0 * te + 0.5 * a0 * te * te, tau < tau_rest ? 0.0 : v0 + a0 * te};
+      const double te = std::max(tau, tau_start);
+      const double x = x0 + v0 * te + 0.5 * a0 * te * te, v = v0 + a0 * te;
+      return std::array<double, 2>{x + (tau - te) * v, v};
     };
     for (std::int64_t j = 0; j < out.ticks; ++j) ext[static_cast<std::size_t>(j)] = at(-static_cast<double>(out.ticks - j) * Ts)[0];
     const auto first = at(-static_cast<double>(out.ticks) * Ts);
