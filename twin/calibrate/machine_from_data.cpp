@@ -562,23 +562,13 @@ ReplayResult replay_segments(const MeasuredRun& run, const sim::MachineDefinitio
     for (auto* v : {&out.u_V, &out.i_A, &out.Tm, &out.vcmd_mm_per_s}) (*v)[index(a)].assign(n, 0.0);
   }
   if (compared) compared->assign(n, 0);
+  // Each segment is replayed from its time and references alone.
+  std::vector<std::string> reference_columns{"t_s"};
+  for (Axis a : out.axes) reference_columns.push_back(col(a, "_ref_mm"));
   for (const Segment& s : segments) {
     if (s.end - s.begin < 5) continue;
-    MeasuredRun sub;
-    sub.dir = run.dir;
-    sub.meta = run.meta;
+    MeasuredRun sub = rows_of(run, s.begin, s.end, reference_columns);
     sub.axes = out.axes;
-    sub.sample_period_s = run.sample_period_s;
-    sub.trace.source = run.trace.source;
-    sub.trace.names.push_back("t_s");
-    sub.trace.columns.emplace_back(t.begin() + static_cast<std::ptrdiff_t>(s.begin),
-                                   t.begin() + static_cast<std::ptrdiff_t>(s.end));
-    for (Axis a : out.axes) {
-      const auto& ref = run.trace.at(col(a, "_ref_mm"));
-      sub.trace.names.push_back(col(a, "_ref_mm"));
-      sub.trace.columns.emplace_back(ref.begin() + static_cast<std::ptrdiff_t>(s.begin),
-                                     ref.begin() + static_cast<std::ptrdiff_t>(s.end));
-    }
     const ReplayResult r = replay_run(sub, machine, 0, {}, ChannelSampling::kMeanOverNeighbours);
     for (Axis a : out.axes) {
       const std::size_t i = index(a);

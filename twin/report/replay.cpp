@@ -466,21 +466,6 @@ void mean_over_neighbours(const TickSums& sums, const MeasuredRun& run, std::int
   }
 }
 
-/// Rows [begin, end) of a run, every column, as a run of their own.
-MeasuredRun rows_of(const MeasuredRun& run, std::size_t begin, std::size_t end) {
-  MeasuredRun part;
-  part.dir = run.dir;
-  part.meta = run.meta;
-  part.axes = run.axes;
-  part.sample_period_s = run.sample_period_s;
-  part.trace.source = run.trace.source;
-  part.trace.names = run.trace.names;
-  for (const auto& c : run.trace.columns)
-    part.trace.columns.emplace_back(c.begin() + static_cast<std::ptrdiff_t>(begin),
-                                    c.begin() + static_cast<std::ptrdiff_t>(end));
-  return part;
-}
-
 /// A run with gaps in its clock, replayed part by part, each from its own
 /// start (the loop cannot be followed through time the log does not hold).
 /// A part of fewer than 3 rows is not replayed: the twin is put on its
@@ -530,6 +515,23 @@ ReplayResult replay_parts(const MeasuredRun& run, const sim::MachineDefinition& 
 }
 
 }  // namespace
+
+MeasuredRun rows_of(const MeasuredRun& run, std::size_t begin, std::size_t end,
+                    const std::vector<std::string>& names) {
+  MeasuredRun part;
+  part.dir = run.dir;
+  part.meta = run.meta;
+  part.axes = run.axes;
+  part.sample_period_s = run.sample_period_s;
+  part.trace.source = run.trace.source;
+  for (std::size_t c = 0; c < run.trace.names.size(); ++c) {
+    if (!names.empty() && std::find(names.begin(), names.end(), run.trace.names[c]) == names.end()) continue;
+    part.trace.names.push_back(run.trace.names[c]);
+    part.trace.columns.emplace_back(run.trace.columns[c].begin() + static_cast<std::ptrdiff_t>(begin),
+                                    run.trace.columns[c].begin() + static_cast<std::ptrdiff_t>(end));
+  }
+  return part;
+}
 
 ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& machine_in, std::size_t rows,
                         feeddrive::IntegratorOptions options, ChannelSampling sampling) {

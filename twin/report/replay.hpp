@@ -95,6 +95,11 @@ enum class ChannelSampling {
   kMeanOverNeighbours,
 };
 
+/// Rows [begin, end) of a run as a run of its own: the columns named, in the
+/// run's order (every column where `names` is empty).
+MeasuredRun rows_of(const MeasuredRun& run, std::size_t begin, std::size_t end,
+                    const std::vector<std::string>& names = {});
+
 /// `rows` limits the replay to the first rows (0: all).
 ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& machine, std::size_t rows = 0,
                         feeddrive::IntegratorOptions options = {},
