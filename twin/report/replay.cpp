@@ -328,11 +328,19 @@ Start replay_start(const MeasuredRun& run, std::size_t n_rows, std::int64_t m, s
 /// The time a replay runs before a log that begins in motion: a few time
 /// constants of position loops down to Kv = 15 1/s.
 constexpr double kRunIn_s = 0.2;
+/// The slowest log a run-in is built for: its first rows show the motion
+/// within 20 ms of the first. A slower log's first three rows span more than
+/// the loop's time constants, and do not tell a move under way at the first
+/// row from one that set off within the first sample or two (at 100 ms, the
+/// U-Mich logs: a run-in there lost umich13 y, 0.592 to 0.625 against the
+/// regression's 0.618, and the y axis's pooled error rose from 0.599 to 0.604).
+constexpr double kRunInMaxPeriod_s = 0.01;
 
 /// A log that begins in motion (recorded, or resumed after a stitch or a gap,
 /// mid-move) is not replayed from rest: a drive started at rest under a
-/// moving command runs a transient the machine never ran. Where an axis's
-/// first two steps go the same way, its reference is extended back by
+/// moving command runs a transient the machine never ran. Where a log samples
+/// every 10 ms or faster and an axis's
+/// first two steps go the same way and so does its speed at the first row, its reference is extended back by
 /// kRunIn_s along the quadratic fitted to its first rows (10 ms of them, 3 to
 /// 10 rows), and held where that quadratic comes to rest (a move that started
 /// within the run-in; one that started within the sample before the first
@@ -349,7 +357,7 @@ struct RunIn {
 };
 RunIn run_in_before(const MeasuredRun& run, std::size_t n_rows, const Start& st, double Ts) {
   RunIn out;
-  if (n_rows < 3) return out;
+  if (n_rows < 3 || run.sample_period_s > kRunInMaxPeriod_s + 1e-12) return out;
   const auto& t = run.trace.at("t_s");
   const std::size_t K = std::min<std::size_t>(
       n_rows, std::clamp<std::size_t>(static_cast<std::size_t>(std::lround(0.01 / run.sample_period_s)), 3, 10));
@@ -368,8 +376,12 @@ RunIn run_in_before(const MeasuredRun& run, std::size_t n_rows, const Start& st,
     }
     const Eigen::Vector2d th = A.ldlt().solve(y);
     if (!th.allFinite()) continue;
-    // A move that starts from rest within the sample before the first row is
-    // replayed from rest there, as a log that begins at rest.
+    // A move under way has its speed the way it steps. One that the
+    // quadratic puts the other way at the first row (positions 0, 1, 5: a
+    // move that set off inside the first sample), or at rest within the
+    // sample before it, is replayed from rest at the first row, as a log that
+    // begins at rest.
+    if (!(th(0) * (r[1] - r[0]) > 0.0)) continue;
     if (th(0) * th(1) > 0.0 && th(0) / th(1) < run.sample_period_s) continue;
     va[index(a)] = std::array<double, 2>{th(0), th(1)};
   }
