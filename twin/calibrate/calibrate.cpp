@@ -467,8 +467,9 @@ CalibrationResult calibrate(const MeasuredRun& run, const sim::MachineDefinition
   if (!run.time_breaks.empty()) {
     const std::size_t k = run.time_breaks.front();
     const auto& t = run.trace.at("t_s");
-    throw IoError(fmt::format("{}: t_s has a gap before t = {:.6g} s (line {} of the trace): a named machine's drives are identified "
-                              "on one uninterrupted log (a run that names no machine is calibrated part by part)",
+    throw IoError(fmt::format("{}: t_s has a gap before t = {:.6g} s (line {} of the trace): a named machine's drives "
+                              "are identified on one uninterrupted log (a run that names no machine is calibrated "
+                              "part by part)",
                               run.trace.source, t[k], k + 2));
   }
   CalibrationResult r;

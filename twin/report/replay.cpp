@@ -339,16 +339,17 @@ constexpr double kRunInMaxPeriod_s = 0.01;
 /// A log that begins in motion (recorded, or resumed after a stitch or a gap,
 /// mid-move) is not replayed from rest: a drive started at rest under a
 /// moving command runs a transient the machine never ran. Where a log samples
-/// every 10 ms or faster and an axis's
-/// first two steps go the same way and so does its speed at the first row, its reference is extended back by
+/// every 10 ms or faster and an axis's first two steps go the same way, and so
+/// does its speed at the first row, its reference is extended back by
 /// kRunIn_s along the quadratic fitted to its first rows (10 ms of them, 3 to
-/// 10 rows), and held where that quadratic comes to rest (a move that started
-/// within the run-in; one that started within the sample before the first
-/// row is replayed from rest at the first row, as before), or, where it
-/// brakes, at twice the first row's speed before the braking began. The replay starts there, in steady motion at the
-/// extension's speed (sim::start_in_steady_motion), and runs the extension
-/// before the log's first row; its outputs are not kept. Other axes hold
-/// their first reference through it.
+/// 10 rows). The extension is held where that quadratic comes to rest (a move
+/// that started within the run-in; one that started within the sample before
+/// the first row is replayed from rest at the first row, as before), or, where
+/// it brakes, runs at twice the first row's speed before the braking began.
+/// The replay starts there, in steady motion at the extension's speed
+/// (sim::start_in_steady_motion), and runs the extension before the log's
+/// first row; its outputs are not kept. Other axes hold their first reference
+/// through it.
 struct RunIn {
   std::int64_t ticks{0};
   AxisArray<std::vector<double>> ref{};  ///< the extension, ticks values per axis
@@ -405,7 +406,8 @@ RunIn run_in_before(const MeasuredRun& run, std::size_t n_rows, const Start& st,
       const double x = x0 + v0 * te + 0.5 * a0 * te * te, v = v0 + a0 * te;
       return std::array<double, 2>{x + (tau - te) * v, v};
     };
-    for (std::int64_t j = 0; j < out.ticks; ++j) ext[static_cast<std::size_t>(j)] = at(-static_cast<double>(out.ticks - j) * Ts)[0];
+    for (std::int64_t j = 0; j < out.ticks; ++j)
+      ext[static_cast<std::size_t>(j)] = at(-static_cast<double>(out.ticks - j) * Ts)[0];
     const auto first = at(-static_cast<double>(out.ticks) * Ts);
     if (first[1] != 0.0)
       out.start[index(a)] = sim::ReferenceAtStart{first[0], at(-static_cast<double>(out.ticks + 1) * Ts)[0],
@@ -491,6 +493,8 @@ ReplayResult replay_parts(const MeasuredRun& run, const sim::MachineDefinition& 
     if (b < n_rows) bounds.push_back(b);
   bounds.push_back(n_rows);
   const auto& t = run.trace.at("t_s");
+  AxisArray<const std::vector<double>*> refs{};
+  for (Axis a : run.axes) refs[index(a)] = &run.trace.at(std::string(axis_name(a)) + "_ref_mm");
   std::size_t unreplayed = 0;
   for (std::size_t p = 0; p + 1 < bounds.size(); ++p) {
     const std::size_t b = bounds[p], e = bounds[p + 1];
@@ -499,7 +503,7 @@ ReplayResult replay_parts(const MeasuredRun& run, const sim::MachineDefinition& 
       for (std::size_t k = b; k < e; ++k) {
         res.t_s.push_back(t[k]);
         for (Axis a : run.axes) {
-          const double r = run.trace.at(std::string(axis_name(a)) + "_ref_mm")[k];
+          const double r = (*refs[index(a)])[k];
           res.x_ref_mm[index(a)].push_back(r);
           res.x_mm[index(a)].push_back(r);
           for (auto* v : {&res.u_V, &res.i_A, &res.Tm, &res.vcmd_mm_per_s}) (*v)[index(a)].push_back(0.0);
