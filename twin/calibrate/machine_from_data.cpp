@@ -584,7 +584,9 @@ ReplayResult replay_segments(const MeasuredRun& run, const sim::MachineDefinitio
     }
     if (compared)
       for (std::size_t k = s.begin; k < s.end; ++k) (*compared)[k] = 1;
-    if (out.notes.empty()) out.notes = r.notes;
+    // What the segments' replays say, each thing once.
+    for (const auto& note : r.notes)
+      if (std::find(out.notes.begin(), out.notes.end(), note) == out.notes.end()) out.notes.push_back(note);
   }
   return out;
 }

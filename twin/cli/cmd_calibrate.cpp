@@ -108,12 +108,6 @@ std::vector<std::filesystem::path> make_plots(io::ResultSet& results, const anal
 }
 
 
-// Whether a run names a machine the twin ships.
-bool names_known_machine(const analysis::MeasuredRun& run) {
-  return run.meta.machine && !run.meta.machine->empty() &&
-         std::filesystem::exists(io::resolve_machine_path(*run.meta.machine));
-}
-
 // Measured against model per axis (torque channel and following error), the
 // fitted and held-out parts marked; and the evidence of the friction model:
 // the channel against the commanded speed, measured and model.
@@ -297,7 +291,7 @@ void run_calibrate(const CalibrateCommand& opt) {
   for (const auto& r : opt.runs) fit_runs.push_back(analysis::load_run(r));
   for (const auto& r : opt.validate) validate_runs.push_back(analysis::load_run(r));
   const bool known = !opt.machine.empty() ||
-                     std::all_of(fit_runs.begin(), fit_runs.end(), [](const auto& r) { return names_known_machine(r); });
+                     std::all_of(fit_runs.begin(), fit_runs.end(), [](const auto& r) { return analysis::names_shipped_machine(r); });
   if (known)
     calibrate_known_machine(opt, fit_runs, std::move(validate_runs));
   else

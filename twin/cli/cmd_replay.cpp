@@ -35,12 +35,15 @@ void register_replay(CLI::App& app) {
     std::vector<std::string> notes = run.notes;
     sim::MachineDefinition machine = analysis::machine_for_run(run, opt->machine, &notes);
     apply_sets(machine, opt->sets);
-    if (sim::machine_loop_law(machine) == controller::LoopLaw::kCascade) {
-      // A machine identified from data (twin calibrate's machine.yaml): replayed
-      // as calibrate validates it, segment by segment with the log's rounding,
-      // and its errors written beside the trace.
+    if (sim::machine_loop_law(machine) == controller::LoopLaw::kCascade || !analysis::names_shipped_machine(run)) {
+      // A machine identified from data (twin calibrate's machine.yaml), or a
+      // log from a machine the twin does not ship (a user's data, whichever
+      // machine stands in): replayed as calibrate validates it, segment by
+      // segment with the log's rounding, never across a stitch, and its
+      // errors written beside the trace.
       analysis::ReplayResult rr;
       const analysis::RunErrors e = analysis::evaluate_machine_on_run(run, machine, &rr, &notes);
+      notes.insert(notes.end(), rr.notes.begin(), rr.notes.end());
       io::ResultSet results(opt->out, "replay");
       analysis::write_data_trace(results.path("trace.csv"), run, rr);
       nlohmann::json j;

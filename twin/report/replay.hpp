@@ -51,6 +51,11 @@ MeasuredRun load_run(const std::filesystem::path& dir);
 sim::MachineDefinition machine_for_run(const MeasuredRun& run, const std::string& machine_override,
                                        std::vector<std::string>* notes);
 
+/// Whether the run's meta.json names a machine the twin ships (our own traces
+/// do; a user's log from another machine does not, and is then handled as
+/// data: stitches, rounding and a machine identified from it).
+bool names_shipped_machine(const MeasuredRun& run);
+
 struct ReplayResult {
   std::vector<Axis> axes;
   std::vector<double> t_s;                  ///< at the run's samples

@@ -3,6 +3,7 @@
 // file at a final name in OUT.
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -203,6 +204,55 @@ TEST(Cli, CalibrateRunOfAnUnnamedMachineWithAnAxisUnmeasured) {
   EXPECT_THAT(report, HasSubstr("- Coulomb levels: "));
   EXPECT_THAT(report, Not(HasSubstr("plots not drawn")));
   EXPECT_TRUE(std::filesystem::exists(out / "overlay.png") || report.find("gnuplot") != std::string::npos);
+}
+
+// A user's log from a machine the twin does not ship, stitched from two
+// recordings 70 mm apart: `twin replay` with the shipped machine standing in
+// replays each piece from its own start, as calibrate does, and says so. Read
+// straight through, the stand-in's loop would chase the 70 mm step and stop at
+// its following-error limit. Oracle: the log itself. Each piece starts at rest
+// on its reference, so the replayed position at the first row after the
+// stitch is that row's reference; the tolerance is the 1 um of the encoder.
+TEST(Cli, ReplayOfAStitchedLogReplaysEachPieceFromItsOwnStart) {
+  std::string csv = "t_s,x_ref_mm,x_mm,x_i_A\n";
+  const double pi = 3.14159265358979;
+  const std::size_t stitch_row = 600;
+  for (int k = 0; k < 1200; ++k) {
+    // 10 mm out and back in 0.25 s each (a cosine ramp), resting between;
+    // the second recording, from row 600, 70 mm further along.
+    const int j = k % 600;
+    double s = 0.0;
+    if (j < 250)
+      s = 0.5 * (1 - std::cos(pi * j / 250.0));
+    else if (j < 300)
+      s = 1.0;
+    else if (j < 550)
+      s = 0.5 * (1 + std::cos(pi * (j - 300) / 250.0));
+    const double x = 10.0 * s + (k >= 600 ? 70.0 : 0.0);
+    csv += std::to_string(k * 1e-3) + "," + std::to_string(x) + "," + std::to_string(x) + ",0\n";
+  }
+  file("stitched_run/trace.csv", csv);
+  file("stitched_run/meta.json", R"({"machine": null, "axes": ["x"], "sample_period_s": 0.001})");
+  const auto out = test_support::removed(work() / "out_stitched");
+  const Result r = twin_cmd("replay " + (work() / "stitched_run").string() + " -o " + out.string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("stitched from 2 segments"));
+  // What both pieces' replays say is said once.
+  const std::string said = "their mean over the two sample periods around it";
+  ASSERT_THAT(r.err, HasSubstr(said));
+  EXPECT_EQ(r.err.find(said), r.err.rfind(said));
+  EXPECT_TRUE(std::filesystem::exists(out / "errors.json"));
+  std::ifstream in(out / "trace.csv");
+  std::string line;
+  std::getline(in, line);
+  EXPECT_THAT(line, HasSubstr("t_s,x_ref_mm,x_mm"));
+  for (std::size_t k = 0; k <= stitch_row; ++k) ASSERT_TRUE(std::getline(in, line));
+  std::vector<double> cells;
+  std::stringstream ss(line);
+  for (std::string c; std::getline(ss, c, ',');) cells.push_back(std::stod(c));
+  ASSERT_GE(cells.size(), 3u);
+  EXPECT_NEAR(cells[1], 70.0, 1e-9);
+  EXPECT_NEAR(cells[2], cells[1], 1e-3);
 }
 
 // ---------------------------------------------------------------------------
