@@ -1,6 +1,7 @@
 #include "twin/calibrate/machine_from_data.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -32,6 +33,17 @@ std::string lowpassed(const std::string& column) { return column + "@lowpassed";
 const std::vector<double>* filtered_alike(const io::TraceTable& t, const std::string& column) {
   const auto* f = t.find(lowpassed(column));
   return f ? f : t.find(column);
+}
+
+/// A velocity command rebuilt from the torque where the log has none
+/// (rebuild_velocity_commands): a column of the calibration's own copy of a
+/// run under this name, so that it is never compared as a logged channel.
+std::string rebuilt(const std::string& column) { return column + "@rebuilt"; }
+
+/// The velocity command the identification reads: as logged, else as rebuilt.
+std::string velocity_command_column(const io::TraceTable& t, Axis a) {
+  const std::string logged = col(a, "_vcmd_mm_s");
+  return t.find(logged) != nullptr ? logged : rebuilt(logged);
 }
 
 bool is_multiple(double x, double q) {
@@ -239,7 +251,7 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
   std::size_t g = 0;  // the segment's index over all runs
   for (const auto& rd : runs) {
     const auto& t = rd.run->trace;
-    const auto& vc = *filtered_alike(t, col(a, "_vcmd_mm_s"));
+    const auto& vc = *filtered_alike(t, velocity_command_column(t, a));
     const auto& v = t.at(col(a, "_v_mm_s"));
     const auto& ch = *filtered_alike(t, channel);
     const auto& ch_logged = t.at(channel);
@@ -1643,7 +1655,7 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
     e.push_back(ref[k] - t.at(col(a, "_mm"))[k]);
     // The law's own speed: the backward difference of the reference.
     vr.push_back((ref[k] - ref[k - 1]) / f.runs[r].run->sample_period_s);
-    vc.push_back(t.at(col(a, "_vcmd_mm_s"))[k]);
+    vc.push_back(t.at(velocity_command_column(t, a))[k]);
     rows.push_back(rows.size());
   });
   const LsqResult ls = least_squares({&e, &vr}, vc, rows);
@@ -1654,9 +1666,12 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
   double vrms = 0.0;
   for (double x : vc) vrms += x * x;
   vrms = std::sqrt(vrms / static_cast<double>(std::max<std::size_t>(1, vc.size())));
-  ax.loop_source = fmt::format("the logged velocity command against the following error and the command's speed "
-                               "(residual {:.3g} mm/s against an RMS of {:.3g} mm/s)",
-                               ls.residual_rms, vrms);
+  const bool logged = f.r0.trace.find(col(a, "_vcmd_mm_s")) != nullptr;
+  ax.loop_source = logged ? fmt::format("the logged velocity command against the following error and the command's "
+                                        "speed (residual {:.3g} mm/s against an RMS of {:.3g} mm/s)",
+                                        ls.residual_rms, vrms)
+                          : std::string("the velocity command rebuilt from the logged torque and speed (see the "
+                                        "notes: no velocity command is logged)");
 }
 
 /// Kv from the lag of the position behind the command (a P loop without feedforward).
@@ -1945,7 +1960,9 @@ AxisFromData identify_axis_from_data(const AxisFit& f, Axis a, sim::MachineDefin
   AxisFromData ax;
   ax.axis = a;
   ax.channel = torque_channel(f.r0, a);
-  const bool have_vcmd = all_runs_log(f.runs, col(a, "_vcmd_mm_s"));
+  // A velocity command logged, or rebuilt from the torque where none is.
+  const bool have_vcmd =
+      all_runs_log(f.runs, col(a, "_vcmd_mm_s")) || all_runs_log(f.runs, rebuilt(col(a, "_vcmd_mm_s")));
   const bool have_x = all_runs_log(f.runs, col(a, "_mm"));
   identify_position_loop(f, ax, have_vcmd, have_x);
   if (!identify_drive_in_channel(f, ax, out)) return ax;
@@ -2707,6 +2724,19 @@ namespace {
 constexpr double kSpeedCutoff_Hz = 50.0;
 constexpr std::size_t kSpeedFilterRows = 64;
 
+/// Per segment, a column low-passed at kSpeedCutoff_Hz without phase (where
+/// the segment is long enough; a shorter one as logged).
+std::vector<double> lowpass_in_segments(const std::vector<double>& c, const std::vector<Segment>& segs, double dt) {
+  std::vector<double> y = c;
+  for (const Segment& sg : segs) {
+    if (sg.end < sg.begin + kSpeedFilterRows) continue;
+    const std::vector<double> yf =
+        lowpass(std::span<const double>(c.data() + sg.begin, sg.end - sg.begin), kSpeedCutoff_Hz, 1.0 / dt);
+    std::copy(yf.begin(), yf.end(), y.begin() + static_cast<std::ptrdiff_t>(sg.begin));
+  }
+  return y;
+}
+
 /// A log at 2 ms or faster with positions to 5 um or finer but no speed
 /// column (a CNC that traces its position loop's command and output, and not
 /// the speed it feeds back): the axis's speed is the central difference of
@@ -2736,17 +2766,7 @@ void add_speed_from_position(std::vector<MeasuredRun>& own, const std::vector<Ru
     for (Axis a : out.axes) {
       const auto* x = r.trace.find(col(a, "_mm"));
       if (x == nullptr || r.trace.find(col(a, "_v_mm_s")) != nullptr) continue;
-      // Per segment, the column low-passed (where the segment is long enough).
-      const auto filtered = [&](const std::vector<double>& c) {
-        std::vector<double> y = c;
-        for (const Segment& sg : segs) {
-          if (sg.end < sg.begin + kSpeedFilterRows) continue;
-          const std::vector<double> yf =
-              lowpass(std::span<const double>(c.data() + sg.begin, sg.end - sg.begin), kSpeedCutoff_Hz, 1.0 / dt);
-          std::copy(yf.begin(), yf.end(), y.begin() + static_cast<std::ptrdiff_t>(sg.begin));
-        }
-        return y;
-      };
+      const auto filtered = [&](const std::vector<double>& c) { return lowpass_in_segments(c, segs, dt); };
       const std::vector<double> xf = filtered(*x);
       std::vector<double> v(x->size(), 0.0);
       for (const Segment& sg : segs) {
@@ -2772,6 +2792,288 @@ void add_speed_from_position(std::vector<MeasuredRun>& own, const std::vector<Ru
                                       "position (every {:g} s, to {:g} mm), low-passed at {:g} Hz without phase",
                                       r.dir.string(), fmt::join(derived, ", "), dt, q > 0.0 ? q : 1e-6,
                                       kSpeedCutoff_Hz));
+  }
+}
+
+/// The six columns of the command's law (rebuild_velocity_commands) per run:
+/// e, v_ref, v, Ie, Ix, eps, each filtered alike where the speed was taken
+/// from the position (e and v_ref so filtered also give the filtered command).
+constexpr std::size_t kLawColumns = 6;
+using LawColumns = std::vector<std::array<std::vector<double>, kLawColumns>>;
+LawColumns command_law_columns(const std::vector<MeasuredRun>& own, const std::vector<RunData>& runs, Axis a,
+                               bool filtered) {
+  LawColumns law(own.size());
+  for (std::size_t i = 0; i < own.size(); ++i) {
+    const auto& t = own[i].trace;
+    const auto& ref = t.at(col(a, "_ref_mm"));
+    const auto& x = t.at(col(a, "_mm"));
+    const auto& v = t.at(col(a, "_v_mm_s"));
+    const double dt = own[i].sample_period_s;
+    auto& L = law[i];
+    for (auto& c : L) c.assign(ref.size(), 0.0);
+    for (const Segment& sg : runs[i].segments) {
+      double ie = 0.0, iv = 0.0;
+      for (std::size_t k = sg.begin; k < sg.end; ++k) {
+        const double e = ref[k] - x[k];
+        ie += dt * e;
+        iv += dt * v[k];
+        const double ix = x[k] - x[sg.begin];
+        L[0][k] = e;
+        L[1][k] = k > sg.begin ? (ref[k] - ref[k - 1]) / dt : 0.0;
+        L[2][k] = v[k];
+        L[3][k] = ie;
+        L[4][k] = ix;
+        L[5][k] = iv - ix - 0.5 * dt * v[k];
+      }
+    }
+    if (filtered)
+      for (std::size_t c : {0UL, 1UL, 3UL, 4UL, 5UL}) L[c] = lowpass_in_segments(L[c], runs[i].segments, dt);
+  }
+  return law;
+}
+
+/// The white noise on a logged torque channel over the fitting rows, and
+/// where a torque limit holds it: as TorqueClip, a flat top of over
+/// kClippedRows fitting rows within 2 % and three times the noise of the
+/// largest |torque| (held_from is the |torque| from which a row is held; +inf
+/// where no limit is seen). The limit, not the law, sets those rows.
+struct TorqueTop {
+  double noise_rms{0.0};
+  double held_from{std::numeric_limits<double>::infinity()};
+};
+TorqueTop torque_top(const std::vector<MeasuredRun>& own, const std::vector<RunData>& runs,
+                     const std::string& channel) {
+  TorqueTop top;
+  double T_abs_max = 0.0;
+  std::vector<double> d2;
+  for (std::size_t i = 0; i < own.size(); ++i) {
+    const auto& ch = own[i].trace.at(channel);
+    for (const Segment& sg : runs[i].segments) {
+      const std::size_t end = std::min(sg.end, runs[i].n_fit);
+      for (std::size_t k = sg.begin; k < end; ++k) T_abs_max = std::max(T_abs_max, std::abs(ch[k]));
+      for (std::size_t k = sg.begin + 1; k + 1 < end; ++k) d2.push_back(std::abs(ch[k + 1] - 2.0 * ch[k] + ch[k - 1]));
+    }
+  }
+  top.noise_rms = white_noise_rms(std::move(d2));
+  const double from = 0.98 * T_abs_max - 3.0 * top.noise_rms;
+  std::size_t held = 0;
+  for (std::size_t i = 0; i < own.size(); ++i) {
+    const auto& ch = own[i].trace.at(channel);
+    for (std::size_t k = 0; k < std::min(ch.size(), runs[i].n_fit); ++k) held += std::abs(ch[k]) >= from ? 1 : 0;
+  }
+  if (held >= kClippedRows && from > 0.0) top.held_from = from;
+  return top;
+}
+
+/// The command's law fitted on the fitting rows less their segment's means,
+/// the torque `lag` samples behind the columns, rows a limit holds left out.
+struct CommandLawFit {
+  LsqResult ls;
+  std::size_t lag{0};
+  double T_rms{0.0};
+};
+CommandLawFit fit_command_law(const std::vector<MeasuredRun>& own, const std::vector<RunData>& runs,
+                              const LawColumns& law, const std::string& channel, std::size_t lag,
+                              double held_from) {
+  std::array<std::vector<double>, kLawColumns> X;
+  std::vector<double> T;
+  std::vector<std::size_t> seg_of_row;
+  std::size_t g = 0;
+  for (std::size_t i = 0; i < own.size(); ++i) {
+    const auto& t = own[i].trace;
+    const auto& ch = *filtered_alike(t, channel);
+    const auto& ch_logged = t.at(channel);
+    for (const Segment& sg : runs[i].segments) {
+      const std::size_t end = std::min(sg.end, runs[i].n_fit);
+      if (end < sg.begin + 3 + lag) continue;
+      for (std::size_t k = sg.begin + 2 + lag; k < end; ++k) {
+        if (std::abs(ch_logged[k]) >= held_from) continue;
+        for (std::size_t c = 0; c < kLawColumns; ++c) X[c].push_back(law[i][c][k - lag]);
+        T.push_back(ch[k]);
+        seg_of_row.push_back(g);
+      }
+      ++g;
+    }
+  }
+  // Each segment's means taken off: its constant without a column.
+  std::vector<double> n_seg(g, 0.0);
+  std::vector<std::array<double, kLawColumns + 1>> mean(g, std::array<double, kLawColumns + 1>{});
+  for (std::size_t k = 0; k < T.size(); ++k) {
+    const std::size_t sg = seg_of_row[k];
+    n_seg[sg] += 1.0;
+    for (std::size_t c = 0; c < kLawColumns; ++c) mean[sg][c] += X[c][k];
+    mean[sg][kLawColumns] += T[k];
+  }
+  CommandLawFit lf;
+  lf.lag = lag;
+  double t2 = 0.0;
+  for (std::size_t k = 0; k < T.size(); ++k) {
+    const std::size_t sg = seg_of_row[k];
+    t2 += T[k] * T[k];
+    for (std::size_t c = 0; c < kLawColumns; ++c) X[c][k] -= mean[sg][c] / n_seg[sg];
+    T[k] -= mean[sg][kLawColumns] / n_seg[sg];
+  }
+  std::vector<std::size_t> rows(T.size());
+  std::iota(rows.begin(), rows.end(), std::size_t{0});
+  lf.ls = least_squares({&X[0], &X[1], &X[2], &X[3], &X[4], &X[5]}, T, rows);
+  lf.T_rms = T.empty() ? 0.0 : std::sqrt(t2 / static_cast<double>(T.size()));
+  return lf;
+}
+
+/// Kv and kff for a rebuilt command.
+struct CommandGains {
+  double Kv{0.0}, kff{0.0};
+};
+
+/// The gains the law's coefficients give, as rebuild_velocity_commands says:
+/// the Kv from e first and, with an integral the fit sees, the Kv from Ie
+/// second; none where the checks fail. Where the speed is taken from the
+/// position, eps holds only what the filter and the difference leave, and
+/// its coefficient says nothing of Ki.
+std::vector<CommandGains> command_gains(const CommandLawFit& f, double dt, bool speed_logged, double noise_rms) {
+  const auto& th = f.ls.theta;
+  const auto& se = f.ls.stderr_theta;
+  const auto less_noise = [&](double rms) { return std::sqrt(std::max(rms * rms - noise_rms * noise_rms, 0.0)); };
+  if (!(less_noise(f.ls.residual_rms) < 0.3 * less_noise(f.T_rms))) return {};
+  // Kvp, kff and Ki together (Kvp's coefficient holds Ki dt / 2).
+  const bool integral = std::abs(th[4]) > 3.0 * se[4] || (speed_logged && std::abs(th[5]) > 3.0 * se[5]);
+  double Kvp = -th[2], kff = th[1] / Kvp, Ki = 0.0;
+  for (int it = 0; integral && it < 50; ++it) {
+    if (std::abs(kff - 1.0) <= 0.1 && !speed_logged) return {};
+    Ki = std::abs(kff - 1.0) > 0.1 ? th[4] / (kff - 1.0) : -th[5];
+    Kvp = -th[2] - 0.5 * Ki * dt;
+    kff = th[1] / Kvp;
+  }
+  if (!(Kvp > 0.0 && kff >= 0.0 && kff <= 1.5 && Ki >= 0.0)) return {};
+  std::vector<CommandGains> gains{{(th[0] - Ki * kff) / Kvp, kff}};
+  if (!(gains.front().Kv > 0.0)) return {};
+  if (integral) {
+    // Within 25 %, or within three standard errors of the coefficient the
+    // second value comes from (eps's is the noisier: under 0.2 N m of noise
+    // on the torque, Ki 2118 +- 224 from it for 1571).
+    const auto near = [](double p, double q, double se_q) {
+      return std::abs(p - q) <= std::max(0.25 * std::max(std::abs(p), std::abs(q)), 3.0 * se_q);
+    };
+    const CommandGains from_integral{th[3] / Ki, kff};
+    if (!(Ki > 0.0 && (!speed_logged || near(Ki, -th[5], se[5])) && from_integral.Kv > 0.0 &&
+          near(gains.front().Kv, from_integral.Kv, se[3] / Ki)))
+      return {};
+    gains.push_back(from_integral);
+  }
+  return gains;
+}
+
+/// The rebuilt command written into the runs (and filtered alike beside it
+/// where the speed was taken from the position), replacing one written before.
+void write_rebuilt_command(std::vector<MeasuredRun>& own, const std::vector<RunData>& runs, const LawColumns& law,
+                           Axis a, bool filtered, const CommandGains& g) {
+  const std::string name = rebuilt(col(a, "_vcmd_mm_s"));
+  for (std::size_t i = 0; i < own.size(); ++i) {
+    auto& t = own[i].trace;
+    std::vector<std::pair<std::string, std::vector<double>>> cols;
+    {
+      const auto& ref = t.at(col(a, "_ref_mm"));
+      const auto& x = t.at(col(a, "_mm"));
+      std::vector<double> c(ref.size(), 0.0);
+      for (const Segment& sg : runs[i].segments)
+        for (std::size_t k = sg.begin; k < sg.end; ++k)
+          c[k] = g.Kv * (ref[k] - x[k]) + g.kff * (k > sg.begin ? (ref[k] - ref[k - 1]) / own[i].sample_period_s : 0.0);
+      cols.emplace_back(name, std::move(c));
+    }
+    if (filtered) {
+      std::vector<double> cf(law[i][0].size());
+      for (std::size_t k = 0; k < cf.size(); ++k) cf[k] = g.Kv * law[i][0][k] + g.kff * law[i][1][k];
+      cols.emplace_back(lowpassed(name), std::move(cf));
+    }
+    for (auto& [n, values] : cols) {
+      const auto it = std::find(t.names.begin(), t.names.end(), n);
+      if (it == t.names.end()) {
+        t.names.push_back(n);
+        t.columns.push_back(std::move(values));
+      } else {
+        t.columns[static_cast<std::size_t>(it - t.names.begin())] = std::move(values);
+      }
+    }
+  }
+}
+
+/// The cascade's position loop where a log at 2 ms or faster has the axis's
+/// speed (logged, or taken from the position) and a torque channel but no
+/// velocity command (a CNC whose trace leaves the position loop's output
+/// out, or holds it dead). The velocity loop's PI acts on vcmd - v with
+/// vcmd = Kv e + kff v_ref, integrating as the twin's law does
+/// (I[k] = I[k-1] + dt (vcmd - v)[k]), so with the torque L samples behind:
+///   T = Kvp (Kv e + kff v_ref - v) + Ki (Kv Ie + kff Iv_ref - Iv) + c,
+/// I the sums times dt within a segment, c per segment. Iv_ref = Ix + e up
+/// to a constant (Ix: the position less its value where the segment starts),
+/// and Iv = Ix + (dt / 2) v + eps, where eps is what the logged speed's sum
+/// and the position disagree by (backlash or a pitch error between motor and
+/// table, the speed's noise; a few counts where they agree). So
+///   T = (Kvp Kv + Ki kff) e + Kvp kff v_ref - (Kvp + Ki dt / 2) v
+///       + Ki Kv Ie + Ki (kff - 1) Ix - Ki eps + c,
+/// linear in six columns that are not near one another (the sums of the
+/// reference and of the speed are, by the position, which is why the law is
+/// not fitted on them as they stand: the normal equations are then singular
+/// to 1e-11). The coefficients give Kvp, kff and Ki (from Ix, or from eps
+/// where kff is near 1), and Kv twice: from Ie and from e. Fitted on the
+/// fitting rows less their segment's means, at the lag L (0 to 10 ms) that
+/// fits best. The command is rebuilt where the law explains most of the
+/// torque (as identify_velocity_loop asks), Kvp and Kv are positive, kff is
+/// within 0 to 1.5, and, with an integral the fit sees, both Ki (within 25 %)
+/// and both Kv (within 25 %) agree; of the two Kv, the one whose command the
+/// PI law (fit_velocity_loop) fits better. The position alone shows only the
+/// lag (1 - kff) / Kv: how the error settles after a change of speed tells
+/// Kv from kff, but there the velocity loop's own error is as large (on the
+/// position and speed of the truth runs of the tests, Kv came out at 14 to
+/// 19 for 45), while the torque carries the command itself.
+void rebuild_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<RunData>& runs,
+                               DataCalibration& out) {
+  if (own.empty() || !(own.front().sample_period_s <= 2e-3 + 1e-12)) return;
+  for (Axis a : out.axes) {
+    const std::string channel = torque_channel(own.front(), a).column;
+    bool usable = !channel.empty();
+    for (const auto& r : own)
+      usable = usable && r.trace.find(col(a, "_vcmd_mm_s")) == nullptr && r.trace.find(channel) != nullptr &&
+               r.trace.find(col(a, "_v_mm_s")) != nullptr && r.trace.find(col(a, "_mm")) != nullptr;
+    if (!usable) continue;
+    const bool filtered = own.front().trace.find(lowpassed(channel)) != nullptr;
+    const LawColumns law = command_law_columns(own, runs, a, filtered);
+    const TorqueTop top = torque_top(own, runs, channel);
+    const auto max_lag =
+        static_cast<std::size_t>(std::clamp(std::lround(0.01 / own.front().sample_period_s), 1L, 10L));
+    CommandLawFit best = fit_command_law(own, runs, law, channel, 0, top.held_from);
+    for (std::size_t lag = 1; lag <= max_lag; ++lag) {
+      CommandLawFit f = fit_command_law(own, runs, law, channel, lag, top.held_from);
+      if (f.ls.ok && (!best.ls.ok || f.ls.residual_rms < best.ls.residual_rms)) best = std::move(f);
+    }
+    if (!best.ls.ok) continue;
+    const std::vector<CommandGains> gains =
+        command_gains(best, own.front().sample_period_s, !filtered, top.noise_rms);
+    if (gains.empty()) continue;
+    // Of two, the one whose command the PI law fits better.
+    std::size_t chosen = 0;
+    if (gains.size() == 2) {
+      double best_law = 1e300;
+      for (std::size_t j = 0; j < 2; ++j) {
+        write_rebuilt_command(own, runs, law, a, filtered, gains[j]);
+        const VelocityLoopFit vl = fit_velocity_loop(runs, a, channel, best.lag);
+        if (vl.ls.ok && vl.ls.residual_rms < best_law) {
+          best_law = vl.ls.residual_rms;
+          chosen = j;
+        }
+      }
+    }
+    write_rebuilt_command(own, runs, law, a, filtered, gains[chosen]);
+    out.notes.push_back(fmt::format(
+        "axis {}: no velocity command logged: rebuilt from the logged torque, position and speed through the "
+        "velocity loop's PI law (residual {:.3g} of a torque RMS {:.3g}, the torque {} samples behind the law): "
+        "Kv {:.4g} 1/s from {}{}, velocity feedforward {:.3g}",
+        axis_name(a), best.ls.residual_rms, best.T_rms, best.lag, gains[chosen].Kv,
+        chosen == 0 ? "the proportional part" : "the integral part",
+        gains.size() == 2 ? fmt::format(" ({:.4g} from the {})", gains[1 - chosen].Kv,
+                                        chosen == 0 ? "integral part" : "proportional part")
+                          : std::string(),
+        gains[chosen].kff));
   }
 }
 
@@ -2847,6 +3149,7 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
                                       "and the machine logs it with torque_sign -1",
                                       axis_name(a), torque_channel(fit.front(), a).column));
     }
+  rebuild_velocity_commands(fit_own, runs, out);
   const std::vector<MeasuredRun>& validate_own = validate_flipped.empty() ? validate : validate_flipped;
   out.identified = identify_machine(AxisFit{runs, Fitter{runs}, r0, Ts}, out);
   out.final_machine = out.identified;

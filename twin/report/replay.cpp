@@ -69,7 +69,8 @@ void find_axes(MeasuredRun& run) {
                                 axis_name(a), axis_name(a)));
 }
 
-// A u or current column constant over the whole run while its axis moves was
+// A channel of an axis (its position, u, current, torque, velocity command
+// or speed) constant over the whole run while the axis's command moves was
 // not recorded: left out, and said.
 void drop_unrecorded_channels(MeasuredRun& run) {
   for (Axis a : run.axes) {
@@ -77,7 +78,8 @@ void drop_unrecorded_channels(MeasuredRun& run) {
     const auto& ref = run.trace.at(n + "_ref_mm");
     const auto [rlo, rhi] = std::minmax_element(ref.begin(), ref.end());
     if (*rlo == *rhi) continue;  // a still axis may well hold u and current constant
-    for (const std::string& col : {n + "_u_V", n + "_i_A"}) {
+    for (const std::string& col : {n + "_mm", n + "_u_V", n + "_i_A", n + "_torque_Nm", n + "_torque_raw",
+                                   n + "_vcmd_mm_s", n + "_v_mm_s"}) {
       const auto it = std::find(run.trace.names.begin(), run.trace.names.end(), col);
       if (it == run.trace.names.end()) continue;
       const auto c = static_cast<std::size_t>(it - run.trace.names.begin());
