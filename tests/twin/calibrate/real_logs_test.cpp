@@ -40,6 +40,18 @@ bool has_note(const DataCalibration& r, const std::string& text) {
                      [&](const std::string& n) { return n.find(text) != std::string::npos; });
 }
 
+/// The held-out machine's check on the one validation run (another program,
+/// never fitted): the following error within 1 % NRMS, and the torque better
+/// than the rigid-body regression fitted on the same rows.
+void expect_held_out_check(const DataCalibration& r) {
+  ASSERT_EQ(r.validation_runs.size(), 1u);
+  const auto& e = r.validation_runs[0].calibrated.nrms;
+  ASSERT_TRUE(e.count("x_err_mm"));
+  EXPECT_LT(e.at("x_err_mm"), 0.01);
+  ASSERT_TRUE(e.count("x_torque_raw"));
+  EXPECT_LT(e.at("x_torque_raw"), r.validation_runs[0].regression.nrms.at("x_torque_raw"));
+}
+
 MeasuredRun run_from_csv(const std::string& name, const std::string& csv) {
   const auto d = work(name);
   std::ofstream(d / "meta.json") << R"({"machine": null, "axes": ["x"], "sample_period_s": 0.1})";
@@ -179,14 +191,9 @@ TEST(RealLogs, CascadeAtOneKilohertzWithRawTorque) {
   // direction by half that, and the held-out replay keeps the two.
   EXPECT_FALSE(ax.one_coulomb_level) << ax.coulomb_choice;
   EXPECT_THAT(ax.coulomb_choice, HasSubstr("a Coulomb level per direction"));
-  // Another program, never fitted: the following error within 1 % NRMS.
+  expect_held_out_check(r);
   ASSERT_EQ(r.validation_runs.size(), 1u);
   const auto& e = r.validation_runs[0].calibrated.nrms;
-  ASSERT_TRUE(e.count("x_err_mm"));
-  EXPECT_LT(e.at("x_err_mm"), 0.01);
-  // And its torque better than the rigid-body regression fitted on the same rows.
-  ASSERT_TRUE(e.count("x_torque_raw"));
-  EXPECT_LT(e.at("x_torque_raw"), r.validation_runs[0].regression.nrms.at("x_torque_raw"));
   // The logged velocity command is a channel too (spec/interfaces.md): the
   // twin's, from the same P law on its own following error, within 2 % NRMS
   // (the velocity feedforward carries most of it; the rest is Kv times an
@@ -326,14 +333,10 @@ TEST(RealLogs, ADeadVelocityCommandIsRebuiltFromTheTorque) {
     EXPECT_NEAR(ax.gains.kff, 0.6, 0.012) << ax.loop_source;
     EXPECT_THAT(ax.loop_source, HasSubstr("rebuilt from the logged torque"));
     EXPECT_TRUE(ax.velocity_loop_from_data) << ax.loop_source;
-    ASSERT_EQ(r.validation_runs.size(), 1u);
-    const auto& e = r.validation_runs[0].calibrated.nrms;
-    ASSERT_TRUE(e.count("x_err_mm"));
-    EXPECT_LT(e.at("x_err_mm"), 0.01);
-    ASSERT_TRUE(e.count("x_torque_raw"));
-    EXPECT_LT(e.at("x_torque_raw"), r.validation_runs[0].regression.nrms.at("x_torque_raw"));
+    expect_held_out_check(r);
     // The command the twin rebuilt is not a logged channel: never compared.
-    EXPECT_FALSE(e.count("x_vcmd_mm_s"));
+    ASSERT_EQ(r.validation_runs.size(), 1u);
+    EXPECT_FALSE(r.validation_runs[0].calibrated.nrms.count("x_vcmd_mm_s"));
     EXPECT_FALSE(r.fit_runs[0].calibrated.nrms.count("x_vcmd_mm_s"));
   }
 }
@@ -403,11 +406,7 @@ TEST(RealLogs, GapsInTheClockAreSegments) {
   EXPECT_NEAR(ax.gains.kff, 0.6, 0.01);
   EXPECT_NEAR(ax.gains.Kvp_torque_s_per_rad, 0.5 / sp.plant.rg * 40.0, 0.05 * 0.5 / sp.plant.rg * 40.0);
   EXPECT_NEAR(ax.gains.Tn_s, 0.008, 0.0008);
-  ASSERT_EQ(r.validation_runs.size(), 1u);
-  const auto& e = r.validation_runs[0].calibrated.nrms;
-  ASSERT_TRUE(e.count("x_err_mm"));
-  EXPECT_LT(e.at("x_err_mm"), 0.01);
-  EXPECT_LT(e.at("x_torque_raw"), r.validation_runs[0].regression.nrms.at("x_torque_raw"));
+  expect_held_out_check(r);
   ASSERT_EQ(r.fit_runs.size(), 1u);
   EXPECT_LT(r.fit_runs[0].calibrated.nrms.at("x_err_mm"), 0.01);
   // The twin's own trace holds every logged row, at its logged time.
