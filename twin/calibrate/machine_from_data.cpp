@@ -35,15 +35,19 @@ const std::vector<double>* filtered_alike(const io::TraceTable& t, const std::st
   return f ? f : t.find(column);
 }
 
-/// A velocity command rebuilt from the torque where the log has none
-/// (rebuild_velocity_commands): a column of the calibration's own copy of a
-/// run under this name, so that it is never compared as a logged channel.
-std::string rebuilt(const std::string& column) { return column + "@rebuilt"; }
+/// A channel the identification reads in place of the logged one: a
+/// velocity command rebuilt from the torque where the log has none
+/// (rebuild_velocity_commands), or the logged one moved to the rows it
+/// belongs to (align_velocity_commands). A column of the calibration's own
+/// copy of a run under this name, so that it is never compared as a logged
+/// channel (the errors compare the log as it is).
+std::string for_identification(const std::string& column) { return column + "@identification"; }
 
-/// The velocity command the identification reads: as logged, else as rebuilt.
+/// The velocity command the identification reads: as rebuilt or aligned,
+/// else as logged.
 std::string velocity_command_column(const io::TraceTable& t, Axis a) {
   const std::string logged = col(a, "_vcmd_mm_s");
-  return t.find(logged) != nullptr ? logged : rebuilt(logged);
+  return t.find(for_identification(logged)) != nullptr ? for_identification(logged) : logged;
 }
 
 bool is_multiple(double x, double q) {
@@ -1961,8 +1965,8 @@ AxisFromData identify_axis_from_data(const AxisFit& f, Axis a, sim::MachineDefin
   ax.axis = a;
   ax.channel = torque_channel(f.r0, a);
   // A velocity command logged, or rebuilt from the torque where none is.
-  const bool have_vcmd =
-      all_runs_log(f.runs, col(a, "_vcmd_mm_s")) || all_runs_log(f.runs, rebuilt(col(a, "_vcmd_mm_s")));
+  const bool have_vcmd = all_runs_log(f.runs, col(a, "_vcmd_mm_s")) ||
+                         all_runs_log(f.runs, for_identification(col(a, "_vcmd_mm_s")));
   const bool have_x = all_runs_log(f.runs, col(a, "_mm"));
   identify_position_loop(f, ax, have_vcmd, have_x);
   if (!identify_drive_in_channel(f, ax, out)) return ax;
@@ -2795,6 +2799,95 @@ void add_speed_from_position(std::vector<MeasuredRun>& own, const std::vector<Ru
   }
 }
 
+/// A column of a run's own copy set (added, or replacing one of that name).
+void set_column(io::TraceTable& t, const std::string& name, std::vector<double> values) {
+  const auto it = std::find(t.names.begin(), t.names.end(), name);
+  if (it == t.names.end()) {
+    t.names.push_back(name);
+    t.columns.push_back(std::move(values));
+  } else {
+    t.columns[static_cast<std::size_t>(it - t.names.begin())] = std::move(values);
+  }
+}
+
+/// Rows a logged channel may sit off the position it is computed from.
+constexpr int kMaxSkewRows = 3;
+
+/// A logged velocity command that sits rows off the following error it is
+/// computed from (a trace whose channels are sampled at different points of
+/// the loop's cycle, or by different loggers): at 1 kHz, one row late put the
+/// cascade sweep's validation tracking at 0.026 to 0.11 NRMS, every law fitted
+/// on it being fitted across the skew. On logs at 10 ms or faster, the P law
+/// vcmd = Kv e + kff v_ref is fitted with the command moved by -3 to 3 rows
+/// (fitting rows, within segments); where a move fits with under half the
+/// residual of the command as logged, the moved command is what the
+/// identification reads (for_identification), said in a note. The errors
+/// still compare the log as it is.
+void align_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<RunData>& runs, DataCalibration& out) {
+  if (own.empty() || !(own.front().sample_period_s <= 1e-2 + 1e-12)) return;
+  for (Axis a : out.axes) {
+    const std::string vcmd = col(a, "_vcmd_mm_s");
+    bool usable = true;
+    for (const auto& r : own) usable = usable && r.trace.find(vcmd) != nullptr && r.trace.find(col(a, "_mm")) != nullptr;
+    if (!usable) continue;
+    // The P law's residual with the command taken `skew` rows later.
+    const auto residual = [&](int skew) {
+      std::vector<double> e, vr, vc;
+      for (std::size_t i = 0; i < own.size(); ++i) {
+        const auto& t = own[i].trace;
+        const auto& ref = t.at(col(a, "_ref_mm"));
+        const auto& x = t.at(col(a, "_mm"));
+        const auto& c = t.at(vcmd);
+        for (const Segment& sg : runs[i].segments) {
+          const std::size_t end = std::min(sg.end, runs[i].n_fit);
+          for (std::size_t k = sg.begin + 1 + kMaxSkewRows; k + kMaxSkewRows < end; ++k) {
+            e.push_back(ref[k] - x[k]);
+            vr.push_back((ref[k] - ref[k - 1]) / own[i].sample_period_s);
+            vc.push_back(c[static_cast<std::size_t>(static_cast<std::ptrdiff_t>(k) + skew)]);
+          }
+        }
+      }
+      std::vector<std::size_t> rows(vc.size());
+      std::iota(rows.begin(), rows.end(), std::size_t{0});
+      const LsqResult ls = least_squares({&e, &vr}, vc, rows);
+      return ls.ok ? ls.residual_rms : std::numeric_limits<double>::infinity();
+    };
+    const double as_logged = residual(0);
+    int best = 0;
+    double best_res = as_logged;
+    for (int skew = -kMaxSkewRows; skew <= kMaxSkewRows; ++skew) {
+      if (skew == 0) continue;
+      const double r = residual(skew);
+      if (r < best_res) {
+        best_res = r;
+        best = skew;
+      }
+    }
+    if (best == 0 || !(best_res < 0.5 * as_logged)) continue;
+    for (std::size_t i = 0; i < own.size(); ++i) {
+      auto& t = own[i].trace;
+      for (const std::string& name : {vcmd, lowpassed(vcmd)}) {
+        const auto* c = t.find(name);
+        if (c == nullptr) continue;
+        std::vector<double> moved(*c);
+        for (const Segment& sg : runs[i].segments)
+          for (std::size_t k = sg.begin; k < sg.end; ++k) {
+            const auto j = std::clamp<std::ptrdiff_t>(static_cast<std::ptrdiff_t>(k) + best,
+                                                      static_cast<std::ptrdiff_t>(sg.begin),
+                                                      static_cast<std::ptrdiff_t>(sg.end) - 1);
+            moved[k] = (*c)[static_cast<std::size_t>(j)];
+          }
+        set_column(t, name == vcmd ? for_identification(vcmd) : lowpassed(for_identification(vcmd)), std::move(moved));
+      }
+    }
+    out.notes.push_back(fmt::format(
+        "axis {}: {} is logged {} {} {} the following error it is computed from (the P law's residual {:.3g} mm/s "
+        "there, {:.3g} as logged): identified on it moved back into line; the errors compare it as logged",
+        axis_name(a), vcmd, std::abs(best), std::abs(best) == 1 ? "row" : "rows", best > 0 ? "after" : "before",
+        best_res, as_logged));
+  }
+}
+
 /// The six columns of the command's law (rebuild_velocity_commands) per run:
 /// e, v_ref, v, Ie, Ix, eps, each filtered alike where the speed was taken
 /// from the position (e and v_ref so filtered also give the filtered command).
@@ -2967,7 +3060,7 @@ std::vector<CommandGains> command_gains(const CommandLawFit& f, double dt, bool 
 /// where the speed was taken from the position), replacing one written before.
 void write_rebuilt_command(std::vector<MeasuredRun>& own, const std::vector<RunData>& runs, const LawColumns& law,
                            Axis a, bool filtered, const CommandGains& g) {
-  const std::string name = rebuilt(col(a, "_vcmd_mm_s"));
+  const std::string name = for_identification(col(a, "_vcmd_mm_s"));
   for (std::size_t i = 0; i < own.size(); ++i) {
     auto& t = own[i].trace;
     std::vector<std::pair<std::string, std::vector<double>>> cols;
@@ -2985,15 +3078,7 @@ void write_rebuilt_command(std::vector<MeasuredRun>& own, const std::vector<RunD
       for (std::size_t k = 0; k < cf.size(); ++k) cf[k] = g.Kv * law[i][0][k] + g.kff * law[i][1][k];
       cols.emplace_back(lowpassed(name), std::move(cf));
     }
-    for (auto& [n, values] : cols) {
-      const auto it = std::find(t.names.begin(), t.names.end(), n);
-      if (it == t.names.end()) {
-        t.names.push_back(n);
-        t.columns.push_back(std::move(values));
-      } else {
-        t.columns[static_cast<std::size_t>(it - t.names.begin())] = std::move(values);
-      }
-    }
+    for (auto& [n, values] : cols) set_column(t, n, std::move(values));
   }
 }
 
@@ -3149,6 +3234,7 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
                                       "and the machine logs it with torque_sign -1",
                                       axis_name(a), torque_channel(fit.front(), a).column));
     }
+  align_velocity_commands(fit_own, runs, out);
   rebuild_velocity_commands(fit_own, runs, out);
   const std::vector<MeasuredRun>& validate_own = validate_flipped.empty() ? validate : validate_flipped;
   out.identified = identify_machine(AxisFit{runs, Fitter{runs}, r0, Ts}, out);
