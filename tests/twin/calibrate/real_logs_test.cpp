@@ -53,6 +53,19 @@ void expect_held_out_check(const DataCalibration& r) {
   EXPECT_LT(e.at("x_torque_raw"), r.validation_runs[0].regression.nrms.at("x_torque_raw"));
 }
 
+/// The truth's cascade gains (cascade_run_spec: Kv 45 1/s, kff 0.6, Kvp
+/// 0.5 N m s/rad times the raw unit's 40 per N m over rg, Tn 8 ms) where the
+/// log shows both loops: Kv and kff to 1 % (a regression on the logged loop
+/// signals, exact but for the log's rounding and the encoder's 0.5 um), Kvp
+/// to 5 % and Tn to 10 %.
+void expect_truth_gains(const AxisFromData& ax, const truth::RunSpec& sp) {
+  EXPECT_NEAR(ax.gains.Kv_per_s, 45.0, 0.45);
+  EXPECT_NEAR(ax.gains.kff, 0.6, 0.01);
+  EXPECT_TRUE(ax.velocity_loop_from_data) << ax.loop_source;
+  EXPECT_NEAR(ax.gains.Kvp_torque_s_per_rad, 0.5 / sp.plant.rg * 40.0, 0.05 * 0.5 / sp.plant.rg * 40.0);
+  EXPECT_NEAR(ax.gains.Tn_s, 0.008, 0.0008);
+}
+
 MeasuredRun run_from_csv(const std::string& name, const std::string& csv) {
   const auto d = work(name);
   std::ofstream(d / "meta.json") << R"({"machine": null, "axes": ["x"], "sample_period_s": 0.1})";
@@ -175,14 +188,8 @@ TEST(RealLogs, CascadeAtOneKilohertzWithRawTorque) {
   const AxisFromData& ax = r.axis[0];
   ASSERT_TRUE(ax.identified) << ax.note;
   EXPECT_EQ(ax.channel.column, "x_torque_raw");
-  // The gains: a regression on the logged loop signals, exact but for the
-  // log's rounding and the encoder's quantisation (0.5 um): 1 %.
-  EXPECT_NEAR(ax.gains.Kv_per_s, 45.0, 0.45);
-  EXPECT_NEAR(ax.gains.kff, 0.6, 0.01);
-  EXPECT_TRUE(ax.velocity_loop_from_data) << ax.loop_source;
-  // Kvp in raw per mm/s (rg = 1 mm/rad in the identified drive): 0.5 N m s/rad / rg * 40.
-  EXPECT_NEAR(ax.gains.Kvp_torque_s_per_rad, 0.5 / sp.plant.rg * 40.0, 0.05 * 0.5 / sp.plant.rg * 40.0);
-  EXPECT_NEAR(ax.gains.Tn_s, 0.008, 0.0008);
+  // Kvp in raw per mm/s (rg = 1 mm/rad in the identified drive).
+  expect_truth_gains(ax, sp);
   // Friction in the log's unit: moving levels Tc + load, 10 % (the fit
   // sees the truth's B and J through a 1 kHz log of the commanded motion).
   const double scale = sp.cascade.raw_per_Nm;
@@ -411,11 +418,7 @@ TEST(RealLogs, ALogSlowerThanTheLoopIsFittedAtTheLoopsPeriod) {
     ASSERT_EQ(r.axis.size(), 1u);
     const AxisFromData& ax = r.axis[0];
     ASSERT_TRUE(ax.identified) << ax.note;
-    EXPECT_NEAR(ax.gains.Kv_per_s, 45.0, 0.45);
-    EXPECT_NEAR(ax.gains.kff, 0.6, 0.01);
-    EXPECT_TRUE(ax.velocity_loop_from_data) << ax.loop_source;
-    EXPECT_NEAR(ax.gains.Kvp_torque_s_per_rad, 0.5 / sp.plant.rg * 40.0, 0.05 * 0.5 / sp.plant.rg * 40.0);
-    EXPECT_NEAR(ax.gains.Tn_s, 0.008, 0.0008);
+    expect_truth_gains(ax, sp);
     expect_held_out_check(r);
   }
 }
@@ -481,10 +484,7 @@ TEST(RealLogs, GapsInTheClockAreSegments) {
   ASSERT_EQ(r.axis.size(), 1u);
   const AxisFromData& ax = r.axis[0];
   ASSERT_TRUE(ax.identified) << ax.note;
-  EXPECT_NEAR(ax.gains.Kv_per_s, 45.0, 0.45);
-  EXPECT_NEAR(ax.gains.kff, 0.6, 0.01);
-  EXPECT_NEAR(ax.gains.Kvp_torque_s_per_rad, 0.5 / sp.plant.rg * 40.0, 0.05 * 0.5 / sp.plant.rg * 40.0);
-  EXPECT_NEAR(ax.gains.Tn_s, 0.008, 0.0008);
+  expect_truth_gains(ax, sp);
   expect_held_out_check(r);
   ASSERT_EQ(r.fit_runs.size(), 1u);
   EXPECT_LT(r.fit_runs[0].calibrated.nrms.at("x_err_mm"), 0.01);
