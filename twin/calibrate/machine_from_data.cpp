@@ -75,6 +75,25 @@ std::vector<double> loop_reference_speed(const std::vector<double>& ref, const s
   return vr;
 }
 
+/// The speed taken from the position: its low-pass, and the shortest segment
+/// it is applied to (a shorter one is differentiated as logged).
+constexpr double kSpeedCutoff_Hz = 50.0;
+constexpr std::size_t kSpeedFilterRows = 64;
+
+/// Per segment, a column low-passed at kSpeedCutoff_Hz without phase (where
+/// the segment is long enough; a shorter one as logged).
+std::vector<double> lowpass_in_segments(const std::vector<double>& c, const std::vector<Segment>& segs, double dt,
+                                        double cutoff_Hz = kSpeedCutoff_Hz) {
+  std::vector<double> y = c;
+  for (const Segment& sg : segs) {
+    if (sg.end < sg.begin + kSpeedFilterRows) continue;
+    const std::vector<double> yf =
+        lowpass(std::span<const double>(c.data() + sg.begin, sg.end - sg.begin), cutoff_Hz, 1.0 / dt);
+    std::copy(yf.begin(), yf.end(), y.begin() + static_cast<std::ptrdiff_t>(sg.begin));
+  }
+  return y;
+}
+
 bool is_multiple(double x, double q) {
   const double r = x / q;
   return std::abs(r - std::round(r)) < 1e-6 * std::max(1.0, std::abs(r)) + 1e-9;
@@ -188,7 +207,22 @@ RunData prepare_run(const MeasuredRun& run, const std::vector<Axis>& axes, const
   if (!seg_note.empty()) notes.push_back(fmt::format("{}: {}", run.dir.string(), seg_note));
   d.interior = interior_rows(d.n, d.segments);
   d.smooth = std::make_shared<MeasuredRun>(run);
-  if (rounding.kind != PositionRounding::Kind::kNone && rounding.quantum_mm > 0.005) {
+  // A log at 2 ms or faster rounded coarser than 1 um: several quanta a row,
+  // and the staircase's rebuild keeps the rows themselves there, whose steps
+  // the replayed loop's velocity feedforward turns into torque (at 10 um and
+  // 1 kHz, kff times 10 mm/s a row: the cascade sweep's runs validated at a
+  // torque error near 1). Low-passed without phase at the identification's
+  // 50 Hz instead (torque 0.05 to 0.15 there; 25 to 200 Hz moved the
+  // tracking error by under 5 %, and 50 Hz gave the lowest torque error).
+  const bool fast = run.sample_period_s <= 2e-3 + 1e-12;
+  if (fast && rounding.kind != PositionRounding::Kind::kNone && rounding.quantum_mm > 0.001 + 1e-12) {
+    for (Axis a : axes) {
+      const std::string name = col(a, "_ref_mm");
+      auto it = std::find(d.smooth->trace.names.begin(), d.smooth->trace.names.end(), name);
+      auto& dst = d.smooth->trace.columns[static_cast<std::size_t>(it - d.smooth->trace.names.begin())];
+      dst = lowpass_in_segments(dst, d.segments, run.sample_period_s);
+    }
+  } else if (rounding.kind != PositionRounding::Kind::kNone && rounding.quantum_mm > 0.005) {
     const auto& t = run.trace.at("t_s");
     for (Axis a : axes) {
       const std::string name = col(a, "_ref_mm");
@@ -383,10 +417,13 @@ std::string PositionRounding::describe() const {
   return "positions logged at full precision";
 }
 
-PositionRounding detect_rounding(const MeasuredRun& run) {
+namespace {
+
+/// The coarsest rounding the columns `suffixes` of every axis agree with.
+PositionRounding detect_rounding_of(const MeasuredRun& run, std::initializer_list<const char*> suffixes) {
   std::vector<const std::vector<double>*> cols;
   for (Axis a : run.axes)
-    for (const char* s : {"_ref_mm", "_mm"})
+    for (const char* s : suffixes)
       if (const auto* c = run.trace.find(col(a, s))) cols.push_back(c);
   PositionRounding r;
   double max_abs = 0.0;
@@ -421,6 +458,10 @@ PositionRounding detect_rounding(const MeasuredRun& run) {
   }
   return r;
 }
+
+}  // namespace
+
+PositionRounding detect_rounding(const MeasuredRun& run) { return detect_rounding_of(run, {"_ref_mm", "_mm"}); }
 
 std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, std::optional<double> v_max_mm_per_s,
                                    std::string* note) {
@@ -1627,18 +1668,36 @@ void check_no_runaway(const MeasuredRun& r) {
   }
 }
 
-/// Rounding: the coarsest all fitting runs agree with.
+/// Rounding: the coarsest all fitting runs agree with. It is the log's, not
+/// the encoder's, where it is coarser than 10 um, or coarser than 1 um with
+/// the commanded positions rounded alike: an encoder quantises the position
+/// it measures, not the command the interpolator computes. (Taken as a 10 um
+/// encoder, a 1 kHz cascade log rounded to 0.01 mm was replayed on a loop
+/// that hunted by counts of 10 um: the cascade sweep's runs then validated at
+/// 0.066 to 0.072 tracking NRMS and a torque error near 1.)
 void choose_rounding(const std::vector<MeasuredRun>& fit, DataCalibration& out) {
   out.rounding = detect_rounding(fit.front());
   for (std::size_t i = 1; i < fit.size(); ++i) {
     const PositionRounding ri = detect_rounding(fit[i]);
     if (ri.quantum_mm > out.rounding.quantum_mm) out.rounding = ri;
   }
-  out.notes.push_back(out.rounding.describe() + (out.rounding.quantum_mm > 0.01
-                                                     ? ": a display rounding, not the servo's encoder; the twin's "
-                                                       "loop closes on a 1 um encoder and its logged positions are "
-                                                       "rounded as the log's"
-                                                     : ": used as the replay's encoder"));
+  bool commands_alike = true;
+  for (const auto& r : fit)
+    commands_alike = commands_alike && detect_rounding_of(r, {"_ref_mm"}).quantum_mm >= out.rounding.quantum_mm;
+  out.display_rounding = out.rounding.kind == PositionRounding::Kind::kSignificant ||
+                         out.rounding.quantum_mm > 0.01 + 1e-12 ||
+                         (out.rounding.quantum_mm > 0.001 + 1e-12 && commands_alike);
+  out.notes.push_back(out.rounding.describe() +
+                      (out.display_rounding
+                           ? std::string(": the log's rounding, not the servo's encoder (") +
+                                 (out.rounding.quantum_mm > 0.01 + 1e-12 ||
+                                          out.rounding.kind == PositionRounding::Kind::kSignificant
+                                      ? "coarser than an encoder's count"
+                                      : "the commanded positions are rounded alike, and an encoder does not round "
+                                        "the command") +
+                                 "); the twin's loop closes on a 1 um encoder and its logged positions are rounded "
+                                 "as the log's"
+                           : std::string(": used as the replay's encoder")));
 }
 
 /// The loop period the twin replays at, said in a note.
@@ -1664,6 +1723,7 @@ struct AxisFit {
   const Fitter fitter;
   const MeasuredRun& r0;
   double Ts{0.0};
+  double position_quantum_mm{0.0};  ///< the rounding of the logged positions (0: none seen)
 };
 
 bool all_runs_log(const std::vector<RunData>& runs, const std::string& column) {
@@ -1678,17 +1738,35 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
   const Axis a = ax.axis;
   std::vector<double> e, vr, vc;
   std::vector<std::size_t> rows;
-  // The law's own speed: the backward difference of the reference over a period.
-  std::vector<std::vector<double>> speed;
-  for (const auto& rd : f.runs)
-    speed.push_back(loop_reference_speed(rd.run->trace.at(col(a, "_ref_mm")), rd.segments,
-                                         rd.run->sample_period_s, f.Ts));
+  // The law's own speed: the backward difference of the reference over a
+  // period, of the reference as rebuilt from a coarse rounding's staircase
+  // (RunData::smooth).
+  // Positions rounded coarser than 1 um on a log at 2 ms or faster: the
+  // rounding's steps are noise on the error and on that speed, which a
+  // regression takes for signal (Kv 87 and kff 0.23 for 45 and 0.6 at 10 um
+  // and 1 kHz). The law is linear, so all three columns are low-passed alike
+  // (zero phase, at the identification's 50 Hz) and the noise is left out.
+  const double dt = f.r0.sample_period_s;
+  const bool filter = f.position_quantum_mm > 0.001 + 1e-12 && dt <= 2e-3 + 1e-12;
+  std::vector<std::array<std::vector<double>, 3>> cols;  // e, v_ref, vcmd per run
+  for (const auto& rd : f.runs) {
+    const auto& t = rd.run->trace;
+    // Filtered here, the reference as logged (the rebuilt one is low-passed already).
+    const auto& ref = (filter ? *rd.run : *rd.smooth).trace.at(col(a, "_ref_mm"));
+    const auto& x = t.at(col(a, "_mm"));
+    std::array<std::vector<double>, 3> c;
+    c[0].resize(ref.size());
+    for (std::size_t k = 0; k < ref.size(); ++k) c[0][k] = ref[k] - x[k];
+    c[1] = loop_reference_speed(ref, rd.segments, rd.run->sample_period_s, f.Ts);
+    c[2] = t.at(velocity_command_column(t, a));
+    if (filter)
+      for (auto& y : c) y = lowpass_in_segments(y, rd.segments, rd.run->sample_period_s);
+    cols.push_back(std::move(c));
+  }
   f.fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
-    const auto& t = f.runs[r].run->trace;
-    const auto& ref = t.at(col(a, "_ref_mm"));
-    e.push_back(ref[k] - t.at(col(a, "_mm"))[k]);
-    vr.push_back(speed[r][k]);
-    vc.push_back(t.at(velocity_command_column(t, a))[k]);
+    e.push_back(cols[r][0][k]);
+    vr.push_back(cols[r][1][k]);
+    vc.push_back(cols[r][2][k]);
     rows.push_back(rows.size());
   });
   const LsqResult ls = least_squares({&e, &vr}, vc, rows);
@@ -2021,10 +2099,7 @@ sim::MachineDefinition identify_machine(const AxisFit& f, DataCalibration& out) 
   m.name = "identified";
   m.source = "twin calibrate (from data)";
   m.Ts_s = f.Ts;
-  m.encoder_resolution_mm = out.rounding.quantum_mm > 0.0 && out.rounding.quantum_mm <= 0.01 &&
-                                    out.rounding.kind == PositionRounding::Kind::kDecimals
-                                ? out.rounding.quantum_mm
-                                : 0.001;
+  m.encoder_resolution_mm = out.rounding.quantum_mm > 0.0 && !out.display_rounding ? out.rounding.quantum_mm : 0.001;
   sim::set_machine_loop_law(m, controller::LoopLaw::kCascade);
   for (Axis a : out.axes) out.axis.push_back(identify_axis_from_data(f, a, m, out));
   sim::set_machine_loop_law(m, controller::LoopLaw::kCascade);
@@ -2763,23 +2838,6 @@ void errors_on_validation_runs(DataCalibration& out, const std::vector<MeasuredR
 
 namespace {
 
-/// The speed taken from the position: its low-pass, and the shortest segment
-/// it is applied to (a shorter one is differentiated as logged).
-constexpr double kSpeedCutoff_Hz = 50.0;
-constexpr std::size_t kSpeedFilterRows = 64;
-
-/// Per segment, a column low-passed at kSpeedCutoff_Hz without phase (where
-/// the segment is long enough; a shorter one as logged).
-std::vector<double> lowpass_in_segments(const std::vector<double>& c, const std::vector<Segment>& segs, double dt) {
-  std::vector<double> y = c;
-  for (const Segment& sg : segs) {
-    if (sg.end < sg.begin + kSpeedFilterRows) continue;
-    const std::vector<double> yf =
-        lowpass(std::span<const double>(c.data() + sg.begin, sg.end - sg.begin), kSpeedCutoff_Hz, 1.0 / dt);
-    std::copy(yf.begin(), yf.end(), y.begin() + static_cast<std::ptrdiff_t>(sg.begin));
-  }
-  return y;
-}
 
 /// A log at 2 ms or faster with positions to 5 um or finer but no speed
 /// column (a CNC that traces its position loop's command and output, and not
@@ -2874,13 +2932,13 @@ void align_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<Ru
     // The P law's residual with the command taken `skew` rows later.
     std::vector<std::vector<double>> speed;
     for (std::size_t i = 0; i < own.size(); ++i)
-      speed.push_back(
-          loop_reference_speed(own[i].trace.at(col(a, "_ref_mm")), runs[i].segments, own[i].sample_period_s, Ts));
+      speed.push_back(loop_reference_speed(runs[i].smooth->trace.at(col(a, "_ref_mm")), runs[i].segments,
+                                           own[i].sample_period_s, Ts));
     const auto residual = [&](int skew) {
       std::vector<double> e, vr, vc;
       for (std::size_t i = 0; i < own.size(); ++i) {
         const auto& t = own[i].trace;
-        const auto& ref = t.at(col(a, "_ref_mm"));
+        const auto& ref = runs[i].smooth->trace.at(col(a, "_ref_mm"));
         const auto& x = t.at(col(a, "_mm"));
         const auto& c = t.at(vcmd);
         for (const Segment& sg : runs[i].segments) {
@@ -2943,7 +3001,7 @@ LawColumns command_law_columns(const std::vector<MeasuredRun>& own, const std::v
   LawColumns law(own.size());
   for (std::size_t i = 0; i < own.size(); ++i) {
     const auto& t = own[i].trace;
-    const auto& ref = t.at(col(a, "_ref_mm"));
+    const auto& ref = runs[i].smooth->trace.at(col(a, "_ref_mm"));
     const auto& x = t.at(col(a, "_mm"));
     const auto& v = t.at(col(a, "_v_mm_s"));
     const double dt = own[i].sample_period_s;
@@ -3110,7 +3168,7 @@ void write_rebuilt_command(std::vector<MeasuredRun>& own, const std::vector<RunD
     auto& t = own[i].trace;
     std::vector<std::pair<std::string, std::vector<double>>> cols;
     {
-      const auto& ref = t.at(col(a, "_ref_mm"));
+      const auto& ref = runs[i].smooth->trace.at(col(a, "_ref_mm"));
       const auto& x = t.at(col(a, "_mm"));
       const std::vector<double> vr = loop_reference_speed(ref, runs[i].segments, own[i].sample_period_s, Ts);
       std::vector<double> c(ref.size(), 0.0);
@@ -3267,7 +3325,7 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
   for (const auto& r : fit_own)
     runs.push_back(prepare_run(r, out.axes, out.rounding, options.fit_fraction, out.notes));
   add_speed_from_position(fit_own, runs, out);
-  const AxisArray<bool> flip = torque_against_motion(AxisFit{runs, Fitter{runs}, r0, Ts}, out);
+  const AxisArray<bool> flip = torque_against_motion(AxisFit{runs, Fitter{runs}, r0, Ts, out.rounding.quantum_mm}, out);
   std::vector<MeasuredRun> validate_flipped;
   for (Axis a : out.axes)
     if (flip[index(a)]) {
@@ -3282,7 +3340,7 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
   align_velocity_commands(fit_own, runs, Ts, out);
   rebuild_velocity_commands(fit_own, runs, Ts, out);
   const std::vector<MeasuredRun>& validate_own = validate_flipped.empty() ? validate : validate_flipped;
-  out.identified = identify_machine(AxisFit{runs, Fitter{runs}, r0, Ts}, out);
+  out.identified = identify_machine(AxisFit{runs, Fitter{runs}, r0, Ts, out.rounding.quantum_mm}, out);
   out.final_machine = out.identified;
   skip_unseen_effects(fit, out);
   choose_coulomb_levels(out, runs);

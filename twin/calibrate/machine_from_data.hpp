@@ -167,6 +167,10 @@ struct DataCalibration {
   std::vector<Axis> axes;
   std::vector<AxisFromData> axis;
   PositionRounding rounding;
+  /// The rounding is the log's (an export or display), not the encoder's:
+  /// the identified machine closes its loop on a 1 um encoder and rounds its
+  /// logged positions as the log's (choose_rounding says why).
+  bool display_rounding{false};
   std::vector<DataEffect> effects;             ///< tried (kept or not)
   std::vector<std::pair<std::string, std::string>> skipped;  ///< effect, why the data cannot show it
   std::vector<RunErrors> fit_runs;             ///< held-out rows of each fitting run
