@@ -169,6 +169,30 @@ truth::RunSpec cascade_spec(double Ts_s) {
   return truth::cascade_run_spec(100.0 / 2.5, 0.0005, Ts_s);  // percent of a 2.5 N m rated torque
 }
 
+/// The cascade truth with a Stribeck rise the identified drive does not
+/// have (breakaway 0.4 N m above both Coulomb levels, over 2 rad/s).
+truth::RunSpec cascade_spec_with_stribeck(double Ts_s) {
+  truth::RunSpec sp = cascade_spec(Ts_s);
+  sp.effects.stribeck_Ts = 0.4;
+  sp.effects.stribeck_ws = 2.0;
+  return sp;
+}
+
+/// `sp` run on the fitting program and on another (faster moves), written
+/// under `name`, and calibrated from the data on the first, validated on
+/// the second.
+DataCalibration calibrate_on_two_programs(truth::RunSpec sp, const std::string& name) {
+  const double Ts = sp.Ts_s;
+  sp.reference_mm = program(Ts, 1.0, 24.0);
+  const auto fit_dir = work(name + "_fit");
+  truth::write_truth_run(fit_dir, sp);
+  sp.reference_mm = program(Ts, 1.6, 12.0);
+  const auto val_dir = work(name + "_val");
+  truth::write_truth_run(val_dir, sp);
+  const MeasuredRun fit = load_run(fit_dir), val = load_run(val_dir);
+  return calibrate_from_data({fit}, {val}, machine_for_run(fit, "", nullptr));
+}
+
 // 1 kHz, velocity command, speed and a raw torque logged: the loop's gains
 // are read from the logged signals and the drive is identified in the log's
 // unit; the calibrated machine follows another program's tracking error.
@@ -289,7 +313,7 @@ TEST(RealLogs, CoarseRoundedStitchedCurrentLog) {
 TEST(RealLogs, ADeadVelocityCommandIsRebuiltFromTheTorque) {
   const double Ts = 1e-3;
   truth::RunSpec sp = cascade_spec(Ts);
-  sp.effects.stribeck_Ts = 0.1;
+  sp.effects.stribeck_Ts = 0.1;  // a Stribeck rise the drive does not have
   sp.effects.stribeck_ws = 2.0;
   // The truth run of `ref` with the velocity command written as 0 (and,
   // without `speed`, no speed column).
@@ -399,22 +423,12 @@ TEST(RealLogs, AVelocityCommandLoggedRowsOffIsMovedBackIntoLine) {
 // and kff 0.6 to the 1 % of the 1 kHz test, and its Kvp and Tn to the 5 %
 // and 10 % of that test; the held-out machine's check on the other program.
 TEST(RealLogs, ALogSlowerThanTheLoopIsFittedAtTheLoopsPeriod) {
-  const double Ts = 1e-3;
-  truth::RunSpec sp = cascade_spec(Ts);
-  sp.effects.stribeck_Ts = 0.4;
-  sp.effects.stribeck_ws = 2.0;
+  truth::RunSpec sp = cascade_spec_with_stribeck(1e-3);
   for (const int every : {2, 4}) {
     SCOPED_TRACE(every);
     sp.log_every = every;
-    sp.reference_mm = program(Ts, 1.0, 24.0);
-    const auto fit_dir = work("slow_fit");
-    truth::write_truth_run(fit_dir, sp);
-    sp.reference_mm = program(Ts, 1.6, 12.0);
-    const auto val_dir = work("slow_val");
-    truth::write_truth_run(val_dir, sp);
-    const MeasuredRun fit = load_run(fit_dir), val = load_run(val_dir);
-    ASSERT_NEAR(fit.sample_period_s, every * Ts, 1e-9);
-    const DataCalibration r = calibrate_from_data({fit}, {val}, machine_for_run(fit, "", nullptr));
+    const DataCalibration r = calibrate_on_two_programs(sp, "slow");
+    EXPECT_TRUE(has_note(r, "controller period 0.001 s from meta.json"));
     ASSERT_EQ(r.axis.size(), 1u);
     const AxisFromData& ax = r.axis[0];
     ASSERT_TRUE(ax.identified) << ax.note;
@@ -437,9 +451,7 @@ TEST(RealLogs, ALogSlowerThanTheLoopIsFittedAtTheLoopsPeriod) {
 // the torque below the regression's and under 0.2 (it was near 1).
 TEST(RealLogs, PositionsExportedToTwoDecimalsAreTheLogsRounding) {
   const double Ts = 1e-3;
-  truth::RunSpec sp = cascade_spec(Ts);
-  sp.effects.stribeck_Ts = 0.4;
-  sp.effects.stribeck_ws = 2.0;
+  truth::RunSpec sp = cascade_spec_with_stribeck(Ts);
   auto both = [&](const std::string& name, const std::vector<double>& ref) {
     sp.reference_mm = ref;
     const auto d = work(name);
@@ -478,21 +490,11 @@ TEST(RealLogs, PositionsExportedToTwoDecimalsAreTheLogsRounding) {
 // tau_i and Kvp and 10 % on Tn, as for the gains elsewhere), no delay
 // proposed, and the held-out machine's check on the other program.
 TEST(RealLogs, ACurrentLoopLagIsIdentified) {
-  const double Ts = 1e-3;
-  truth::RunSpec sp = cascade_spec(Ts);
-  sp.effects.stribeck_Ts = 0.4;
-  sp.effects.stribeck_ws = 2.0;
+  truth::RunSpec sp = cascade_spec_with_stribeck(1e-3);
   for (const double tau_s : {0.0005, 0.002}) {
     SCOPED_TRACE(tau_s);
     sp.cascade.tau_i = tau_s;
-    sp.reference_mm = program(Ts, 1.0, 24.0);
-    const auto fit_dir = work("lag_fit");
-    truth::write_truth_run(fit_dir, sp);
-    sp.reference_mm = program(Ts, 1.6, 12.0);
-    const auto val_dir = work("lag_val");
-    truth::write_truth_run(val_dir, sp);
-    const MeasuredRun fit = load_run(fit_dir), val = load_run(val_dir);
-    const DataCalibration r = calibrate_from_data({fit}, {val}, machine_for_run(fit, "", nullptr));
+    const DataCalibration r = calibrate_on_two_programs(sp, "lag");
     ASSERT_EQ(r.axis.size(), 1u);
     const AxisFromData& ax = r.axis[0];
     EXPECT_NEAR(ax.gains.tau_i_s, tau_s, 0.05 * tau_s) << ax.loop_source;
