@@ -3050,7 +3050,8 @@ LawColumns command_law_columns(const std::vector<MeasuredRun>& own, const std::v
   LawColumns law(own.size());
   for (std::size_t i = 0; i < own.size(); ++i) {
     const auto& t = own[i].trace;
-    const auto& ref = runs[i].smooth->trace.at(col(a, "_ref_mm"));
+    // Filtered here, the reference as logged (a rebuilt one may be low-passed already).
+    const auto& ref = (filtered ? own[i] : *runs[i].smooth).trace.at(col(a, "_ref_mm"));
     const auto& x = t.at(col(a, "_mm"));
     const auto& v = t.at(col(a, "_v_mm_s"));
     const double dt = own[i].sample_period_s;
