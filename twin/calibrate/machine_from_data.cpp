@@ -2983,7 +2983,8 @@ void align_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<Ru
   for (Axis a : out.axes) {
     const std::string vcmd = col(a, "_vcmd_mm_s");
     bool usable = true;
-    for (const auto& r : own) usable = usable && r.trace.find(vcmd) != nullptr && r.trace.find(col(a, "_mm")) != nullptr;
+    for (const auto& r : own)
+      usable = usable && r.trace.find(vcmd) != nullptr && r.trace.find(col(a, "_mm")) != nullptr;
     if (!usable) continue;
     // The P law's residual with the command taken `skew` rows later.
     std::vector<std::vector<double>> speed;

@@ -291,7 +291,8 @@ void run_calibrate(const CalibrateCommand& opt) {
   for (const auto& r : opt.runs) fit_runs.push_back(analysis::load_run(r));
   for (const auto& r : opt.validate) validate_runs.push_back(analysis::load_run(r));
   const bool known = !opt.machine.empty() ||
-                     std::all_of(fit_runs.begin(), fit_runs.end(), [](const auto& r) { return analysis::names_shipped_machine(r); });
+                     std::all_of(fit_runs.begin(), fit_runs.end(),
+                                 [](const auto& r) { return analysis::names_shipped_machine(r); });
   if (known)
     calibrate_known_machine(opt, fit_runs, std::move(validate_runs));
   else

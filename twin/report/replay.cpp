@@ -470,8 +470,8 @@ void run_ticks(sim::CoSimulation& cosim, const MeasuredRun& run, std::int64_t n_
 void mean_over_neighbours(const TickSums& sums, const MeasuredRun& run, std::int64_t n_ticks, std::int64_t m,
                           ReplayResult& res) {
   res.notes.push_back(fmt::format("the twin's u, current and torque at a row are their mean over the two sample "
-                                  "periods around it ({:.6g} s): where the log samples every {:.6g} s, a stop or a change "
-                                  "of speed falls at a time inside them the log does not give",
+                                  "periods around it ({:.6g} s): where the log samples every {:.6g} s, a stop or a "
+                                  "change of speed falls at a time inside them the log does not give",
                                   2.0 * run.sample_period_s, run.sample_period_s));
   for (Axis a : run.axes) {
     const auto& S = sums[index(a)];
@@ -571,8 +571,9 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
   const std::int64_t m = upsampling(run, Ts);
   const std::size_t n_rows = rows == 0 ? run.trace.num_rows() : std::min(rows, run.trace.num_rows());
   if (m > 1)
-    res.notes.push_back(fmt::format("trace sampled every {:.6g} s = {} controller periods: the reference is interpolated "
-                                    "by a monotone cubic to Ts = {} s and the twin's outputs are taken at the trace's samples",
+    res.notes.push_back(fmt::format("trace sampled every {:.6g} s = {} controller periods: the reference is "
+                                    "interpolated by a monotone cubic to Ts = {} s and the twin's outputs are taken at "
+                                    "the trace's samples",
                                     run.sample_period_s, m, Ts));
   const std::int64_t n_ticks = static_cast<std::int64_t>(n_rows - 1) * m + 1;
   Start st = replay_start(run, n_rows, m, machine, res);

@@ -304,12 +304,13 @@ TEST(RealLogs, CoarseRoundedStitchedCurrentLog) {
 // held at 0 on every row (a dead channel), and once without the speed too.
 // The position alone shows only the lag (1 - kff) / Kv, and a P loop
 // without feedforward at that lag missed the other program's following
-// error by 0.044 NRMS here (0.08 on the cascade sweep's Stribeck run). The cascade's velocity loop acts on vcmd - v, so the
-// torque carries the command: rebuilt from it, the gains must come out as
-// where the command is logged (oracle: the truth's Kv 45 1/s and kff 0.6;
-// 2 %, against the 1 % of the logged command, for the speed's noise and, without
-// the speed, the 50 Hz filter of the one taken from the position), and the
-// following error within 1 % NRMS on the other program.
+// error by 0.044 NRMS here (0.08 on the cascade sweep's Stribeck run). The
+// cascade's velocity loop acts on vcmd - v, so the torque carries the
+// command: rebuilt from it, the gains must come out as where the command is
+// logged (oracle: the truth's Kv 45 1/s and kff 0.6; 2 %, against the 1 % of
+// the logged command, for the speed's noise and, without the speed, the
+// 50 Hz filter of the one taken from the position), and the following error
+// within 1 % NRMS on the other program.
 TEST(RealLogs, ADeadVelocityCommandIsRebuiltFromTheTorque) {
   const double Ts = 1e-3;
   truth::RunSpec sp = cascade_spec(Ts);
@@ -393,8 +394,8 @@ TEST(RealLogs, AVelocityCommandLoggedRowsOffIsMovedBackIntoLine) {
         std::find(run.trace.names.begin(), run.trace.names.end(), "x_vcmd_mm_s") - run.trace.names.begin())];
     const std::vector<double> logged = c;
     for (std::size_t k = 0; k < c.size(); ++k)
-      c[k] = logged[static_cast<std::size_t>(
-          std::clamp<std::ptrdiff_t>(static_cast<std::ptrdiff_t>(k) - skew, 0, static_cast<std::ptrdiff_t>(c.size()) - 1))];
+      c[k] = logged[static_cast<std::size_t>(std::clamp<std::ptrdiff_t>(static_cast<std::ptrdiff_t>(k) - skew, 0,
+                                                                        static_cast<std::ptrdiff_t>(c.size()) - 1))];
     return run;
   };
   for (const int skew : {1, -2}) {
@@ -402,8 +403,8 @@ TEST(RealLogs, AVelocityCommandLoggedRowsOffIsMovedBackIntoLine) {
     const MeasuredRun fit = skewed("skew_fit", program(Ts, 1.0, 24.0), skew);
     const MeasuredRun val = skewed("skew_val", program(Ts, 1.6, 12.0), skew);
     const DataCalibration r = calibrate_from_data({fit}, {val}, machine_for_run(fit, "", nullptr));
-    EXPECT_TRUE(has_note(r, fmt::format("x_vcmd_mm_s is logged {} {} {}", std::abs(skew), std::abs(skew) == 1 ? "row" : "rows",
-                                        skew > 0 ? "after" : "before")));
+    EXPECT_TRUE(has_note(r, fmt::format("x_vcmd_mm_s is logged {} {} {}", std::abs(skew),
+                                        std::abs(skew) == 1 ? "row" : "rows", skew > 0 ? "after" : "before")));
     ASSERT_EQ(r.axis.size(), 1u);
     EXPECT_NEAR(r.axis[0].gains.Kv_per_s, 45.0, 0.45);
     EXPECT_NEAR(r.axis[0].gains.kff, 0.6, 0.01);
