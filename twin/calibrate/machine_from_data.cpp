@@ -264,6 +264,20 @@ double white_noise_rms(std::vector<double> abs_d2) {
   return *mid / 0.6745 / std::sqrt(6.0);
 }
 
+/// The white noise on a logged channel over the fitting rows of the runs'
+/// segments.
+double fitting_rows_noise_rms(const std::vector<RunData>& runs, const std::string& channel) {
+  std::vector<double> d2;
+  for (const auto& rd : runs) {
+    const auto& ch = rd.run->trace.at(channel);
+    for (const Segment& sg : rd.segments) {
+      const std::size_t end = std::min(sg.end, rd.n_fit);
+      for (std::size_t k = sg.begin + 1; k + 1 < end; ++k) d2.push_back(std::abs(ch[k + 1] - 2.0 * ch[k] + ch[k - 1]));
+    }
+  }
+  return white_noise_rms(std::move(d2));
+}
+
 /// Rows a torque limit holds before the limit is taken for one (as many as
 /// the saturation detector asks for).
 constexpr std::size_t kClippedRows = 10;
@@ -319,7 +333,7 @@ struct VelocityLoopFit {
 };
 VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, const std::string& channel,
                                   std::size_t lag, const TorqueClip* clip = nullptr, bool current_lag = false) {
-  std::vector<double> ev, iev, Tm, Tp, d2;
+  std::vector<double> ev, iev, Tm, Tp;
   std::vector<std::size_t> vrows, seg_of_row;
   std::size_t g = 0;  // the segment's index over all runs
   for (const auto& rd : runs) {
@@ -327,13 +341,10 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
     const auto& vc = *filtered_alike(t, velocity_command_column(t, a));
     const auto& v = t.at(col(a, "_v_mm_s"));
     const auto& ch = *filtered_alike(t, channel);
-    const auto& ch_logged = t.at(channel);
     for (std::size_t si = 0; si < rd.segments.size(); ++si, ++g) {
       const Segment& s = rd.segments[si];
       const std::size_t end = std::min(s.end, rd.n_fit);
       if (end <= s.begin) continue;
-      for (std::size_t k = s.begin + 1; k + 1 < end; ++k)
-        d2.push_back(std::abs(ch_logged[k + 1] - 2.0 * ch_logged[k] + ch_logged[k - 1]));
       std::vector<double> e(end - s.begin), ie(end - s.begin);
       double integral = 0.0;
       for (std::size_t k = s.begin; k < end; ++k) {
@@ -394,7 +405,7 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
     f.T_abs_max = std::max(f.T_abs_max, std::abs(Tm[k]));
   }
   f.T_rms = vrows.empty() ? 0.0 : std::sqrt(t2 / static_cast<double>(vrows.size()));
-  f.noise_rms = white_noise_rms(std::move(d2));
+  f.noise_rms = fitting_rows_noise_rms(runs, channel);
   if (f.ls.ok && !current_lag) {
     const TorqueClip c{f.ls.theta, f.c_seg, f.T_abs_max, f.noise_rms};
     for (std::size_t k : vrows)
@@ -2986,29 +2997,32 @@ void align_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<Ru
     for (const auto& r : own)
       usable = usable && r.trace.find(vcmd) != nullptr && r.trace.find(col(a, "_mm")) != nullptr;
     if (!usable) continue;
-    // The P law's residual with the command taken `skew` rows later.
-    std::vector<std::vector<double>> speed;
-    for (std::size_t i = 0; i < own.size(); ++i)
-      speed.push_back(loop_reference_speed(runs[i].smooth->trace.at(col(a, "_ref_mm")), runs[i].segments,
-                                           own[i].sample_period_s, Ts));
-    const auto residual = [&](int skew) {
-      std::vector<double> e, vr, vc;
-      for (std::size_t i = 0; i < own.size(); ++i) {
-        const auto& t = own[i].trace;
-        const auto& ref = runs[i].smooth->trace.at(col(a, "_ref_mm"));
-        const auto& x = t.at(col(a, "_mm"));
-        const auto& c = t.at(vcmd);
-        for (const Segment& sg : runs[i].segments) {
-          const std::size_t end = std::min(sg.end, runs[i].n_fit);
-          for (std::size_t k = sg.begin + 1 + kMaxSkewRows; k + kMaxSkewRows < end; ++k) {
-            e.push_back(ref[k] - x[k]);
-            vr.push_back(speed[i][k]);
-            vc.push_back(c[static_cast<std::size_t>(static_cast<std::ptrdiff_t>(k) + skew)]);
-          }
+    // The fitting rows (away from segment ends by the largest move) with
+    // their error and command's speed, once; the P law's residual with the
+    // command taken `skew` rows later.
+    std::vector<double> e, vr;
+    std::vector<std::pair<std::size_t, std::size_t>> at;  // run, row
+    for (std::size_t i = 0; i < own.size(); ++i) {
+      const auto& ref = runs[i].smooth->trace.at(col(a, "_ref_mm"));
+      const auto& x = own[i].trace.at(col(a, "_mm"));
+      const std::vector<double> speed = loop_reference_speed(ref, runs[i].segments, own[i].sample_period_s, Ts);
+      for (const Segment& sg : runs[i].segments) {
+        const std::size_t end = std::min(sg.end, runs[i].n_fit);
+        for (std::size_t k = sg.begin + 1 + kMaxSkewRows; k + kMaxSkewRows < end; ++k) {
+          e.push_back(ref[k] - x[k]);
+          vr.push_back(speed[k]);
+          at.emplace_back(i, k);
         }
       }
-      std::vector<std::size_t> rows(vc.size());
-      std::iota(rows.begin(), rows.end(), std::size_t{0});
+    }
+    std::vector<std::size_t> rows(e.size());
+    std::iota(rows.begin(), rows.end(), std::size_t{0});
+    std::vector<const std::vector<double>*> logged;
+    for (const auto& r : own) logged.push_back(&r.trace.at(vcmd));
+    const auto residual = [&](int skew) {
+      std::vector<double> vc(at.size());
+      for (std::size_t j = 0; j < at.size(); ++j)
+        vc[j] = (*logged[at[j].first])[static_cast<std::size_t>(static_cast<std::ptrdiff_t>(at[j].second) + skew)];
       const LsqResult ls = least_squares({&e, &vr}, vc, rows);
       return ls.ok ? ls.residual_rms : std::numeric_limits<double>::infinity();
     };
@@ -3053,16 +3067,15 @@ void align_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<Ru
 /// from the position (e and v_ref so filtered also give the filtered command).
 constexpr std::size_t kLawColumns = 6;
 using LawColumns = std::vector<std::array<std::vector<double>, kLawColumns>>;
-LawColumns command_law_columns(const std::vector<MeasuredRun>& own, const std::vector<RunData>& runs, Axis a,
-                               double Ts, bool filtered) {
-  LawColumns law(own.size());
-  for (std::size_t i = 0; i < own.size(); ++i) {
-    const auto& t = own[i].trace;
+LawColumns command_law_columns(const std::vector<RunData>& runs, Axis a, double Ts, bool filtered) {
+  LawColumns law(runs.size());
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    const auto& t = runs[i].run->trace;
     // Filtered here, the reference as logged (a rebuilt one may be low-passed already).
-    const auto& ref = (filtered ? own[i] : *runs[i].smooth).trace.at(col(a, "_ref_mm"));
+    const auto& ref = (filtered ? *runs[i].run : *runs[i].smooth).trace.at(col(a, "_ref_mm"));
     const auto& x = t.at(col(a, "_mm"));
     const auto& v = t.at(col(a, "_v_mm_s"));
-    const double dt = own[i].sample_period_s;
+    const double dt = runs[i].run->sample_period_s;
     auto& L = law[i];
     for (auto& c : L) c.assign(ref.size(), 0.0);
     L[1] = loop_reference_speed(ref, runs[i].segments, dt, Ts);
@@ -3095,24 +3108,20 @@ struct TorqueTop {
   double noise_rms{0.0};
   double held_from{std::numeric_limits<double>::infinity()};
 };
-TorqueTop torque_top(const std::vector<MeasuredRun>& own, const std::vector<RunData>& runs,
-                     const std::string& channel) {
+TorqueTop torque_top(const std::vector<RunData>& runs, const std::string& channel) {
   TorqueTop top;
   double T_abs_max = 0.0;
-  std::vector<double> d2;
-  for (std::size_t i = 0; i < own.size(); ++i) {
-    const auto& ch = own[i].trace.at(channel);
-    for (const Segment& sg : runs[i].segments) {
-      const std::size_t end = std::min(sg.end, runs[i].n_fit);
-      for (std::size_t k = sg.begin; k < end; ++k) T_abs_max = std::max(T_abs_max, std::abs(ch[k]));
-      for (std::size_t k = sg.begin + 1; k + 1 < end; ++k) d2.push_back(std::abs(ch[k + 1] - 2.0 * ch[k] + ch[k - 1]));
-    }
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    const auto& ch = runs[i].run->trace.at(channel);
+    for (const Segment& sg : runs[i].segments)
+      for (std::size_t k = sg.begin; k < std::min(sg.end, runs[i].n_fit); ++k)
+        T_abs_max = std::max(T_abs_max, std::abs(ch[k]));
   }
-  top.noise_rms = white_noise_rms(std::move(d2));
+  top.noise_rms = fitting_rows_noise_rms(runs, channel);
   const double from = 0.98 * T_abs_max - 3.0 * top.noise_rms;
   std::size_t held = 0;
-  for (std::size_t i = 0; i < own.size(); ++i) {
-    const auto& ch = own[i].trace.at(channel);
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    const auto& ch = runs[i].run->trace.at(channel);
     for (std::size_t k = 0; k < std::min(ch.size(), runs[i].n_fit); ++k) held += std::abs(ch[k]) >= from ? 1 : 0;
   }
   if (held >= kClippedRows && from > 0.0) top.held_from = from;
@@ -3126,15 +3135,14 @@ struct CommandLawFit {
   std::size_t lag{0};
   double T_rms{0.0};
 };
-CommandLawFit fit_command_law(const std::vector<MeasuredRun>& own, const std::vector<RunData>& runs,
-                              const LawColumns& law, const std::string& channel, std::size_t lag,
-                              double held_from) {
+CommandLawFit fit_command_law(const std::vector<RunData>& runs, const LawColumns& law, const std::string& channel,
+                              std::size_t lag, double held_from) {
   std::array<std::vector<double>, kLawColumns> X;
   std::vector<double> T;
   std::vector<std::size_t> seg_of_row;
   std::size_t g = 0;
-  for (std::size_t i = 0; i < own.size(); ++i) {
-    const auto& t = own[i].trace;
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    const auto& t = runs[i].run->trace;
     const auto& ch = *filtered_alike(t, channel);
     const auto& ch_logged = t.at(channel);
     for (const Segment& sg : runs[i].segments) {
@@ -3283,13 +3291,13 @@ void rebuild_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<
                r.trace.find(col(a, "_v_mm_s")) != nullptr && r.trace.find(col(a, "_mm")) != nullptr;
     if (!usable) continue;
     const bool filtered = own.front().trace.find(lowpassed(channel)) != nullptr;
-    const LawColumns law = command_law_columns(own, runs, a, Ts, filtered);
-    const TorqueTop top = torque_top(own, runs, channel);
+    const LawColumns law = command_law_columns(runs, a, Ts, filtered);
+    const TorqueTop top = torque_top(runs, channel);
     const auto max_lag =
         static_cast<std::size_t>(std::clamp(std::lround(0.01 / own.front().sample_period_s), 1L, 10L));
-    CommandLawFit best = fit_command_law(own, runs, law, channel, 0, top.held_from);
+    CommandLawFit best = fit_command_law(runs, law, channel, 0, top.held_from);
     for (std::size_t lag = 1; lag <= max_lag; ++lag) {
-      CommandLawFit f = fit_command_law(own, runs, law, channel, lag, top.held_from);
+      CommandLawFit f = fit_command_law(runs, law, channel, lag, top.held_from);
       if (f.ls.ok && (!best.ls.ok || f.ls.residual_rms < best.ls.residual_rms)) best = std::move(f);
     }
     if (!best.ls.ok) continue;

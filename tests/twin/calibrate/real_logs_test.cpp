@@ -9,6 +9,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -39,6 +40,22 @@ std::filesystem::path work(const std::string& name) {
 bool has_note(const DataCalibration& r, const std::string& text) {
   return std::any_of(r.notes.begin(), r.notes.end(),
                      [&](const std::string& n) { return n.find(text) != std::string::npos; });
+}
+
+/// A copy of the run in `from` under `name` (meta.json as it is), with
+/// trace.csv rewritten line by line: `edit(row, line)` sees the header as row
+/// -1 and the samples from 0, may change the line, and says whether to keep it.
+MeasuredRun rewritten_run(const std::filesystem::path& from, const std::string& name,
+                          const std::function<bool(std::ptrdiff_t, std::string&)>& edit) {
+  const auto d = work(name);
+  std::filesystem::copy_file(from / "meta.json", d / "meta.json");
+  std::ifstream in(from / "trace.csv");
+  std::ofstream out(d / "trace.csv");
+  std::string line;
+  for (std::ptrdiff_t row = -1; std::getline(in, line); ++row)
+    if (edit(row, line)) out << line << "\n";
+  out.close();
+  return load_run(d);
 }
 
 /// The held-out machine's check on the one validation run (another program,
@@ -322,33 +339,18 @@ TEST(RealLogs, ADeadVelocityCommandIsRebuiltFromTheTorque) {
     sp.reference_mm = ref;
     const auto whole = work(name + "_whole");
     truth::write_truth_run(whole, sp);
-    std::ifstream in(whole / "trace.csv");
-    const auto d = work(name);
-    std::filesystem::copy_file(whole / "meta.json", d / "meta.json");
-    std::ofstream out(d / "trace.csv");
-    std::string line;
-    std::getline(in, line);
     std::vector<std::string> head;
-    {
-      std::stringstream ss(line);
-      for (std::string c; std::getline(ss, c, ',');) head.push_back(c);
-    }
-    const auto keep = [&](std::size_t j) { return speed || head[j] != "x_v_mm_s"; };
-    auto write = [&](const std::vector<std::string>& cells, bool header) {
-      std::string row;
-      for (std::size_t j = 0; j < cells.size(); ++j)
-        if (keep(j)) row += (row.empty() ? "" : ",") + (!header && head[j] == "x_vcmd_mm_s" ? "0" : cells[j]);
-      out << row << "\n";
-    };
-    write(head, true);
-    while (std::getline(in, line)) {
+    return rewritten_run(whole, name, [&](std::ptrdiff_t row, std::string& line) {
       std::vector<std::string> cells;
       std::stringstream ss(line);
       for (std::string c; std::getline(ss, c, ',');) cells.push_back(c);
-      write(cells, false);
-    }
-    out.close();
-    return load_run(d);
+      if (row < 0) head = cells;
+      line.clear();
+      for (std::size_t j = 0; j < cells.size(); ++j)
+        if (speed || head[j] != "x_v_mm_s")
+          line += (line.empty() ? "" : ",") + (row >= 0 && head[j] == "x_vcmd_mm_s" ? "0" : cells[j]);
+      return true;
+    });
   };
   for (const bool speed : {true, false}) {
     SCOPED_TRACE(speed ? "speed logged" : "no speed logged");
@@ -538,17 +540,10 @@ TEST(RealLogs, GapsInTheClockAreSegments) {
     const std::size_t cut = moving_from(block_from);
     for (std::size_t k = cut; k < cut + block; ++k) dropped.push_back(k);
     for (std::size_t from : singles) dropped.push_back(moving_from(from));
-    std::ifstream in(whole / "trace.csv");
-    const auto d = work(name);
-    std::filesystem::copy_file(whole / "meta.json", d / "meta.json");
-    std::ofstream out(d / "trace.csv");
-    std::string line;
-    std::getline(in, line);
-    out << line << "\n";
-    for (std::size_t k = 0; std::getline(in, line); ++k)
-      if (std::find(dropped.begin(), dropped.end(), k) == dropped.end()) out << line << "\n";
-    out.close();
-    return std::make_pair(load_run(d), cut);
+    const MeasuredRun run = rewritten_run(whole, name, [&](std::ptrdiff_t row, std::string&) {
+      return row < 0 || std::find(dropped.begin(), dropped.end(), static_cast<std::size_t>(row)) == dropped.end();
+    });
+    return std::make_pair(run, cut);
   };
   const auto [run, cut] = gappy_run("gaps_fit", program(Ts, 1.0, 24.0), 4000, 700, {9000, 12000, 20000});
   const MeasuredRun val = gappy_run("gaps_val", program(Ts, 1.6, 12.0), 3000, 300, {7000, 9500}).first;
