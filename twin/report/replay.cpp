@@ -167,6 +167,97 @@ double uniform_sample_period(MeasuredRun& run) {
   return dt;
 }
 
+/// The parts of a run between its time breaks, as [first row, end row).
+std::vector<std::pair<std::size_t, std::size_t>> parts_between_breaks(const MeasuredRun& run, std::size_t n) {
+  std::vector<std::pair<std::size_t, std::size_t>> parts;
+  std::size_t from = 0;
+  for (std::size_t b : run.time_breaks) {
+    parts.emplace_back(from, b);
+    from = b;
+  }
+  parts.emplace_back(from, n);
+  return parts;
+}
+
+/// Where a torque channel sits in time against the axis's logged speed, in
+/// rows: the torque fitted on the speed's forward differences over this
+/// many rows back (with the speed, a Coulomb level per direction and a
+/// constant), and the lag the centroid of their weights gives.
+constexpr std::size_t kTorqueLagTaps = 5;
+
+/// The centroid lag in rows of `T` behind the acceleration the logged speed
+/// `v` shows; nullopt where the fit fails or its weights do not sum positive.
+std::optional<double> torque_lag_rows(const MeasuredRun& run, const std::vector<double>& v,
+                                      const std::vector<double>& T) {
+  const double dt = run.sample_period_s;
+  double v_max = 0.0;
+  for (double x : v) v_max = std::max(v_max, std::abs(x));
+  const double v_moving = 0.01 * v_max;
+  constexpr std::size_t kCols = kTorqueLagTaps + 4;
+  Eigen::Matrix<double, kCols, kCols> A = Eigen::Matrix<double, kCols, kCols>::Zero();
+  Eigen::Matrix<double, kCols, 1> b = Eigen::Matrix<double, kCols, 1>::Zero();
+  std::size_t rows = 0;
+  for (const auto& [first, end] : parts_between_breaks(run, v.size()))
+    for (std::size_t k = first + kTorqueLagTaps - 1; k + 1 < end; ++k) {
+      Eigen::Matrix<double, kCols, 1> x;
+      for (std::size_t j = 0; j < kTorqueLagTaps; ++j) x(static_cast<Eigen::Index>(j)) = (v[k + 1 - j] - v[k - j]) / dt;
+      x(kTorqueLagTaps) = v[k];
+      x(kTorqueLagTaps + 1) = v[k] > v_moving ? 1.0 : 0.0;
+      x(kTorqueLagTaps + 2) = v[k] < -v_moving ? 1.0 : 0.0;
+      x(kTorqueLagTaps + 3) = 1.0;
+      A.noalias() += x * x.transpose();
+      b.noalias() += x * T[k];
+      ++rows;
+    }
+  if (rows < 10 * kCols) return std::nullopt;
+  // A direction the axis never moves in leaves its column empty.
+  for (Eigen::Index c = 0; c < static_cast<Eigen::Index>(kCols); ++c)
+    if (A(c, c) == 0.0) A(c, c) = 1.0;
+  const Eigen::Matrix<double, kCols, 1> w = A.ldlt().solve(b);
+  double sum = 0.0, moment = 0.0;
+  for (std::size_t j = 0; j < kTorqueLagTaps; ++j) {
+    sum += w(static_cast<Eigen::Index>(j));
+    moment += static_cast<double>(j) * w(static_cast<Eigen::Index>(j));
+  }
+  if (!(std::isfinite(sum) && std::isfinite(moment) && sum > 0.0)) return std::nullopt;
+  return moment / sum;
+}
+
+// A torque or current channel logged whole rows after the motion it drives
+// (a logger that samples the drive's torque a cycle late). The torque a
+// drive applies over a row shows in the speed's change over that row, and a
+// delay in the drive (its current loop, a dead time) delays the torque and
+// that change together, so only the log's own timing puts the torque behind
+// the speed's change. Read that many rows earlier, with a note; the last
+// rows of each part hold its last logged value. Checked where the axis's
+// speed is logged at 5 ms or faster, and taken where the lag lies within
+// 0.3 rows of a whole number of 1 to 3 rows.
+void realign_late_torque(MeasuredRun& run) {
+  if (!(run.sample_period_s <= 5e-3 + 1e-12)) return;
+  for (Axis a : run.axes) {
+    const std::string n(axis_name(a));
+    const auto* v = run.trace.find(n + "_v_mm_s");
+    if (v == nullptr) continue;
+    for (const std::string& col : {n + "_torque_raw", n + "_torque_Nm", n + "_i_A"}) {
+      auto it = std::find(run.trace.names.begin(), run.trace.names.end(), col);
+      if (it == run.trace.names.end()) continue;
+      auto& T = run.trace.columns[static_cast<std::size_t>(it - run.trace.names.begin())];
+      const std::optional<double> lag = torque_lag_rows(run, *v, T);
+      if (!lag) continue;
+      const long rows = std::lround(*lag);
+      if (rows < 1 || rows > 3 || std::abs(*lag - static_cast<double>(rows)) > 0.3) continue;
+      const auto s = static_cast<std::size_t>(rows);
+      for (const auto& [first, end] : parts_between_breaks(run, T.size()))
+        for (std::size_t k = first; k < end; ++k) T[k] = T[std::min(k + s, end - 1)];
+      run.notes.push_back(fmt::format("{}: {} is logged {} row{} after the motion it drives (fitted on the speed's "
+                                      "changes, it lags them by {:.2f} rows; a delay in the drive would delay both): "
+                                      "read {} row{} earlier, the logger's timing, not the machine's",
+                                      run.trace.source, col, rows, rows == 1 ? "" : "s", *lag, rows,
+                                      rows == 1 ? "" : "s"));
+    }
+  }
+}
+
 }  // namespace
 
 MeasuredRun load_run(const std::filesystem::path& dir) {
@@ -187,6 +278,7 @@ MeasuredRun load_run(const std::filesystem::path& dir) {
   if (run.meta.sample_period_s && std::abs(*run.meta.sample_period_s - dt) > 0.01 * dt)
     throw IoError(fmt::format("{}: sample_period_s = {} s but the trace's t_s steps by {} s", meta_path.string(),
                               *run.meta.sample_period_s, dt));
+  realign_late_torque(run);
   return run;
 }
 

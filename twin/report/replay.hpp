@@ -40,7 +40,9 @@ struct MeasuredRun {
 /// t_s must be uniform within 1 %, or jitter by at most a fifth of a period
 /// about a uniform grid (taken as on it, with a note), between gaps: a step of
 /// over 1.5 periods is a gap (`time_breaks`, with a note), and a gap on more
-/// than one row in 20 is an error.
+/// than one row in 20 is an error. A torque or current column that lags the
+/// axis's logged speed changes by a whole 1 to 3 rows (at 5 ms or faster) is
+/// logged late: it is read that many rows earlier, with a note.
 MeasuredRun load_run(const std::filesystem::path& dir);
 
 /// The machine a run is replayed on: `machine_override` (name or path; one
