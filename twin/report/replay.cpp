@@ -179,81 +179,153 @@ std::vector<std::pair<std::size_t, std::size_t>> parts_between_breaks(const Meas
   return parts;
 }
 
-/// Where a torque channel sits in time against the axis's logged speed, in
-/// rows: the torque fitted on the speed's forward differences over this
-/// many rows back (with the speed, a Coulomb level per direction and a
-/// constant), and the lag the centroid of their weights gives.
-constexpr std::size_t kTorqueLagTaps = 5;
-
-/// The centroid lag in rows of `T` behind the acceleration the logged speed
-/// `v` shows; nullopt where the fit fails or its weights do not sum positive.
-std::optional<double> torque_lag_rows(const MeasuredRun& run, const std::vector<double>& v,
-                                      const std::vector<double>& T) {
-  const double dt = run.sample_period_s;
-  double v_max = 0.0;
-  for (double x : v) v_max = std::max(v_max, std::abs(x));
-  const double v_moving = 0.01 * v_max;
-  constexpr std::size_t kCols = kTorqueLagTaps + 4;
-  Eigen::Matrix<double, kCols, kCols> A = Eigen::Matrix<double, kCols, kCols>::Zero();
-  Eigen::Matrix<double, kCols, 1> b = Eigen::Matrix<double, kCols, 1>::Zero();
-  std::size_t rows = 0;
-  for (const auto& [first, end] : parts_between_breaks(run, v.size()))
-    for (std::size_t k = first + kTorqueLagTaps - 1; k + 1 < end; ++k) {
-      Eigen::Matrix<double, kCols, 1> x;
-      for (std::size_t j = 0; j < kTorqueLagTaps; ++j) x(static_cast<Eigen::Index>(j)) = (v[k + 1 - j] - v[k - j]) / dt;
-      x(kTorqueLagTaps) = v[k];
-      x(kTorqueLagTaps + 1) = v[k] > v_moving ? 1.0 : 0.0;
-      x(kTorqueLagTaps + 2) = v[k] < -v_moving ? 1.0 : 0.0;
-      x(kTorqueLagTaps + 3) = 1.0;
-      A.noalias() += x * x.transpose();
-      b.noalias() += x * T[k];
-      ++rows;
-    }
-  if (rows < 10 * kCols) return std::nullopt;
+/// The lag in rows of a channel behind the signal it follows, from a least
+/// squares fit of the channel on that signal at `taps` rows back (row k's
+/// columns start with those taps, then any others): the centroid of the
+/// taps' weights. nullopt where the fit fails or the weights do not sum
+/// positive.
+template <int kCols>
+std::optional<double> centroid_lag(Eigen::Matrix<double, kCols, kCols> A, const Eigen::Matrix<double, kCols, 1>& b,
+                                   std::size_t rows, int first_tap, int taps) {
+  if (rows < 10 * static_cast<std::size_t>(kCols)) return std::nullopt;
   // A direction the axis never moves in leaves its column empty.
-  for (Eigen::Index c = 0; c < static_cast<Eigen::Index>(kCols); ++c)
+  for (Eigen::Index c = 0; c < kCols; ++c)
     if (A(c, c) == 0.0) A(c, c) = 1.0;
   const Eigen::Matrix<double, kCols, 1> w = A.ldlt().solve(b);
   double sum = 0.0, moment = 0.0;
-  for (std::size_t j = 0; j < kTorqueLagTaps; ++j) {
-    sum += w(static_cast<Eigen::Index>(j));
-    moment += static_cast<double>(j) * w(static_cast<Eigen::Index>(j));
+  for (int j = 0; j < taps; ++j) {
+    sum += w(j);
+    moment += static_cast<double>(first_tap + j) * w(j);
   }
   if (!(std::isfinite(sum) && std::isfinite(moment) && sum > 0.0)) return std::nullopt;
   return moment / sum;
 }
 
-// A torque or current channel logged whole rows after the motion it drives
-// (a logger that samples the drive's torque a cycle late). The torque a
-// drive applies over a row shows in the speed's change over that row, and a
+/// The speed's rows fitted on the position's central differences at -3 to 3
+/// rows back.
+constexpr int kSpeedTaps = 7;
+/// The torque's rows fitted on the speed's forward differences at 0 to 4 rows
+/// back, with the speed, a Coulomb level per direction and a constant.
+constexpr int kTorqueTaps = 5;
+
+/// The lag in rows of the logged speed `v` behind the logged position `x`.
+/// Rows where the position steps faster than the speed ever goes (a stitch)
+/// are left out.
+std::optional<double> speed_lag_rows(const MeasuredRun& run, const std::vector<double>& x,
+                                     const std::vector<double>& v) {
+  const double dt = run.sample_period_s;
+  double v_max = 0.0;
+  for (double s : v) v_max = std::max(v_max, std::abs(s));
+  Eigen::Matrix<double, kSpeedTaps, kSpeedTaps> A = Eigen::Matrix<double, kSpeedTaps, kSpeedTaps>::Zero();
+  Eigen::Matrix<double, kSpeedTaps, 1> b = Eigen::Matrix<double, kSpeedTaps, 1>::Zero();
+  std::size_t rows = 0;
+  constexpr std::size_t reach = kSpeedTaps / 2 + 1;
+  for (const auto& [first, end] : parts_between_breaks(run, v.size()))
+    for (std::size_t k = first + reach; k + reach < end; ++k) {
+      Eigen::Matrix<double, kSpeedTaps, 1> c;
+      bool stitched = false;
+      for (int j = 0; j < kSpeedTaps; ++j) {
+        const std::size_t at = k + reach - 1 - static_cast<std::size_t>(j);  // tap -3 first
+        c(j) = (x[at + 1] - x[at - 1]) / (2.0 * dt);
+        stitched = stitched || std::abs(c(j)) > 2.0 * v_max + 1.0;
+      }
+      if (stitched) continue;
+      A.noalias() += c * c.transpose();
+      b.noalias() += c * v[k];
+      ++rows;
+    }
+  return centroid_lag<kSpeedTaps>(A, b, rows, -(kSpeedTaps / 2), kSpeedTaps);
+}
+
+/// The lag in rows of a torque `T` behind the acceleration the logged speed
+/// `v` shows.
+std::optional<double> torque_lag_rows(const MeasuredRun& run, const std::vector<double>& v,
+                                      const std::vector<double>& T) {
+  const double dt = run.sample_period_s;
+  double v_max = 0.0;
+  for (double s : v) v_max = std::max(v_max, std::abs(s));
+  const double v_moving = 0.01 * v_max;
+  constexpr int kCols = kTorqueTaps + 4;
+  Eigen::Matrix<double, kCols, kCols> A = Eigen::Matrix<double, kCols, kCols>::Zero();
+  Eigen::Matrix<double, kCols, 1> b = Eigen::Matrix<double, kCols, 1>::Zero();
+  std::size_t rows = 0;
+  for (const auto& [first, end] : parts_between_breaks(run, v.size()))
+    for (std::size_t k = first + kTorqueTaps - 1; k + 1 < end; ++k) {
+      Eigen::Matrix<double, kCols, 1> x;
+      for (int j = 0; j < kTorqueTaps; ++j) {
+        const std::size_t at = k - static_cast<std::size_t>(j);
+        x(j) = (v[at + 1] - v[at]) / dt;
+      }
+      x(kTorqueTaps) = v[k];
+      x(kTorqueTaps + 1) = v[k] > v_moving ? 1.0 : 0.0;
+      x(kTorqueTaps + 2) = v[k] < -v_moving ? 1.0 : 0.0;
+      x(kTorqueTaps + 3) = 1.0;
+      A.noalias() += x * x.transpose();
+      b.noalias() += x * T[k];
+      ++rows;
+    }
+  return centroid_lag<kCols>(A, b, rows, 0, kTorqueTaps);
+}
+
+/// A lag within 0.3 rows of a whole 1 to 3 rows: that many rows; else 0.
+std::size_t whole_rows_late(const std::optional<double>& lag) {
+  if (!lag) return 0;
+  const long rows = std::lround(*lag);
+  if (rows < 1 || rows > 3 || std::abs(*lag - static_cast<double>(rows)) > 0.3) return 0;
+  return static_cast<std::size_t>(rows);
+}
+
+/// The column read `s` rows earlier within each part between time breaks,
+/// the last rows of each part holding its last logged value.
+void read_rows_earlier(const MeasuredRun& run, std::vector<double>& c, std::size_t s) {
+  for (const auto& [first, end] : parts_between_breaks(run, c.size()))
+    for (std::size_t k = first; k < end; ++k) c[k] = c[std::min(k + s, end - 1)];
+}
+
+// Channels logged whole rows after the motion they belong to (a logger that
+// samples some of the drive's signals a cycle late, or several loggers).
+// Checked in a chain from the position, whose rows are the loop's: the
+// speed against the position's changes (a kinematic identity), then each
+// torque or current against the speed's changes (the drive's dynamics). A
 // delay in the drive (its current loop, a dead time) delays the torque and
-// that change together, so only the log's own timing puts the torque behind
-// the speed's change. Read that many rows earlier, with a note; the last
-// rows of each part hold its last logged value. Checked where the axis's
-// speed is logged at 5 ms or faster, and taken where the lag lies within
-// 0.3 rows of a whole number of 1 to 3 rows.
-void realign_late_torque(MeasuredRun& run) {
+// the speed's change together, so only the log's own timing puts a torque
+// behind that change. A channel lagging by 1 to 3 whole rows is read that
+// many rows earlier, with a note. Only lags, not leads: backlash and a
+// compliant drive put the motor's speed ahead of the table's position, and a
+// delay after the logged current puts it ahead of the motion. Checked where
+// the axis's speed is logged at 5 ms or faster.
+void realign_late_channels(MeasuredRun& run) {
   if (!(run.sample_period_s <= 5e-3 + 1e-12)) return;
+  const auto column = [&](const std::string& name) -> std::vector<double>* {
+    const auto it = std::find(run.trace.names.begin(), run.trace.names.end(), name);
+    return it == run.trace.names.end() ? nullptr
+                                       : &run.trace.columns[static_cast<std::size_t>(it - run.trace.names.begin())];
+  };
+  const auto say = [&](const std::string& col, std::size_t rows, double lag, const char* behind, const char* why) {
+    run.notes.push_back(fmt::format("{}: {} is logged {} row{} after the motion it belongs to: it lags {} by {:.2f} "
+                                    "rows{}; read {} row{} earlier, the logger's timing, not the machine's",
+                                    run.trace.source, col, rows, rows == 1 ? "" : "s", behind, lag, why, rows,
+                                    rows == 1 ? "" : "s"));
+  };
   for (Axis a : run.axes) {
     const std::string n(axis_name(a));
-    const auto* v = run.trace.find(n + "_v_mm_s");
+    std::vector<double>* v = column(n + "_v_mm_s");
     if (v == nullptr) continue;
+    if (const std::vector<double>* x = column(n + "_mm")) {
+      const std::optional<double> lag = speed_lag_rows(run, *x, *v);
+      if (const std::size_t s = whole_rows_late(lag)) {
+        read_rows_earlier(run, *v, s);
+        say(n + "_v_mm_s", s, *lag, "the position's changes", "");
+      }
+    }
     for (const std::string& col : {n + "_torque_raw", n + "_torque_Nm", n + "_i_A"}) {
-      auto it = std::find(run.trace.names.begin(), run.trace.names.end(), col);
-      if (it == run.trace.names.end()) continue;
-      auto& T = run.trace.columns[static_cast<std::size_t>(it - run.trace.names.begin())];
-      const std::optional<double> lag = torque_lag_rows(run, *v, T);
-      if (!lag) continue;
-      const long rows = std::lround(*lag);
-      if (rows < 1 || rows > 3 || std::abs(*lag - static_cast<double>(rows)) > 0.3) continue;
-      const auto s = static_cast<std::size_t>(rows);
-      for (const auto& [first, end] : parts_between_breaks(run, T.size()))
-        for (std::size_t k = first; k < end; ++k) T[k] = T[std::min(k + s, end - 1)];
-      run.notes.push_back(fmt::format("{}: {} is logged {} row{} after the motion it drives (fitted on the speed's "
-                                      "changes, it lags them by {:.2f} rows; a delay in the drive would delay both): "
-                                      "read {} row{} earlier, the logger's timing, not the machine's",
-                                      run.trace.source, col, rows, rows == 1 ? "" : "s", *lag, rows,
-                                      rows == 1 ? "" : "s"));
+      std::vector<double>* T = column(col);
+      if (T == nullptr) continue;
+      const std::optional<double> lag = torque_lag_rows(run, *v, *T);
+      if (const std::size_t s = whole_rows_late(lag)) {
+        read_rows_earlier(run, *T, s);
+        say(col, s, *lag, "the speed's changes", " (a delay in the drive would delay both)");
+      }
     }
   }
 }
@@ -278,7 +350,7 @@ MeasuredRun load_run(const std::filesystem::path& dir) {
   if (run.meta.sample_period_s && std::abs(*run.meta.sample_period_s - dt) > 0.01 * dt)
     throw IoError(fmt::format("{}: sample_period_s = {} s but the trace's t_s steps by {} s", meta_path.string(),
                               *run.meta.sample_period_s, dt));
-  realign_late_torque(run);
+  realign_late_channels(run);
   return run;
 }
 

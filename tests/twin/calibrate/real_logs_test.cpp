@@ -509,42 +509,55 @@ TEST(RealLogs, ACurrentLoopLagIsIdentified) {
   }
 }
 
-// A torque channel logged one row after the motion it drives (a logger that
-// samples the drive's torque a cycle late), on the truth with a Stribeck rise
-// the drive does not have, without and with a 2 ms delay in the drive (whose
-// logged torque is the delayed one). The velocity loop's law fits such a
-// torque best a row late either way, so the skew was read as a delay: the
-// other program's tracking went to 0.010 to 0.018 NRMS, and 0.34 where the
-// drive has a delay too. A delay in the drive delays the torque and the
-// motion together; only the log's timing puts the torque behind the speed's
-// change. Oracles: the note, from load_run, on the skewed runs and not on the
-// same runs logged in line; the truth's gains (expect_truth_gains) and the
-// held-out machine's check; the truth's delay, 2 ms to the 1 ms row, kept
-// where the drive has one (the law's gains then those fitted at its lag),
-// and none kept where it has none.
-TEST(RealLogs, ATorqueLoggedARowLateIsReadBackInLine) {
+// A channel logged one row after the motion it belongs to (a logger that
+// samples some of the drive's signals a cycle late), on the truth with a
+// Stribeck rise the drive does not have: the torque, without and with a 2 ms
+// delay in the drive (whose logged torque is the delayed one), and the speed.
+// The velocity loop's law fits such a torque best a row late either way, so
+// the skew was read as a delay: on the cascade sweep the other program's
+// tracking went to 0.010 to 0.018 NRMS, and 0.34 where the drive has a delay
+// too. A delay in the drive delays the torque and the motion together; only
+// the log's timing puts the torque behind the speed's change. A speed a row
+// late put every law across the skew (tracking 0.024 to 0.12). Oracles: the
+// note, from load_run, on the skewed runs and not on the same runs logged in
+// line; the truth's gains (expect_truth_gains) and the held-out machine's
+// check; the truth's delay, 2 ms to the 1 ms row, kept where the drive has
+// one (the law's gains then those fitted at its lag), and none kept where it
+// has none.
+TEST(RealLogs, AChannelLoggedARowLateIsReadBackInLine) {
   truth::RunSpec sp = cascade_spec_with_stribeck(1e-3);
-  const auto late = [&](const std::string& name, const std::vector<double>& ref) {
+  // The truth's run of `ref` with the column `late_column` logged a row late.
+  const auto late = [&](const std::string& name, const std::vector<double>& ref, const std::string& late_column) {
     sp.reference_mm = ref;
     const auto whole = work(name + "_in_line");
     truth::write_truth_run(whole, sp);
-    for (const auto& n : load_run(whole).notes) EXPECT_THAT(n, ::testing::Not(HasSubstr("row after the motion")));
+    for (const auto& n : load_run(whole).notes) EXPECT_THAT(n, ::testing::Not(HasSubstr("after the motion it belongs")));
+    std::size_t field = 0;
     std::string previous;
     return rewritten_run(whole, name, [&](std::ptrdiff_t row, std::string& line) {
-      const auto comma = line.rfind(',');
-      const std::string torque = line.substr(comma + 1);
-      if (row > 0) line = line.substr(0, comma + 1) + previous;
-      previous = torque;
+      std::vector<std::string> cells;
+      std::stringstream in(line);
+      for (std::string c; std::getline(in, c, ',');) cells.push_back(c);
+      if (row < 0) {
+        field = static_cast<std::size_t>(std::find(cells.begin(), cells.end(), late_column) - cells.begin());
+        EXPECT_LT(field, cells.size()) << late_column;
+        return true;
+      }
+      const std::string logged = cells.at(field);
+      if (row > 0) cells[field] = previous;
+      previous = logged;
+      line = fmt::format("{}", fmt::join(cells, ","));
       return true;
     });
   };
-  for (const int delay_ticks : {0, 2}) {
-    SCOPED_TRACE(delay_ticks);
+  for (const auto& [late_column, delay_ticks] :
+       std::vector<std::pair<std::string, int>>{{"x_torque_raw", 0}, {"x_torque_raw", 2}, {"x_v_mm_s", 0}}) {
+    SCOPED_TRACE(late_column + ", delay " + std::to_string(delay_ticks));
     sp.effects.delay_ticks = delay_ticks;
-    const MeasuredRun fit = late("late_fit", program(sp.Ts_s, 1.0, 24.0));
-    const MeasuredRun val = late("late_val", program(sp.Ts_s, 1.6, 12.0));
+    const MeasuredRun fit = late("late_fit", program(sp.Ts_s, 1.0, 24.0), late_column);
+    const MeasuredRun val = late("late_val", program(sp.Ts_s, 1.6, 12.0), late_column);
     const DataCalibration r = calibrate_from_data({fit}, {val}, machine_for_run(fit, "", nullptr));
-    EXPECT_TRUE(has_note(r, "x_torque_raw is logged 1 row after the motion it drives"));
+    EXPECT_TRUE(has_note(r, late_column + " is logged 1 row after the motion it belongs to"));
     ASSERT_EQ(r.axis.size(), 1u);
     const AxisFromData& ax = r.axis[0];
     ASSERT_TRUE(ax.identified) << ax.note;
