@@ -7,7 +7,7 @@
 //   calibrate_sweep [--example RUN_DIR] [--filter NAME] [--program NAME] [--magnitudes 0.5,1,2]
 //                   [--log-every M] [--current-only] [--keep DIR] [--verbose]
 //   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed]
-//                            [--encoder-mm Q] [--keep DIR]
+//                            [--encoder-mm Q] [--current-lag S] [--kff K] [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
 // measured run, each on the truth's X plant, and its y reference on the Y
@@ -30,7 +30,9 @@
 // same rows (TORQUE where not below it); ROSE where the sum of the two
 // NRMS is above the identified machine's without effects. --noise sets the
 // standard deviation of the noise on the logged torque in N m (0.002 unless
-// given; 40 raw per N m).
+// given; 40 raw per N m); --current-lag gives the truth's current loop a
+// first-order lag of S seconds (and its logged torque is the lagged one);
+// --kff sets its velocity feedforward (0.6 unless given).
 #include <unistd.h>
 
 #include <algorithm>
@@ -151,8 +153,14 @@ std::vector<std::string> split_sorted(const std::string& list) {
   return v;
 }
 
+/// The truth's loop where the sweep changes it from cascade_run_spec's.
+struct CascadeOptions {
+  double current_lag_s{0.0};  ///< the current loop's first-order lag (0: instant)
+  double kff{-1.0};           ///< the velocity feedforward (< 0: the spec's)
+};
+
 int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filter, double noise_Nm,
-                  bool log_motor_speed, double encoder_mm, const std::string& keep) {
+                  bool log_motor_speed, double encoder_mm, const CascadeOptions& loop, const std::string& keep) {
   namespace ta = twin::analysis;
   const std::vector<double> fit_speeds{20.0, -35.0, 3.0, -12.0, 50.0, -30.0, 8.0, -4.0, 25.0, -25.0};
   const std::vector<double> val_speeds{30.0, -45.0, 5.0, -15.0, 40.0, -6.0, 12.0, -20.0};
@@ -168,6 +176,8 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     sp.current_noise_A = noise_Nm;  // the truth adds it to the torque in N m where the torque is logged raw
     sp.cascade.log_motor_speed = log_motor_speed;
     sp.resolution_mm = encoder_mm;
+    sp.cascade.tau_i = loop.current_lag_s;
+    if (loop.kff >= 0.0) sp.cascade.kff = loop.kff;
     const double load = sp.effects.load_Nm;
     c.set(sp.effects);
     sp.effects.load_Nm = load;
@@ -228,6 +238,15 @@ int main(int argc, char** argv) {
   double noise_Nm = 0.002;
   bool log_motor_speed = true;
   double encoder_mm = 0.001;
+  CascadeOptions loop;
+  // A number >= 0 for `option`, or a message and false.
+  auto number_at_least_0 = [](const char* option, const char* t, double& out) {
+    char* end = nullptr;
+    out = std::strtod(t, &end);
+    if (end != t && *end == '\0' && out >= 0.0) return true;
+    std::fprintf(stderr, "calibrate_sweep: %s takes a number >= 0, not '%s'\n", option, t);
+    return false;
+  };
   for (int i = 1; i < argc; ++i) {
     const bool has_value = i + 1 < argc;
     if (!std::strcmp(argv[i], "--verbose")) {
@@ -273,6 +292,10 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "calibrate_sweep: --encoder-mm takes a resolution in mm > 0, not '%s'\n", t);
         return 2;
       }
+    } else if (!std::strcmp(argv[i], "--current-lag") && has_value) {
+      if (!number_at_least_0("--current-lag", argv[++i], loop.current_lag_s)) return 2;
+    } else if (!std::strcmp(argv[i], "--kff") && has_value) {
+      if (!number_at_least_0("--kff", argv[++i], loop.kff)) return 2;
     } else if (!std::strcmp(argv[i], "--no-motor-speed")) {
       log_motor_speed = false;
     } else if (!std::strcmp(argv[i], "--current-only")) {
@@ -284,7 +307,7 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  if (cascade) return cascade_sweep(magnitudes, filter, noise_Nm, log_motor_speed, encoder_mm, keep);
+  if (cascade) return cascade_sweep(magnitudes, filter, noise_Nm, log_motor_speed, encoder_mm, loop, keep);
   // A program: a reference and the drive that follows it (the X plant, or
   // the Y plant written as axis y).
   struct Program {
