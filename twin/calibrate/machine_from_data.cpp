@@ -2015,6 +2015,11 @@ void set_velocity_loop(const VelocityLoopFit& vl, const AxisFit& f, controller::
   g.Tn_s = Ki > 0.0 ? g.Kvp_torque_s_per_rad / Ki : 0.0;
 }
 
+/// The rows a torque may follow its law late: up to 10 ms, 1 to 10 rows.
+std::size_t max_torque_lag_rows(const AxisFit& f) {
+  return static_cast<std::size_t>(std::clamp(std::lround(0.01 / f.r0.sample_period_s), 1L, 10L));
+}
+
 /// The same law a few samples later: a torque that follows its command late
 /// (a delay beyond the loop) fits best at that lag. A lag that lowers the
 /// residual by less than a fifth is the law's own noise: the residual less
@@ -2023,8 +2028,7 @@ void set_velocity_loop(const VelocityLoopFit& vl, const AxisFit& f, controller::
 void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueClip* clip, AxisFromData& ax) {
   ax.gains_at_lag = ax.gains;
   double best = vl.ls.residual_rms;
-  const auto max_lag = static_cast<std::size_t>(std::clamp(std::lround(0.01 / f.r0.sample_period_s), 1L, 10L));
-  for (std::size_t lag = 1; lag <= max_lag; ++lag) {
+  for (std::size_t lag = 1; lag <= max_torque_lag_rows(f); ++lag) {
     const VelocityLoopFit vlag = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, lag, clip);
     if (!(vlag.ls.ok && vlag.ls.theta[0] > 0.0 && vlag.ls.theta[1] >= 0.0 && vlag.ls.residual_rms < best)) continue;
     best = vlag.ls.residual_rms;
@@ -2039,41 +2043,56 @@ void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const Torque
 
 /// The current loop as a first-order lag where the logged torque shows one:
 /// the law fitted with the previous row's torque (fit_velocity_loop's
-/// current_lag) on a log that samples every loop period and logs the speed. Taken where its
+/// current_lag) on a log that samples every loop period and logs the speed,
+/// with the law's columns at 0 to max_lag rows back as for a pure delay (a
+/// drive's dead time and its current loop's lag together: each alone left
+/// the other program's tracking at 0.054 on a 2 ms dead time with a 1 ms
+/// lag, the dead time read as 3 ms). The lag with the smallest residual whose
 /// coefficient a lies within 0.05 to 0.95 (tau_i from a third of a period to
-/// 20 periods), the gains are positive, it leaves under 0.8 of the plain
-/// law's residual (both less the noise), and less than the torque's best
-/// pure delay (velocity_loop_lag) does: a delay is then not proposed. Without
-/// it, on the truth's runs with a current loop of 0.5 to 2 ms and a Stribeck
-/// rise, Kvp came out 2 to 22 % low and rising_friction, backlash or delay
-/// was named for the lag.
-void current_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, AxisFromData& ax) {
+/// 20 periods) with positive gains is taken where it leaves under 0.8 of the
+/// plain law's residual at its best lag (velocity_loop_lag; both less the
+/// noise). Its gains are the loop's, and its lag the dead time a delay is
+/// then proposed at. Without it, on the truth's runs with a current loop of
+/// 0.5 to 2 ms and a Stribeck rise, Kvp came out 2 to 22 % low and
+/// rising_friction, backlash or delay was named for the lag.
+void current_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueClip* clip, AxisFromData& ax) {
   const double dt = f.r0.sample_period_s;
   if (!(std::abs(dt - f.Ts) <= 1e-9 + 1e-6 * f.Ts)) return;
   // Where the speed is taken from the position, the law is fitted through
   // the low-pass (filtered_alike), whose own lag the previous row would fit.
   if (f.r0.trace.find(lowpassed(ax.channel.column)) != nullptr) return;
-  const VelocityLoopFit arx = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, 0, nullptr, true);
-  if (!arx.ls.ok) return;
-  const double a = arx.ls.theta[2];
-  if (!(a > 0.05 && a < 0.95 && arx.ls.theta[0] > 0.0 && arx.ls.theta[1] >= 0.0)) return;
-  const double plain = vl.less_noise(vl.ls.residual_rms), with_lag = vl.less_noise(arx.ls.residual_rms);
-  double delay = vl.ls.residual_rms;
-  if (ax.torque_lag_samples > 0) {
-    const VelocityLoopFit d = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, ax.torque_lag_samples);
-    if (d.ls.ok) delay = d.ls.residual_rms;
+  std::optional<VelocityLoopFit> best;
+  std::size_t best_lag = 0;
+  for (std::size_t lag = 0; lag <= max_torque_lag_rows(f); ++lag) {
+    VelocityLoopFit arx = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, lag, clip, true);
+    if (!arx.ls.ok) continue;
+    const double a = arx.ls.theta[2];
+    if (!(a > 0.05 && a < 0.95 && arx.ls.theta[0] > 0.0 && arx.ls.theta[1] >= 0.0)) continue;
+    if (!best || arx.ls.residual_rms < best->ls.residual_rms) {
+      best = std::move(arx);
+      best_lag = lag;
+    }
   }
-  if (!(with_lag < 0.8 * plain && arx.ls.residual_rms < delay)) return;
-  const double Kvp = arx.ls.theta[0] / (1.0 - a), Ki = arx.ls.theta[1] / (1.0 - a);
+  if (!best) return;
+  double plain = vl.ls.residual_rms;
+  if (ax.torque_lag_samples > 0) {
+    const VelocityLoopFit d = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, ax.torque_lag_samples, clip);
+    if (d.ls.ok) plain = std::min(plain, d.ls.residual_rms);
+  }
+  if (!(vl.less_noise(best->ls.residual_rms) < 0.8 * vl.less_noise(plain))) return;
+  const double a = best->ls.theta[2];
+  const double Kvp = best->ls.theta[0] / (1.0 - a), Ki = best->ls.theta[1] / (1.0 - a);
   ax.gains.Kvp_torque_s_per_rad = Kvp;
   ax.gains.Tn_s = Ki > 0.0 ? Kvp / Ki : 0.0;
   ax.gains.tau_i_s = -dt / std::log(a);
-  ax.torque_lag_samples = 0;
+  ax.torque_lag_samples = best_lag;
   ax.gains_at_lag = ax.gains;
-  ax.loop_source += fmt::format("; a current loop lagging the law by {:.3g} ms (a first order: the law with the "
+  ax.loop_source += fmt::format("; a current loop lagging the law by {:.3g} ms{} (a first order: the law with the "
                                 "previous row's torque leaves a residual of {:.3g}, {:.3g} without; Kvp {:.4g}, "
                                 "Tn {:.3g} s)",
-                                1e3 * ax.gains.tau_i_s, arx.ls.residual_rms, vl.ls.residual_rms, Kvp, ax.gains.Tn_s);
+                                1e3 * ax.gains.tau_i_s,
+                                best_lag > 0 ? fmt::format(" behind a dead time of {} samples", best_lag) : "",
+                                best->ls.residual_rms, plain, Kvp, ax.gains.Tn_s);
 }
 
 /// The velocity loop: from the logged torque against the speed error where
@@ -2121,7 +2140,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
                                     "{:.3g} of an RMS {:.3g}){}",
                                     vl.ls.residual_rms, vl.T_rms, clipped);
       velocity_loop_lag(f, vl, clip ? &*clip : nullptr, ax);
-      if (!clip) current_loop_lag(f, vl, ax);
+      current_loop_lag(f, vl, clip ? &*clip : nullptr, ax);
     }
   }
   if (!ax.velocity_loop_from_data)

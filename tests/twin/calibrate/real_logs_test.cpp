@@ -486,26 +486,51 @@ TEST(RealLogs, PositionsExportedToTwoDecimalsAreTheLogsRounding) {
 }
 
 // The truth's current loop as a first-order lag of 0.5 and 2 ms (its logged
-// torque is the lagged one), with a Stribeck rise the drive does not have.
-// Fitted as an instant current loop, Kvp came out 2 % and 22 % low, and a
-// 2 ms lag was read as a delay of one row. Oracle: the truth's lag and the
-// velocity loop's gains (the law is exact at the log's period, so 5 % on
-// tau_i and Kvp and 10 % on Tn, as for the gains elsewhere), no delay
-// proposed, and the held-out machine's check on the other program.
+// torque is the lagged one), with a Stribeck rise the drive does not have,
+// and a lag of 1 ms behind a dead time of 2 ms (a drive's sampling and its
+// current loop together). Fitted as an instant current loop, Kvp came out 2 %
+// and 22 % low, and a 2 ms lag was read as a delay of one row; fitted as a
+// lag alone or a delay alone, the lag behind a dead time was read as a 3 ms
+// delay and the other program tracked at 0.054 NRMS on the cascade sweep.
+// Oracle: the truth's lag and the velocity loop's gains (the law is exact at
+// the log's period, so 5 % on tau_i and Kvp and 10 % on Tn, as for the gains
+// elsewhere), the truth's dead time as the delay kept and none where it has
+// none, and the held-out machine's check on the other program.
 TEST(RealLogs, ACurrentLoopLagIsIdentified) {
   truth::RunSpec sp = cascade_spec_with_stribeck(1e-3);
-  for (const double tau_s : {0.0005, 0.002}) {
-    SCOPED_TRACE(tau_s);
+  for (const auto& [tau_s, delay_ticks] : std::vector<std::pair<double, int>>{{0.0005, 0}, {0.002, 0}, {0.001, 2}}) {
+    SCOPED_TRACE(fmt::format("lag {} s, dead time {} periods", tau_s, delay_ticks));
     sp.cascade.tau_i = tau_s;
+    sp.effects.delay_ticks = delay_ticks;
     const DataCalibration r = calibrate_on_two_programs(sp, "lag");
     ASSERT_EQ(r.axis.size(), 1u);
     const AxisFromData& ax = r.axis[0];
     EXPECT_NEAR(ax.gains.tau_i_s, tau_s, 0.05 * tau_s) << ax.loop_source;
     EXPECT_THAT(ax.loop_source, HasSubstr("a current loop lagging the law"));
     expect_truth_gains(ax, sp);
-    EXPECT_EQ(ax.torque_lag_samples, 0u);
-    for (const auto& e : r.effects) EXPECT_FALSE(e.kept && e.effect == "delay");
-    expect_held_out_check(r);
+    EXPECT_EQ(ax.torque_lag_samples, static_cast<std::size_t>(delay_ticks));
+    const auto delay = std::find_if(r.effects.begin(), r.effects.end(),
+                                    [](const DataEffect& e) { return e.kept && e.effect == "delay"; });
+    if (delay_ticks == 0) {
+      EXPECT_EQ(delay, r.effects.end());
+    } else {
+      ASSERT_NE(delay, r.effects.end());
+      EXPECT_NEAR(delay->params.at("delay_s"), 1e-3 * delay_ticks, 1e-9);
+    }
+    if (delay_ticks == 0) {
+      expect_held_out_check(r);
+    } else {
+      // The loop with both is the least damped, and its following error the
+      // most sensitive to the drive's friction levels, which the fit through
+      // its hunting at low speed takes 3 % off (B 5 % low): the other
+      // program tracks at 0.014, torque 0.18 (0.036 and 0.46 with the dead
+      // time read as 3 ms; on the sweep's run 0.0125, and 0.0086 with the
+      // truth's levels). Held at 0.02, and the torque below the regression's.
+      ASSERT_EQ(r.validation_runs.size(), 1u);
+      const auto& e = r.validation_runs[0].calibrated.nrms;
+      EXPECT_LT(e.at("x_err_mm"), 0.02);
+      EXPECT_LT(e.at("x_torque_raw"), r.validation_runs[0].regression.nrms.at("x_torque_raw"));
+    }
   }
 }
 
