@@ -1737,8 +1737,8 @@ void choose_rounding(const std::vector<MeasuredRun>& fit, DataCalibration& out) 
                                       ? "coarser than an encoder's count"
                                       : "the commanded positions are rounded alike, and an encoder does not round "
                                         "the command") +
-                                 "); the twin's loop closes on a 1 um encoder and its logged positions are rounded "
-                                 "as the log's"
+                                 "); the twin's loop closes on the encoder (meta.json's, else 1 um) and its "
+                                 "logged positions are rounded as the log's"
                            : std::string("")));
 }
 
@@ -2116,12 +2116,15 @@ void current_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueC
 /// neighbour fitted the law's misfit (the sweep without the motor's speed
 /// went from 8 named wrong and 4 tracking misses to 12 and 5). So the lag is
 /// given, not fitted: the law's columns pass through a first-order lag of
-/// 0.25 to 5 ms (fit_velocity_loop's lag_a), each at 0 to max_lag rows of
-/// dead time, and the pair with the smallest residual, refined on a finer
-/// grid about it, is taken where it leaves under 0.8 of the plain law's
-/// residual at its best lag (both less the noise). Without it, a truth with a
-/// 1 ms current loop behind a 2 ms dead time and no speed logged tracked the
-/// other program at 0.047 NRMS.
+/// 0.25 to 5 ms (fit_velocity_loop's lag_a) and then of a golden-section
+/// search between the best grid point's neighbours, at each of 0 to max_lag
+/// rows of dead time; the pair with the smallest residual is taken where it
+/// leaves under 0.8 of the plain law's residual at its best lag (both less
+/// the noise). Without it, a truth with a 1 ms current loop behind a 2 ms
+/// dead time and no speed logged tracked the other program at 0.047 NRMS,
+/// and a 2 ms lag alone was read as a delay. Through the filter a lag and a
+/// dead time of about the same total look alike (a 1.7 ms lag fits no
+/// better than a 1 ms dead time, and is left as that delay).
 void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl, const TorqueClip* clip,
                                      AxisFromData& ax) {
   const double dt = f.r0.sample_period_s;
@@ -2150,7 +2153,8 @@ void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl
         at = g;
       }
     if (r_at >= 1e300) continue;
-    double lo = std::log(1e-3 * grid_ms[at == 0 ? 0 : at - 1]), hi = std::log(1e-3 * grid_ms[std::min(at + 1, grid_ms.size() - 1)]);
+    double lo = std::log(1e-3 * grid_ms[at == 0 ? 0 : at - 1]);
+    double hi = std::log(1e-3 * grid_ms[std::min(at + 1, grid_ms.size() - 1)]);
     const double phi = 0.5 * (std::sqrt(5.0) - 1.0);
     double x1 = hi - phi * (hi - lo), x2 = lo + phi * (hi - lo);
     double r1 = residual(fit_at(lag, std::exp(x1))), r2 = residual(fit_at(lag, std::exp(x2)));

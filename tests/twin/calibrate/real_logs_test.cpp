@@ -562,7 +562,8 @@ TEST(RealLogs, AChannelLoggedARowLateIsReadBackInLine) {
     sp.reference_mm = ref;
     const auto whole = work(name + "_in_line");
     truth::write_truth_run(whole, sp);
-    for (const auto& n : load_run(whole).notes) EXPECT_THAT(n, ::testing::Not(HasSubstr("after the motion it belongs")));
+    for (const auto& n : load_run(whole).notes)
+      EXPECT_THAT(n, ::testing::Not(HasSubstr("after the motion it belongs")));
     std::size_t field = 0;
     std::string previous;
     return rewritten_run(whole, name, [&](std::ptrdiff_t row, std::string& line) {
