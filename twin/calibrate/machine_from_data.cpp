@@ -301,6 +301,22 @@ struct TorqueClip {
   }
 };
 
+/// The command's acceleration as the loop takes it for a torque
+/// feedforward, on a log that samples every loop period: the backward
+/// difference of the backward difference of the reference, within each
+/// segment (0 on its first two rows), low-passed alike where the law is
+/// fitted through the low-pass (the speed taken from the position).
+std::vector<double> reference_acceleration(const RunData& rd, Axis a, const std::string& channel) {
+  const io::TraceTable& t = rd.run->trace;
+  const std::vector<double>& ref = t.at(col(a, "_ref_mm"));
+  const double dt = rd.run->sample_period_s;
+  std::vector<double> acc(ref.size(), 0.0);
+  for (const Segment& sg : rd.segments)
+    for (std::size_t k = sg.begin + 2; k < sg.end; ++k)
+      acc[k] = (ref[k] - 2.0 * ref[k - 1] + ref[k - 2]) / (dt * dt);
+  return t.find(lowpassed(channel)) != nullptr ? lowpass_in_segments(acc, rd.segments, dt) : acc;
+}
+
 /// The PI velocity law fitted on the fitting rows: the logged torque at row k
 /// against the speed error (vcmd - v) and its integral at row k - lag (within
 /// a segment), and a constant per segment: the integral's value where the
@@ -317,7 +333,8 @@ struct TorqueClip {
 /// value, before they are fitted: a current loop whose lag is given (output
 /// error, which noise on the speed does not bias towards a slow lag).
 struct VelocityLoopFit {
-  LsqResult ls;  ///< Kvp, Kvp / Tn
+  LsqResult ls;  ///< Kvp, Kvp / Tn (then a, with current_lag; then Jff, with torque_ff)
+  bool torque_ff{false};
   /// The constant of each segment, in the order of the runs' segments
   /// (0 where a segment has no row fitted).
   std::vector<double> c_seg;
@@ -336,8 +353,8 @@ struct VelocityLoopFit {
 };
 VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, const std::string& channel,
                                   std::size_t lag, const TorqueClip* clip = nullptr, bool current_lag = false,
-                                  double lag_a = 0.0) {
-  std::vector<double> ev, iev, Tm, Tp;
+                                  double lag_a = 0.0, bool torque_ff = false) {
+  std::vector<double> ev, iev, Tm, Tp, aff;
   std::vector<std::size_t> vrows, seg_of_row;
   std::size_t g = 0;  // the segment's index over all runs
   for (const auto& rd : runs) {
@@ -345,11 +362,14 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
     const auto& vc = *filtered_alike(t, velocity_command_column(t, a));
     const auto& v = t.at(col(a, "_v_mm_s"));
     const auto& ch = *filtered_alike(t, channel);
+    const std::vector<double> a_ref = torque_ff ? reference_acceleration(rd, a, channel) : std::vector<double>{};
     for (std::size_t si = 0; si < rd.segments.size(); ++si, ++g) {
       const Segment& s = rd.segments[si];
       const std::size_t end = std::min(s.end, rd.n_fit);
       if (end <= s.begin) continue;
-      std::vector<double> e(end - s.begin), ie(end - s.begin);
+      std::vector<double> e(end - s.begin), ie(end - s.begin), ar;
+      if (torque_ff) ar.assign(a_ref.begin() + static_cast<std::ptrdiff_t>(s.begin),
+                               a_ref.begin() + static_cast<std::ptrdiff_t>(end));
       double integral = 0.0;
       for (std::size_t k = s.begin; k < end; ++k) {
         e[k - s.begin] = vc[k] - v[k];
@@ -357,7 +377,8 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
         ie[k - s.begin] = integral;
       }
       if (lag_a > 0.0)
-        for (std::vector<double>* c : {&e, &ie}) {
+        for (std::vector<double>* c : {&e, &ie, &ar}) {
+          if (c->empty()) continue;
           double y = c->front();
           for (double& x : *c) x = y = lag_a * y + (1.0 - lag_a) * x;
         }
@@ -365,6 +386,7 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
         const std::size_t j = k - s.begin;
         ev.push_back(j >= lag ? e[j - lag] : 0.0);
         iev.push_back(j >= lag ? ie[j - lag] : 0.0);
+        if (torque_ff) aff.push_back(j >= lag ? ar[j - lag] : 0.0);
         Tm.push_back(ch[k]);
         Tp.push_back(j >= 1 ? ch[k - 1] : 0.0);
         seg_of_row.push_back(g);
@@ -376,7 +398,7 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
     }
   }
   // Each segment's means over its rows fitted, taken off.
-  std::vector<double> n_seg(g, 0.0), me(g, 0.0), mie(g, 0.0), mT(g, 0.0), mTp(g, 0.0);
+  std::vector<double> n_seg(g, 0.0), me(g, 0.0), mie(g, 0.0), mT(g, 0.0), mTp(g, 0.0), ma(g, 0.0);
   for (std::size_t k : vrows) {
     const std::size_t sg = seg_of_row[k];
     n_seg[sg] += 1.0;
@@ -384,6 +406,7 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
     mie[sg] += iev[k];
     mT[sg] += Tm[k];
     mTp[sg] += Tp[k];
+    if (torque_ff) ma[sg] += aff[k];
   }
   for (std::size_t sg = 0; sg < g; ++sg)
     if (n_seg[sg] > 0.0) {
@@ -391,23 +414,29 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
       mie[sg] /= n_seg[sg];
       mT[sg] /= n_seg[sg];
       mTp[sg] /= n_seg[sg];
+      ma[sg] /= n_seg[sg];
     }
-  std::vector<double> ev0(ev.size()), iev0(ev.size()), Tm0(ev.size()), Tp0(ev.size());
+  std::vector<double> ev0(ev.size()), iev0(ev.size()), Tm0(ev.size()), Tp0(ev.size()), a0(aff.size());
   for (std::size_t k = 0; k < ev.size(); ++k) {
     const std::size_t sg = seg_of_row[k];
     ev0[k] = ev[k] - me[sg];
     iev0[k] = iev[k] - mie[sg];
     Tm0[k] = Tm[k] - mT[sg];
     Tp0[k] = Tp[k] - mTp[sg];
+    if (torque_ff) a0[k] = aff[k] - ma[sg];
   }
   VelocityLoopFit f;
-  f.ls = current_lag ? least_squares({&ev0, &iev0, &Tp0}, Tm0, vrows) : least_squares({&ev0, &iev0}, Tm0, vrows);
+  f.torque_ff = torque_ff;
+  std::vector<const std::vector<double>*> cols{&ev0, &iev0};
+  if (current_lag) cols.push_back(&Tp0);
+  if (torque_ff) cols.push_back(&a0);
+  f.ls = least_squares(cols, Tm0, vrows);
   f.c_seg.assign(g, 0.0);
   if (f.ls.ok)
     for (std::size_t sg = 0; sg < g; ++sg)
       if (n_seg[sg] > 0.0)
         f.c_seg[sg] = mT[sg] - f.ls.theta[0] * me[sg] - f.ls.theta[1] * mie[sg] -
-                      (current_lag ? f.ls.theta[2] * mTp[sg] : 0.0);
+                      (current_lag ? f.ls.theta[2] * mTp[sg] : 0.0) - (torque_ff ? f.ls.theta.back() * ma[sg] : 0.0);
   double t2 = 0.0;
   for (std::size_t k : vrows) {
     t2 += Tm[k] * Tm[k];
@@ -2028,6 +2057,7 @@ void set_velocity_loop(const VelocityLoopFit& vl, const AxisFit& f, controller::
   const double excess_s = std::max(0.0, f.r0.sample_period_s - f.Ts);
   g.Kvp_torque_s_per_rad = vl.ls.theta[0] + 0.5 * Ki * excess_s;
   g.Tn_s = Ki > 0.0 ? g.Kvp_torque_s_per_rad / Ki : 0.0;
+  g.Jff_torque_s2_per_rad = vl.torque_ff ? vl.ls.theta.back() : 0.0;
 }
 
 /// The rows a torque may follow its law late: up to 10 ms, 1 to 10 rows.
@@ -2044,7 +2074,8 @@ void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const Torque
   ax.gains_at_lag = ax.gains;
   double best = vl.ls.residual_rms;
   for (std::size_t lag = 1; lag <= max_torque_lag_rows(f); ++lag) {
-    const VelocityLoopFit vlag = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, lag, clip);
+    const VelocityLoopFit vlag =
+        fit_velocity_loop(f.runs, ax.axis, ax.channel.column, lag, clip, false, 0.0, ax.torque_feedforward);
     if (!(vlag.ls.ok && vlag.ls.theta[0] > 0.0 && vlag.ls.theta[1] >= 0.0 && vlag.ls.residual_rms < best)) continue;
     best = vlag.ls.residual_rms;
     ax.torque_lag_samples = lag;
@@ -2079,7 +2110,8 @@ void current_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueC
   std::optional<VelocityLoopFit> best;
   std::size_t best_lag = 0;
   for (std::size_t lag = 0; lag <= max_torque_lag_rows(f); ++lag) {
-    VelocityLoopFit arx = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, lag, clip, true);
+    VelocityLoopFit arx =
+        fit_velocity_loop(f.runs, ax.axis, ax.channel.column, lag, clip, true, 0.0, ax.torque_feedforward);
     if (!arx.ls.ok) continue;
     const double a = arx.ls.theta[2];
     if (!(a > 0.05 && a < 0.95 && arx.ls.theta[0] > 0.0 && arx.ls.theta[1] >= 0.0)) continue;
@@ -2091,7 +2123,8 @@ void current_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueC
   if (!best) return;
   double plain = vl.ls.residual_rms;
   if (ax.torque_lag_samples > 0) {
-    const VelocityLoopFit d = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, ax.torque_lag_samples, clip);
+    const VelocityLoopFit d = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, ax.torque_lag_samples, clip,
+                                                false, 0.0, ax.torque_feedforward);
     if (d.ls.ok) plain = std::min(plain, d.ls.residual_rms);
   }
   if (!(vl.less_noise(best->ls.residual_rms) < 0.8 * vl.less_noise(plain))) return;
@@ -2099,6 +2132,7 @@ void current_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueC
   const double Kvp = best->ls.theta[0] / (1.0 - a), Ki = best->ls.theta[1] / (1.0 - a);
   ax.gains.Kvp_torque_s_per_rad = Kvp;
   ax.gains.Tn_s = Ki > 0.0 ? Kvp / Ki : 0.0;
+  ax.gains.Jff_torque_s2_per_rad = best->torque_ff ? best->ls.theta.back() / (1.0 - a) : 0.0;
   ax.gains.tau_i_s = -dt / std::log(a);
   ax.torque_lag_samples = best_lag;
   ax.gains_at_lag = ax.gains;
@@ -2139,7 +2173,8 @@ void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl
   const std::vector<double> grid_ms{0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0};
   std::optional<Best> best;
   const auto fit_at = [&](std::size_t lag, double tau_s) -> std::optional<VelocityLoopFit> {
-    VelocityLoopFit v = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, lag, clip, false, std::exp(-dt / tau_s));
+    VelocityLoopFit v = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, lag, clip, false, std::exp(-dt / tau_s),
+                                          ax.torque_feedforward);
     if (!(v.ls.ok && v.ls.theta[0] > 0.0 && v.ls.theta[1] >= 0.0)) return std::nullopt;
     return v;
   };
@@ -2179,13 +2214,15 @@ void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl
   if (!best) return;
   double plain = vl.ls.residual_rms;
   if (ax.torque_lag_samples > 0) {
-    const VelocityLoopFit d = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, ax.torque_lag_samples, clip);
+    const VelocityLoopFit d = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, ax.torque_lag_samples, clip,
+                                                false, 0.0, ax.torque_feedforward);
     if (d.ls.ok) plain = std::min(plain, d.ls.residual_rms);
   }
   if (!(vl.less_noise(best->fit.ls.residual_rms) < 0.8 * vl.less_noise(plain))) return;
   const double Kvp = best->fit.ls.theta[0], Ki = best->fit.ls.theta[1];
   ax.gains.Kvp_torque_s_per_rad = Kvp;
   ax.gains.Tn_s = Ki > 0.0 ? Kvp / Ki : 0.0;
+  ax.gains.Jff_torque_s2_per_rad = best->fit.torque_ff ? best->fit.ls.theta.back() : 0.0;
   ax.gains.tau_i_s = best->tau_s;
   ax.torque_lag_samples = best->lag;
   ax.gains_at_lag = ax.gains;
@@ -2206,6 +2243,23 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
   ax.gains.T_max = 1e9;
   if (have_vcmd && f.r0.sample_period_s <= 5e-3 + 1e-12 && all_runs_log(f.runs, col(ax.axis, "_v_mm_s"))) {
     VelocityLoopFit vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, 0);
+    // A torque fed forward from the command's acceleration (the spec's
+    // acceleration or torque feedforward): the law with that acceleration as
+    // a column, taken where its coefficient is positive and it leaves under
+    // 0.8 of the plain law's residual (both less the noise). Read where the
+    // log samples every loop period, whose acceleration the loop takes.
+    std::string fed_forward;
+    if (vl.ls.ok && std::abs(f.r0.sample_period_s - f.Ts) <= 1e-9 + 1e-6 * f.Ts) {
+      VelocityLoopFit ff = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, 0, nullptr, false, 0.0, true);
+      if (ff.ls.ok && ff.ls.theta.back() > 0.0 &&
+          ff.less_noise(ff.ls.residual_rms) < 0.8 * vl.less_noise(vl.ls.residual_rms)) {
+        fed_forward = fmt::format("; a torque fed forward from the command's acceleration (Jff {:.4g}: the law with "
+                                  "it leaves a residual of {:.3g}, {:.3g} without)",
+                                  ff.ls.theta.back(), ff.ls.residual_rms, vl.ls.residual_rms);
+        ax.torque_feedforward = true;
+        vl = std::move(ff);
+      }
+    }
     // A torque limit: the logged torque flattens near its largest value where
     // the law asks for more. Those rows follow the limit, not the law; the
     // law is fitted on the rest.
@@ -2217,7 +2271,8 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
       // them asks for the unlimited torque more nearly, so twice more.
       TorqueClip c{vl.ls.theta, vl.c_seg, vl.T_abs_max, vl.noise_rms};
       for (int pass = 0; pass < 3; ++pass) {
-        const VelocityLoopFit inside = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, 0, &c);
+        const VelocityLoopFit inside =
+            fit_velocity_loop(f.runs, ax.axis, ax.channel.column, 0, &c, false, 0.0, ax.torque_feedforward);
         if (!inside.ls.ok) break;
         clip = c;
         vl = inside;
@@ -2239,7 +2294,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
       ax.velocity_loop_from_data = true;
       ax.loop_source += fmt::format("; velocity loop from the logged torque against the speed error (residual "
                                     "{:.3g} of an RMS {:.3g}){}",
-                                    vl.ls.residual_rms, vl.T_rms, clipped);
+                                    vl.ls.residual_rms, vl.T_rms, clipped + fed_forward);
       velocity_loop_lag(f, vl, clip ? &*clip : nullptr, ax);
       if (f.r0.trace.find(lowpassed(ax.channel.column)) != nullptr)
         current_loop_lag_through_filter(f, vl, clip ? &*clip : nullptr, ax);

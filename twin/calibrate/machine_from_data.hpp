@@ -127,6 +127,9 @@ struct AxisFromData {
   /// candidate (the gains above stay the lag-0 fit).
   std::size_t torque_lag_samples{0};
   controller::CascadeGains gains_at_lag;
+  /// The law fitted with the command's acceleration as a column too: the
+  /// loop feeds a torque forward (gains.Jff_torque_s2_per_rad).
+  bool torque_feedforward{false};
   std::string note;
 };
 

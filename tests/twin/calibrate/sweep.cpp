@@ -7,7 +7,7 @@
 //   calibrate_sweep [--example RUN_DIR] [--filter NAME] [--program NAME] [--magnitudes 0.5,1,2]
 //                   [--log-every M] [--current-only] [--keep DIR] [--verbose]
 //   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed]
-//                            [--encoder-mm Q] [--current-lag S] [--kff K] [--keep DIR]
+//                            [--encoder-mm Q] [--current-lag S] [--kff K] [--jff J] [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
 // measured run, each on the truth's X plant, and its y reference on the Y
@@ -32,7 +32,8 @@
 // standard deviation of the noise on the logged torque in N m (0.002 unless
 // given; 40 raw per N m); --current-lag gives the truth's current loop a
 // first-order lag of S seconds (and its logged torque is the lagged one);
-// --kff sets its velocity feedforward (0.6 unless given).
+// --kff sets its velocity feedforward (0.6 unless given), --jff gives it a
+// torque feedforward of J N m s^2/rad on the command's acceleration.
 #include <unistd.h>
 
 #include <algorithm>
@@ -157,6 +158,7 @@ std::vector<std::string> split_sorted(const std::string& list) {
 struct CascadeOptions {
   double current_lag_s{0.0};  ///< the current loop's first-order lag (0: instant)
   double kff{-1.0};           ///< the velocity feedforward (< 0: the spec's)
+  double Jff{0.0};            ///< the torque feedforward on the command's acceleration, N m s^2/rad
 };
 
 int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filter, double noise_Nm,
@@ -178,6 +180,7 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     sp.resolution_mm = encoder_mm;
     sp.cascade.tau_i = loop.current_lag_s;
     if (loop.kff >= 0.0) sp.cascade.kff = loop.kff;
+    sp.cascade.Jff = loop.Jff;
     const double load = sp.effects.load_Nm;
     c.set(sp.effects);
     sp.effects.load_Nm = load;
@@ -294,6 +297,8 @@ int main(int argc, char** argv) {
       }
     } else if (!std::strcmp(argv[i], "--current-lag") && has_value) {
       if (!number_at_least_0("--current-lag", argv[++i], loop.current_lag_s)) return 2;
+    } else if (!std::strcmp(argv[i], "--jff") && has_value) {
+      if (!number_at_least_0("--jff", argv[++i], loop.Jff)) return 2;
     } else if (!std::strcmp(argv[i], "--kff") && has_value) {
       if (!number_at_least_0("--kff", argv[++i], loop.kff)) return 2;
     } else if (!std::strcmp(argv[i], "--no-motor-speed")) {

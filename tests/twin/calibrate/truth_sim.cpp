@@ -157,7 +157,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     if (cl.on) {
       const double ev = (vcmd - v_motor) / p.rg;
       Iv += Ts * ev;
-      const double Tcmd = cl.Kvp * (ev + (cl.Tn > 0.0 ? Iv / cl.Tn : 0.0));
+      const double Tcmd = cl.Kvp * (ev + (cl.Tn > 0.0 ? Iv / cl.Tn : 0.0)) + cl.Jff * aref / p.rg;
       Tf = lag_a * Tf + (1.0 - lag_a) * Tcmd;
       u = Tf / (p.Ka * p.Kt);
     }

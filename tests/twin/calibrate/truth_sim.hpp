@@ -66,12 +66,13 @@ struct Effects {
 /// The cascade law of spec/measured-data.md ("Position loops of real
 /// machines") in place of the FADAL law, written here apart from the twin's:
 /// vcmd = Kv e + kff v_ref; a PI velocity loop on the motor's speed; the
-/// current loop as a first-order lag. The run is then logged as a real CNC
+/// current loop as a first-order lag; optionally a torque feedforward Jff
+/// (N m s^2/rad) on the command's acceleration. The run is then logged as a real CNC
 /// logs it: no machine named, the velocity command and the measured speed,
 /// the torque in the log's own unit (raw = raw_per_Nm Tm) or the current.
 struct CascadeLaw {
   bool on{false};
-  double Kv{60.0}, kff{0.0}, Kvp{0.4}, Tn{0.01}, tau_i{0.0};
+  double Kv{60.0}, kff{0.0}, Kvp{0.4}, Tn{0.01}, tau_i{0.0}, Jff{0.0};
   double raw_per_Nm{0.0};  ///< > 0: log <a>_torque_raw; 0: log <a>_i_A
   bool log_velocities{true};
   /// With log_velocities: also the motor's speed (false: the velocity
