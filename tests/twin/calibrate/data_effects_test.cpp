@@ -436,9 +436,10 @@ TEST(DataEffects, ACurrentLoopLagIsFoundWithoutTheMotorSpeed) {
 // cascade sweep (`calibrate_sweep --cascade --magnitudes 1 --jff 0.01`)
 // every one of the 14 runs missed the held-out check (tracking 0.028 to
 // 0.047, the torque not below the regression's on 11), and every one without
-// the speed too (the torque not below the regression's on 12). Oracle: the truth's Jff in the log's unit (times 40 raw per N m,
-// over rg) within 5 %, Kvp within 5 % and Tn within 10 % as above, nothing
-// kept, and the held-out machine's check.
+// the speed too (the torque not below the regression's on 12). Oracle: the
+// truth's Jff in the log's unit (times 40 raw per N m, over rg) within 5 %,
+// Kvp within 5 % and Tn within 10 % as above, nothing kept, and the held-out
+// machine's check.
 TEST(DataEffects, ATorqueFeedforwardIsIdentified) {
   for (const bool motor_speed : {true, false}) {
     SCOPED_TRACE(motor_speed ? "motor speed logged" : "no motor speed");
