@@ -2087,6 +2087,19 @@ void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const Torque
   }
 }
 
+/// The plain law's residual at its best lag (velocity_loop_lag's): what a
+/// current loop's lag must improve on.
+double plain_law_residual(const AxisFit& f, const VelocityLoopFit& vl, const TorqueClip* clip,
+                          const AxisFromData& ax) {
+  double plain = vl.ls.residual_rms;
+  if (ax.torque_lag_samples > 0) {
+    const VelocityLoopFit d = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, ax.torque_lag_samples, clip,
+                                                false, 0.0, ax.torque_feedforward);
+    if (d.ls.ok) plain = std::min(plain, d.ls.residual_rms);
+  }
+  return plain;
+}
+
 /// The current loop as a first-order lag where the logged torque shows one:
 /// the law fitted with the previous row's torque (fit_velocity_loop's
 /// current_lag) on a log that samples every loop period and logs the speed,
@@ -2121,12 +2134,7 @@ void current_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueC
     }
   }
   if (!best) return;
-  double plain = vl.ls.residual_rms;
-  if (ax.torque_lag_samples > 0) {
-    const VelocityLoopFit d = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, ax.torque_lag_samples, clip,
-                                                false, 0.0, ax.torque_feedforward);
-    if (d.ls.ok) plain = std::min(plain, d.ls.residual_rms);
-  }
+  const double plain = plain_law_residual(f, vl, clip, ax);
   if (!(vl.less_noise(best->ls.residual_rms) < 0.8 * vl.less_noise(plain))) return;
   const double a = best->ls.theta[2];
   const double Kvp = best->ls.theta[0] / (1.0 - a), Ki = best->ls.theta[1] / (1.0 - a);
@@ -2212,12 +2220,7 @@ void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl
     if (v && (!best || v->ls.residual_rms < best->fit.ls.residual_rms)) best = Best{std::move(*v), lag, tau_s};
   }
   if (!best) return;
-  double plain = vl.ls.residual_rms;
-  if (ax.torque_lag_samples > 0) {
-    const VelocityLoopFit d = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, ax.torque_lag_samples, clip,
-                                                false, 0.0, ax.torque_feedforward);
-    if (d.ls.ok) plain = std::min(plain, d.ls.residual_rms);
-  }
+  const double plain = plain_law_residual(f, vl, clip, ax);
   if (!(vl.less_noise(best->fit.ls.residual_rms) < 0.8 * vl.less_noise(plain))) return;
   const double Kvp = best->fit.ls.theta[0], Ki = best->fit.ls.theta[1];
   ax.gains.Kvp_torque_s_per_rad = Kvp;

@@ -71,6 +71,15 @@ std::pair<MeasuredRun, MeasuredRun> truth_runs(const std::string& name, truth::R
 
 // `motor_speed`: whether the motor's speed is logged beside the velocity
 // command (a CNC may trace its loop's command and not the speed it feeds back).
+/// The runs of `sp` (truth_runs) calibrated on the first, validated on the second.
+Outcome calibrate_spec(const std::string& name, const truth::RunSpec& sp) {
+  const auto [fit, val] = truth_runs(name, sp);
+  Outcome o{calibrate_from_data({fit}, {val}, machine_for_run(fit, "", nullptr)), {}};
+  for (const DataEffect& e : o.r.effects)
+    if (e.kept) o.kept.push_back(e.effect);
+  return o;
+}
+
 Outcome calibrate_truth(const std::string& name, const truth::Effects& fx, double noise_Nm = -1.0,
                         bool motor_speed = true) {
   truth::RunSpec sp = cascade_spec();
@@ -79,11 +88,7 @@ Outcome calibrate_truth(const std::string& name, const truth::Effects& fx, doubl
   const double load = sp.effects.load_Nm;
   sp.effects = fx;
   sp.effects.load_Nm = load;
-  const auto [fit, val] = truth_runs(name, sp);
-  Outcome o{calibrate_from_data({fit}, {val}, machine_for_run(fit, "", nullptr)), {}};
-  for (const DataEffect& e : o.r.effects)
-    if (e.kept) o.kept.push_back(e.effect);
-  return o;
+  return calibrate_spec(name, sp);
 }
 
 const DataEffect& kept_effect(const Outcome& o, const std::string& name) {
@@ -409,10 +414,7 @@ TEST(DataEffects, ACurrentLoopLagIsFoundWithoutTheMotorSpeed) {
     sp.cascade.log_motor_speed = false;
     sp.cascade.tau_i = tau_s;
     sp.effects.delay_ticks = delay_ticks;
-    const auto [fit, val] = truth_runs("lag_no_speed", sp);
-    Outcome o{calibrate_from_data({fit}, {val}, machine_for_run(fit, "", nullptr)), {}};
-    for (const DataEffect& e : o.r.effects)
-      if (e.kept) o.kept.push_back(e.effect);
+    const Outcome o = calibrate_spec("lag_no_speed", sp);
     ASSERT_EQ(o.r.axis.size(), 1u);
     const AxisFromData& ax = o.r.axis[0];
     ASSERT_TRUE(ax.velocity_loop_from_data) << ax.loop_source;
@@ -446,10 +448,7 @@ TEST(DataEffects, ATorqueFeedforwardIsIdentified) {
     truth::RunSpec sp = cascade_spec();
     sp.cascade.log_motor_speed = motor_speed;
     sp.cascade.Jff = 0.01;
-    const auto [fit, val] = truth_runs("torque_ff", sp);
-    Outcome o{calibrate_from_data({fit}, {val}, machine_for_run(fit, "", nullptr)), {}};
-    for (const DataEffect& e : o.r.effects)
-      if (e.kept) o.kept.push_back(e.effect);
+    const Outcome o = calibrate_spec("torque_ff", sp);
     ASSERT_EQ(o.r.axis.size(), 1u);
     const AxisFromData& ax = o.r.axis[0];
     EXPECT_TRUE(ax.torque_feedforward) << ax.loop_source;

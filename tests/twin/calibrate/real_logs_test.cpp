@@ -70,6 +70,19 @@ void expect_held_out_check(const DataCalibration& r) {
   EXPECT_LT(e.at("x_torque_raw"), r.validation_runs[0].regression.nrms.at("x_torque_raw"));
 }
 
+/// A delay of `delay_s` kept (to 1e-9 s: whole loop periods), or none where
+/// it is 0.
+void expect_delay_kept(const DataCalibration& r, double delay_s) {
+  const auto delay = std::find_if(r.effects.begin(), r.effects.end(),
+                                  [](const DataEffect& e) { return e.kept && e.effect == "delay"; });
+  if (delay_s == 0.0) {
+    EXPECT_EQ(delay, r.effects.end());
+  } else {
+    ASSERT_NE(delay, r.effects.end());
+    EXPECT_NEAR(delay->params.at("delay_s"), delay_s, 1e-9);
+  }
+}
+
 /// The truth's cascade gains (cascade_run_spec: Kv 45 1/s, kff 0.6, Kvp
 /// 0.5 N m s/rad times the raw unit's 40 per N m over rg, Tn 8 ms) where the
 /// log shows both loops: Kv and kff to 1 % (a regression on the logged loop
@@ -515,14 +528,7 @@ TEST(RealLogs, ACurrentLoopLagIsIdentified) {
     EXPECT_THAT(ax.loop_source, HasSubstr("a current loop lagging the law"));
     expect_truth_gains(ax, sp);
     EXPECT_EQ(ax.torque_lag_samples, static_cast<std::size_t>(delay_ticks));
-    const auto delay = std::find_if(r.effects.begin(), r.effects.end(),
-                                    [](const DataEffect& e) { return e.kept && e.effect == "delay"; });
-    if (delay_ticks == 0) {
-      EXPECT_EQ(delay, r.effects.end());
-    } else {
-      ASSERT_NE(delay, r.effects.end());
-      EXPECT_NEAR(delay->params.at("delay_s"), 1e-3 * delay_ticks, 1e-9);
-    }
+    expect_delay_kept(r, 1e-3 * delay_ticks);
     if (delay_ticks == 0) {
       expect_held_out_check(r);
     } else {
@@ -599,14 +605,7 @@ TEST(RealLogs, AChannelLoggedARowLateIsReadBackInLine) {
     at_lag.gains = ax.gains_at_lag;
     expect_truth_gains(at_lag, sp);
     expect_held_out_check(r);
-    const auto delay = std::find_if(r.effects.begin(), r.effects.end(),
-                                    [](const DataEffect& e) { return e.kept && e.effect == "delay"; });
-    if (delay_ticks == 0) {
-      EXPECT_EQ(delay, r.effects.end());
-    } else {
-      ASSERT_NE(delay, r.effects.end());
-      EXPECT_NEAR(delay->params.at("delay_s"), 0.002, 1e-9);
-    }
+    expect_delay_kept(r, 1e-3 * delay_ticks);
   }
 }
 
