@@ -351,9 +351,17 @@ struct VelocityLoopFit {
   /// noise, which no law fits.
   double less_noise(double rms) const { return std::sqrt(std::max(rms * rms - noise_rms * noise_rms, 0.0)); }
 };
+/// The columns and rows fit_velocity_loop fits with (see above).
+struct LawFitOptions {
+  std::size_t lag{0};
+  const TorqueClip* clip{nullptr};
+  bool current_lag{false};
+  double lag_a{0.0};
+  bool torque_ff{false};
+};
 VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, const std::string& channel,
-                                  std::size_t lag, const TorqueClip* clip = nullptr, bool current_lag = false,
-                                  double lag_a = 0.0, bool torque_ff = false) {
+                                  const LawFitOptions& o = {}) {
+  const auto [lag, clip, current_lag, lag_a, torque_ff] = o;
   std::vector<double> ev, iev, Tm, Tp, aff;
   std::vector<std::size_t> vrows, seg_of_row;
   std::size_t g = 0;  // the segment's index over all runs
@@ -2075,7 +2083,8 @@ void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const Torque
   double best = vl.ls.residual_rms;
   for (std::size_t lag = 1; lag <= max_torque_lag_rows(f); ++lag) {
     const VelocityLoopFit vlag =
-        fit_velocity_loop(f.runs, ax.axis, ax.channel.column, lag, clip, false, 0.0, ax.torque_feedforward);
+        fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
+                          {.lag = lag, .clip = clip, .torque_ff = ax.torque_feedforward});
     if (!(vlag.ls.ok && vlag.ls.theta[0] > 0.0 && vlag.ls.theta[1] >= 0.0 && vlag.ls.residual_rms < best)) continue;
     best = vlag.ls.residual_rms;
     ax.torque_lag_samples = lag;
@@ -2093,8 +2102,9 @@ double plain_law_residual(const AxisFit& f, const VelocityLoopFit& vl, const Tor
                           const AxisFromData& ax) {
   double plain = vl.ls.residual_rms;
   if (ax.torque_lag_samples > 0) {
-    const VelocityLoopFit d = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, ax.torque_lag_samples, clip,
-                                                false, 0.0, ax.torque_feedforward);
+    const VelocityLoopFit d = fit_velocity_loop(
+        f.runs, ax.axis, ax.channel.column,
+        {.lag = ax.torque_lag_samples, .clip = clip, .torque_ff = ax.torque_feedforward});
     if (d.ls.ok) plain = std::min(plain, d.ls.residual_rms);
   }
   return plain;
@@ -2117,14 +2127,12 @@ double plain_law_residual(const AxisFit& f, const VelocityLoopFit& vl, const Tor
 void current_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueClip* clip, AxisFromData& ax) {
   const double dt = f.r0.sample_period_s;
   if (!(std::abs(dt - f.Ts) <= 1e-9 + 1e-6 * f.Ts)) return;
-  // Where the speed is taken from the position, the law is fitted through
-  // the low-pass (filtered_alike), whose own lag the previous row would fit.
-  if (f.r0.trace.find(lowpassed(ax.channel.column)) != nullptr) return;
   std::optional<VelocityLoopFit> best;
   std::size_t best_lag = 0;
   for (std::size_t lag = 0; lag <= max_torque_lag_rows(f); ++lag) {
     VelocityLoopFit arx =
-        fit_velocity_loop(f.runs, ax.axis, ax.channel.column, lag, clip, true, 0.0, ax.torque_feedforward);
+        fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
+                          {.lag = lag, .clip = clip, .current_lag = true, .torque_ff = ax.torque_feedforward});
     if (!arx.ls.ok) continue;
     const double a = arx.ls.theta[2];
     if (!(a > 0.05 && a < 0.95 && arx.ls.theta[0] > 0.0 && arx.ls.theta[1] >= 0.0)) continue;
@@ -2181,8 +2189,9 @@ void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl
   const std::vector<double> grid_ms{0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0};
   std::optional<Best> best;
   const auto fit_at = [&](std::size_t lag, double tau_s) -> std::optional<VelocityLoopFit> {
-    VelocityLoopFit v = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, lag, clip, false, std::exp(-dt / tau_s),
-                                          ax.torque_feedforward);
+    VelocityLoopFit v = fit_velocity_loop(
+        f.runs, ax.axis, ax.channel.column,
+        {.lag = lag, .clip = clip, .lag_a = std::exp(-dt / tau_s), .torque_ff = ax.torque_feedforward});
     if (!(v.ls.ok && v.ls.theta[0] > 0.0 && v.ls.theta[1] >= 0.0)) return std::nullopt;
     return v;
   };
@@ -2245,7 +2254,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
   ax.gains.tau_i_s = 0.0;
   ax.gains.T_max = 1e9;
   if (have_vcmd && f.r0.sample_period_s <= 5e-3 + 1e-12 && all_runs_log(f.runs, col(ax.axis, "_v_mm_s"))) {
-    VelocityLoopFit vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, 0);
+    VelocityLoopFit vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column);
     // A torque fed forward from the command's acceleration (the spec's
     // acceleration or torque feedforward): the law with that acceleration as
     // a column, taken where its coefficient is positive and it leaves under
@@ -2253,7 +2262,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
     // log samples every loop period, whose acceleration the loop takes.
     std::string fed_forward;
     if (vl.ls.ok && std::abs(f.r0.sample_period_s - f.Ts) <= 1e-9 + 1e-6 * f.Ts) {
-      VelocityLoopFit ff = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, 0, nullptr, false, 0.0, true);
+      VelocityLoopFit ff = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, {.torque_ff = true});
       if (ff.ls.ok && ff.ls.theta.back() > 0.0 &&
           ff.less_noise(ff.ls.residual_rms) < 0.8 * vl.less_noise(vl.ls.residual_rms)) {
         fed_forward = fmt::format("; a torque fed forward from the command's acceleration (Jff {:.4g}: the law with "
@@ -2275,7 +2284,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
       TorqueClip c{vl.ls.theta, vl.c_seg, vl.T_abs_max, vl.noise_rms};
       for (int pass = 0; pass < 3; ++pass) {
         const VelocityLoopFit inside =
-            fit_velocity_loop(f.runs, ax.axis, ax.channel.column, 0, &c, false, 0.0, ax.torque_feedforward);
+            fit_velocity_loop(f.runs, ax.axis, ax.channel.column, {.clip = &c, .torque_ff = ax.torque_feedforward});
         if (!inside.ls.ok) break;
         clip = c;
         vl = inside;
@@ -2299,6 +2308,8 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
                                     "{:.3g} of an RMS {:.3g}){}",
                                     vl.ls.residual_rms, vl.T_rms, clipped + fed_forward);
       velocity_loop_lag(f, vl, clip ? &*clip : nullptr, ax);
+      // Where the speed is taken from the position the law is fitted through
+      // the low-pass, whose own lag the previous row's torque would fit.
       if (f.r0.trace.find(lowpassed(ax.channel.column)) != nullptr)
         current_loop_lag_through_filter(f, vl, clip ? &*clip : nullptr, ax);
       else
@@ -3516,7 +3527,7 @@ void rebuild_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<
       double best_law = 1e300;
       for (std::size_t j = 0; j < 2; ++j) {
         write_rebuilt_command(own, runs, law, a, Ts, filtered, gains[j]);
-        const VelocityLoopFit vl = fit_velocity_loop(runs, a, channel, best.lag);
+        const VelocityLoopFit vl = fit_velocity_loop(runs, a, channel, {.lag = best.lag});
         if (vl.ls.ok && vl.ls.residual_rms < best_law) {
           best_law = vl.ls.residual_rms;
           chosen = j;
