@@ -2723,9 +2723,12 @@ void for_settled_rest_rows(const std::vector<RunData>& runs, Axis a, F&& f) {
   }
 }
 
-/// What a stopped axis holds off the constant load, mean over the fitting
-/// rows where the command has stood still for 0.2 s: in the log and in the
-/// replay of the identified machine.
+/// What a stopped axis holds off the constant load over the fitting rows
+/// where the command has stood still for 0.2 s: in the log and in the replay
+/// of the identified machine. Each rest period counts with the size of its
+/// own mean, weighted by its rows, so a torque channel's noise averages out
+/// inside the period instead of adding its mean magnitude (0.8 of its RMS)
+/// to what the axis holds.
 struct RestHolding {
   double log{0.0}, model{0.0};
   std::size_t rows{0};
@@ -2738,12 +2741,25 @@ RestHolding rest_holding(const std::vector<RunData>& runs, const FitRunErrors& i
     T.push_back(&runs[r].run->trace.at(ax.channel.column));
     Tm.push_back(model_channel(id_replay.replays[r], ax.axis, ax.channel, true));
   }
+  double seg_log = 0.0, seg_model = 0.0;
+  std::size_t prev_r = 0, prev_k = 0;
+  bool open = false;
+  auto close = [&] {
+    h.log += std::abs(seg_log);
+    h.model += std::abs(seg_model);
+    seg_log = seg_model = 0.0;
+  };
   for_settled_rest_rows(runs, ax.axis, [&](std::size_t r, std::size_t k, int) {
     if (Tm[r] == nullptr) return;
-    h.log += std::abs((*T[r])[k] - ax.c);
-    h.model += std::abs((*Tm[r])[k] - ax.c);
+    if (open && (r != prev_r || k != prev_k + 1)) close();
+    seg_log += (*T[r])[k] - ax.c;
+    seg_model += (*Tm[r])[k] - ax.c;
+    open = true;
+    prev_r = r;
+    prev_k = k;
     ++h.rows;
   });
+  if (open) close();
   if (h.rows > 0) {
     h.log /= static_cast<double>(h.rows);
     h.model /= static_cast<double>(h.rows);

@@ -366,6 +366,21 @@ TEST(DataEffects, CoggingIsFoundUnderHeavyTorqueNoise) {
   expect_held_out_machine_check(o);
 }
 
+// The creep of SmoothFrictionIsKeptOnlyWhereTheHeldTorqueRelaxes under
+// noise of 0.2 N m (8 raw a sample against a held torque of a few raw).
+// What a stopped axis holds is each rest period's mean off the load: the
+// mean magnitude of every sample was the noise's (0.8 of its RMS) in the
+// log and not in the noise-free replay, so the held torque never looked
+// relaxed and the creep was named rising_friction at every size. Found
+// now, and the validation run improves; on the same noise without an
+// effect nothing is kept (DelayIsFoundUnderHeavyTorqueNoise).
+TEST(DataEffects, SmoothFrictionIsFoundUnderHeavyTorqueNoise) {
+  const Outcome o = calibrate_truth("creep_noise", {.creep_w = 0.2}, 0.2);
+  expect_only(o, "smooth_friction");
+  expect_validation_improves(o);
+  expect_held_out_machine_check(o);
+}
+
 // A log with the velocity command and the encoder's position (1 um) but not
 // the motor's speed, every 1 ms. The speed is the central difference of the
 // position low-passed at 50 Hz without phase, and the torque and velocity
