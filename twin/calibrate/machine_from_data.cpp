@@ -2820,10 +2820,9 @@ void try_smooth_friction_on_axis(DataCalibration& out, const std::vector<RunData
   eff.after = hh != held.nrms.end() ? hh->second : bh->second;
   eff.kept = eff.after < eff.before;
   eff.evidence = fmt::format(
-      "a stopped axis holds {:.4g} off the constant load in the log (mean over its rest rows), the stick/slip "
-      "model {:.4g}: friction "
-      "smoothed below {:.3g} mm/s takes the {} error from {:.4g} to {:.4g} on the fitting rows and from {:.4g} "
-      "to {:.4g} on the held-out rows{}",
+      "a stopped axis holds {:.4g} off the constant load in the log (its rest periods' means, weighted by their "
+      "rows), the stick/slip model {:.4g}: friction smoothed below {:.3g} mm/s takes the {} error from {:.4g} to "
+      "{:.4g} on the fitting rows and from {:.4g} to {:.4g} on the held-out rows{}",
       h.log, h.model, best_ws, key, bf->second, best_fit, eff.before, eff.after, eff.kept ? "" : " (not kept)");
   if (eff.kept) final_machine = with_smooth_friction(final_machine, ax.axis, best_ws);
   out.effects.push_back(eff);
@@ -2963,7 +2962,12 @@ void try_rising_friction(DataCalibration& out, const std::vector<RunData>& runs,
     if (const auto en = now.held.nrms.find(err_key), ea = b.held.nrms.find(err_key);
         en != now.held.nrms.end() && ea != b.held.nrms.end() && en->second > 0.0)
       tracking_ok = ea->second <= en->second * (1.0 + kRiseAllowed);
-    eff.kept = eff.after < eff.before * (1.0 - kKeepMargin) && tracking_ok;
+    // With smooth_friction kept on the axis the two are alternatives for
+    // the same low-speed range, not one added to the other: the one that
+    // replays the held-out rows better names it, with no margin for the
+    // one tried first.
+    const bool replaces_smooth = out.final_machine.axes[index(ax->axis)].drive.effects.smooth_friction.enabled;
+    eff.kept = eff.after < eff.before * (replaces_smooth ? 1.0 : 1.0 - kKeepMargin) && tracking_ok;
     eff.evidence = fmt::format(
         "{}: breakaway at {:.2g} of the Coulomb level, rising to it over {:.3g} mm/s, takes the {} error from "
         "{:.4g} to {:.4g} on the fitting rows and from {:.4g} to {:.4g} on the held-out rows{}",
