@@ -331,9 +331,15 @@ std::vector<double> reference_acceleration(const RunData& rd, Axis a, const std:
 /// gains times (1 - a) as the others. With `lag_a` > 0 the law's columns pass
 /// through that lag, y[k] = a y[k-1] + (1 - a) x[k] from the segment's first
 /// value, before they are fitted: a current loop whose lag is given (output
-/// error, which noise on the speed does not bias towards a slow lag).
+/// error, which noise on the speed does not bias towards a slow lag). With
+/// `lead_period_mm` > 0, four columns of an encoder that reads the motor's
+/// travel plus e(x) = s sin(w x) + c cos(w x), w = 2 pi / that period, come
+/// before Jff: where the speed is the encoder's own, the law's integral of
+/// the speed error is short by e and its speed error by de/dt, so the law
+/// gains Ki e + Kvp de/dt: sin(w x), cos(w x), w v cos(w x), -w v sin(w x)
+/// (x the logged position, v the speed; through the same lag and dead time).
 struct VelocityLoopFit {
-  LsqResult ls;  ///< Kvp, Kvp / Tn (then a, with current_lag; then Jff, with torque_ff)
+  LsqResult ls;  ///< Kvp, Kvp / Tn (then a, with current_lag; then the lead columns; then Jff, with torque_ff)
   bool torque_ff{false};
   /// The constant of each segment, in the order of the runs' segments
   /// (0 where a segment has no row fitted).
@@ -358,11 +364,17 @@ struct LawFitOptions {
   bool current_lag{false};
   double lag_a{0.0};
   bool torque_ff{false};
+  double lead_period_mm{0.0};
 };
+/// Where the lead columns start in VelocityLoopFit::ls.theta.
+std::size_t lead_column(const LawFitOptions& o) { return o.current_lag ? 3 : 2; }
 VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, const std::string& channel,
                                   const LawFitOptions& o = {}) {
-  const auto [lag, clip, current_lag, lag_a, torque_ff] = o;
+  const auto [lag, clip, current_lag, lag_a, torque_ff, lead_period_mm] = o;
+  const bool lead = lead_period_mm > 0.0;
+  const double w = lead ? 2.0 * M_PI / lead_period_mm : 0.0;
   std::vector<double> ev, iev, Tm, Tp, aff;
+  std::array<std::vector<double>, 4> ld;  // the lead columns
   std::vector<std::size_t> vrows, seg_of_row;
   std::size_t g = 0;  // the segment's index over all runs
   for (const auto& rd : runs) {
@@ -371,11 +383,13 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
     const auto& v = t.at(col(a, "_v_mm_s"));
     const auto& ch = *filtered_alike(t, channel);
     const std::vector<double> a_ref = torque_ff ? reference_acceleration(rd, a, channel) : std::vector<double>{};
+    const std::vector<double>* xm = lead ? &t.at(col(a, "_mm")) : nullptr;
     for (std::size_t si = 0; si < rd.segments.size(); ++si, ++g) {
       const Segment& s = rd.segments[si];
       const std::size_t end = std::min(s.end, rd.n_fit);
       if (end <= s.begin) continue;
       std::vector<double> e(end - s.begin), ie(end - s.begin), ar;
+      std::array<std::vector<double>, 4> l;
       if (torque_ff) ar.assign(a_ref.begin() + static_cast<std::ptrdiff_t>(s.begin),
                                a_ref.begin() + static_cast<std::ptrdiff_t>(end));
       double integral = 0.0;
@@ -383,9 +397,16 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
         e[k - s.begin] = vc[k] - v[k];
         integral += e[k - s.begin] * rd.run->sample_period_s;
         ie[k - s.begin] = integral;
+        if (lead) {
+          const double sn = std::sin(w * (*xm)[k]), cs = std::cos(w * (*xm)[k]);
+          l[0].push_back(sn);
+          l[1].push_back(cs);
+          l[2].push_back(w * v[k] * cs);
+          l[3].push_back(-w * v[k] * sn);
+        }
       }
       if (lag_a > 0.0)
-        for (std::vector<double>* c : {&e, &ie, &ar}) {
+        for (std::vector<double>* c : {&e, &ie, &ar, &l[0], &l[1], &l[2], &l[3]}) {
           if (c->empty()) continue;
           double y = c->front();
           for (double& x : *c) x = y = lag_a * y + (1.0 - lag_a) * x;
@@ -395,6 +416,8 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
         ev.push_back(j >= lag ? e[j - lag] : 0.0);
         iev.push_back(j >= lag ? ie[j - lag] : 0.0);
         if (torque_ff) aff.push_back(j >= lag ? ar[j - lag] : 0.0);
+        if (lead)
+          for (std::size_t c = 0; c < 4; ++c) ld[c].push_back(j >= lag ? l[c][j - lag] : 0.0);
         Tm.push_back(ch[k]);
         Tp.push_back(j >= 1 ? ch[k - 1] : 0.0);
         seg_of_row.push_back(g);
@@ -407,6 +430,8 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
   }
   // Each segment's means over its rows fitted, taken off.
   std::vector<double> n_seg(g, 0.0), me(g, 0.0), mie(g, 0.0), mT(g, 0.0), mTp(g, 0.0), ma(g, 0.0);
+  std::array<std::vector<double>, 4> ml;
+  for (auto& m : ml) m.assign(lead ? g : 0, 0.0);
   for (std::size_t k : vrows) {
     const std::size_t sg = seg_of_row[k];
     n_seg[sg] += 1.0;
@@ -415,6 +440,8 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
     mT[sg] += Tm[k];
     mTp[sg] += Tp[k];
     if (torque_ff) ma[sg] += aff[k];
+    if (lead)
+      for (std::size_t c = 0; c < 4; ++c) ml[c][sg] += ld[c][k];
   }
   for (std::size_t sg = 0; sg < g; ++sg)
     if (n_seg[sg] > 0.0) {
@@ -423,8 +450,12 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
       mT[sg] /= n_seg[sg];
       mTp[sg] /= n_seg[sg];
       ma[sg] /= n_seg[sg];
+      if (lead)
+        for (auto& m : ml) m[sg] /= n_seg[sg];
     }
   std::vector<double> ev0(ev.size()), iev0(ev.size()), Tm0(ev.size()), Tp0(ev.size()), a0(aff.size());
+  std::array<std::vector<double>, 4> l0;
+  for (std::size_t c = 0; c < 4; ++c) l0[c].resize(ld[c].size());
   for (std::size_t k = 0; k < ev.size(); ++k) {
     const std::size_t sg = seg_of_row[k];
     ev0[k] = ev[k] - me[sg];
@@ -432,19 +463,26 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
     Tm0[k] = Tm[k] - mT[sg];
     Tp0[k] = Tp[k] - mTp[sg];
     if (torque_ff) a0[k] = aff[k] - ma[sg];
+    if (lead)
+      for (std::size_t c = 0; c < 4; ++c) l0[c][k] = ld[c][k] - ml[c][sg];
   }
   VelocityLoopFit f;
   f.torque_ff = torque_ff;
   std::vector<const std::vector<double>*> cols{&ev0, &iev0};
   if (current_lag) cols.push_back(&Tp0);
+  if (lead)
+    for (const auto& c : l0) cols.push_back(&c);
   if (torque_ff) cols.push_back(&a0);
   f.ls = least_squares(cols, Tm0, vrows);
   f.c_seg.assign(g, 0.0);
   if (f.ls.ok)
     for (std::size_t sg = 0; sg < g; ++sg)
-      if (n_seg[sg] > 0.0)
+      if (n_seg[sg] > 0.0) {
         f.c_seg[sg] = mT[sg] - f.ls.theta[0] * me[sg] - f.ls.theta[1] * mie[sg] -
                       (current_lag ? f.ls.theta[2] * mTp[sg] : 0.0) - (torque_ff ? f.ls.theta.back() * ma[sg] : 0.0);
+        if (lead)
+          for (std::size_t c = 0; c < 4; ++c) f.c_seg[sg] -= f.ls.theta[lead_column(o) + c] * ml[c][sg];
+      }
   double t2 = 0.0;
   for (std::size_t k : vrows) {
     t2 += Tm[k] * Tm[k];
@@ -1052,6 +1090,55 @@ std::pair<double, LsqResult> scan_period(double P_min, double P_max, const std::
   return best;
 }
 
+/// A lead error the velocity law shows where the speed is the encoder's own
+/// (fit_velocity_loop's lead columns): its period, the law fitted with it,
+/// its t and the law's residual without it.
+struct LeadInLaw {
+  double P_mm{0.0};  ///< 0: none shown
+  LsqResult ls;
+  double t{0.0}, base_residual{0.0};
+  std::size_t column{0};  ///< where the lead columns start in ls.theta
+  double amplitude_mm() const { return std::hypot(ls.theta[column], ls.theta[column + 1]) / ls.theta[1]; }
+  double phase_rad() const { return std::atan2(ls.theta[column + 1], ls.theta[column]); }
+};
+
+/// The law `o` fitted with the lead columns at each period of a scan from
+/// the period whose ripple passes the speed's low-pass unchanged (at most
+/// half its cutoff at the fastest speed of the fitting rows) to half their
+/// travel. Shown where the pair's t reaches kMinT, counting the rows the
+/// low-pass correlates (1 / (2 cutoff)) as one, the residual falls by 2 %
+/// below `base`'s (the same law without them) and Ki stays positive.
+LeadInLaw lead_error_in_law(const std::vector<RunData>& runs, const AxisFromData& ax, LawFitOptions o,
+                            const VelocityLoopFit& base) {
+  LeadInLaw out;
+  out.base_residual = base.ls.residual_rms;
+  double v_high = 0.0, x_lo = 1e300, x_hi = -1e300;
+  for (const RunData& rd : runs) {
+    const auto& v = rd.run->trace.at(col(ax.axis, "_v_mm_s"));
+    const auto& x = rd.run->trace.at(col(ax.axis, "_mm"));
+    for (std::size_t k = 0; k < rd.n_fit; ++k)
+      if (rd.interior[k]) {
+        v_high = std::max(v_high, std::abs(v[k]));
+        x_lo = std::min(x_lo, x[k]);
+        x_hi = std::max(x_hi, x[k]);
+      }
+  }
+  const double dt = runs.front().run->sample_period_s;
+  const double P_min = std::max(0.5, 2.0 * v_high / kSpeedCutoff_Hz), P_max = (x_hi - x_lo) / 2.0;
+  if (!(base.ls.ok && P_max > P_min)) return out;
+  const auto [P, ls] = scan_period(P_min, P_max, [&](double period) {
+    o.lead_period_mm = period;
+    return fit_velocity_loop(runs, ax.axis, ax.channel.column, o).ls;
+  });
+  out.column = lead_column(o);
+  if (!(P > 0.0 && ls.theta[1] > 0.0)) return out;
+  out.t = t_pair(ls, out.column) / std::sqrt(std::max(1.0, 1.0 / (2.0 * kSpeedCutoff_Hz * dt)));
+  if (!(out.t >= kMinT && ls.residual_rms < 0.98 * base.ls.residual_rms)) return out;
+  out.P_mm = P;
+  out.ls = ls;
+  return out;
+}
+
 }  // namespace
 
 namespace {
@@ -1506,12 +1593,59 @@ void detect_cogging_in_data(DataSearch& s) {
   s.attempt(t);
 }
 
+namespace {
+
+// screw_pitch_error where no motor speed is logged and the speed is the
+// encoder's own (add_speed_from_position), with the velocity law fitted
+// from the logged velocity command and torque: the law's integral of the
+// speed error is then short by the lead error e(x) and its speed error by
+// de/dt, so its residual follows Ki e + Kvp de/dt. The period is found with
+// the law (lead_error_in_law, in identify_velocity_loop, so that the gains,
+// the dead time and the feedforward are fitted with it); here the law as
+// the axis finally has it (dead time, current-loop lag, feedforward) gives
+// e's amplitude and phase, its sin/cos coefficients over Ki, replayed
+// where the amplitude is half a position step or more.
+void screw_pitch_error_from_law(DataSearch& s) {
+  const AxisFromData& ax = s.ax;
+  if (!(ax.velocity_loop_from_data && ax.law_lead_period_mm > 0.0)) return;
+  LawFitOptions o{.lag = ax.torque_lag_samples,
+                  .lag_a = ax.gains.tau_i_s > 0.0 ? std::exp(-s.dt / ax.gains.tau_i_s) : 0.0,
+                  .torque_ff = ax.torque_feedforward};
+  const VelocityLoopFit without = fit_velocity_loop(s.runs, ax.axis, ax.channel.column, o);
+  o.lead_period_mm = ax.law_lead_period_mm;
+  LeadInLaw l;
+  l.P_mm = ax.law_lead_period_mm;
+  l.ls = fit_velocity_loop(s.runs, ax.axis, ax.channel.column, o).ls;
+  l.column = lead_column(o);
+  if (!(without.ls.ok && l.ls.ok && l.ls.theta[1] > 0.0)) return;
+  const double A = l.amplitude_mm();
+  if (!(A >= 0.5 * s.q)) return;
+  Trial tr;
+  tr.kind = EffectKind::kScrewPitchError;
+  tr.sets = {{{EffectParam::screw_pitch_error_amplitude_mm, A},
+              {EffectParam::screw_pitch_error_period_mm, l.P_mm},
+              {EffectParam::screw_pitch_error_phase_rad, l.phase_rad()}}};
+  tr.evidence = fmt::format("no motor speed is logged, so the velocity law runs on the encoder's speed, whose "
+                            "integral a lead error shifts by the error itself: a lead error of {:.4g} mm with a "
+                            "period of {:.4g} mm takes the law's residual from {:.4g} to {:.4g}",
+                            A, l.P_mm, without.ls.residual_rms, l.ls.residual_rms);
+  s.attempt(tr);
+}
+
+}  // namespace
+
 // screw_pitch_error: the encoder reads x + A sin(2 pi x / P + phase)
 // while the motor moves x; the logged motor speed then differs from the
 // speed of the logged position by A (2 pi / P) v cos(2 pi x / P + phase).
 // Regressed on that with the speed, the acceleration and a constant as
-// nuisances (a logged speed filtered or late).
+// nuisances (a logged speed filtered or late). Where the speed is the
+// encoder's own, screw_pitch_error_from_law.
 void detect_screw_pitch_error_in_data(DataSearch& s) {
+  if (s.fast && s.fine && s.logs_position() &&
+      s.runs.front().run->trace.find(lowpassed(s.ax.channel.column)) != nullptr) {
+    screw_pitch_error_from_law(s);
+    return;
+  }
   if (!(s.fast && s.fine && s.rows.measured_speed && s.logs_position())) return;
   const AxisRows& rows = s.rows;
   std::vector<double> r(rows.all.size()), vd(rows.all.size()), ad(rows.all.size(), 0.0);
@@ -2084,7 +2218,8 @@ void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const Torque
   for (std::size_t lag = 1; lag <= max_torque_lag_rows(f); ++lag) {
     const VelocityLoopFit vlag =
         fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
-                          {.lag = lag, .clip = clip, .torque_ff = ax.torque_feedforward});
+                          {.lag = lag, .clip = clip, .torque_ff = ax.torque_feedforward,
+                           .lead_period_mm = ax.law_lead_period_mm});
     if (!(vlag.ls.ok && vlag.ls.theta[0] > 0.0 && vlag.ls.theta[1] >= 0.0 && vlag.ls.residual_rms < best)) continue;
     best = vlag.ls.residual_rms;
     ax.torque_lag_samples = lag;
@@ -2104,7 +2239,10 @@ double plain_law_residual(const AxisFit& f, const VelocityLoopFit& vl, const Tor
   if (ax.torque_lag_samples > 0) {
     const VelocityLoopFit d = fit_velocity_loop(
         f.runs, ax.axis, ax.channel.column,
-        {.lag = ax.torque_lag_samples, .clip = clip, .torque_ff = ax.torque_feedforward});
+        {.lag = ax.torque_lag_samples,
+         .clip = clip,
+         .torque_ff = ax.torque_feedforward,
+         .lead_period_mm = ax.law_lead_period_mm});
     if (d.ls.ok) plain = std::min(plain, d.ls.residual_rms);
   }
   return plain;
@@ -2132,7 +2270,11 @@ void current_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueC
   for (std::size_t lag = 0; lag <= max_torque_lag_rows(f); ++lag) {
     VelocityLoopFit arx =
         fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
-                          {.lag = lag, .clip = clip, .current_lag = true, .torque_ff = ax.torque_feedforward});
+                          {.lag = lag,
+                           .clip = clip,
+                           .current_lag = true,
+                           .torque_ff = ax.torque_feedforward,
+                           .lead_period_mm = ax.law_lead_period_mm});
     if (!arx.ls.ok) continue;
     const double a = arx.ls.theta[2];
     if (!(a > 0.05 && a < 0.95 && arx.ls.theta[0] > 0.0 && arx.ls.theta[1] >= 0.0)) continue;
@@ -2191,7 +2333,11 @@ void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl
   const auto fit_at = [&](std::size_t lag, double tau_s) -> std::optional<VelocityLoopFit> {
     VelocityLoopFit v = fit_velocity_loop(
         f.runs, ax.axis, ax.channel.column,
-        {.lag = lag, .clip = clip, .lag_a = std::exp(-dt / tau_s), .torque_ff = ax.torque_feedforward});
+        {.lag = lag,
+         .clip = clip,
+         .lag_a = std::exp(-dt / tau_s),
+         .torque_ff = ax.torque_feedforward,
+         .lead_period_mm = ax.law_lead_period_mm});
     if (!(v.ls.ok && v.ls.theta[0] > 0.0 && v.ls.theta[1] >= 0.0)) return std::nullopt;
     return v;
   };
@@ -2255,6 +2401,18 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
   ax.gains.T_max = 1e9;
   if (have_vcmd && f.r0.sample_period_s <= 5e-3 + 1e-12 && all_runs_log(f.runs, col(ax.axis, "_v_mm_s"))) {
     VelocityLoopFit vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column);
+    std::string lead;
+    if (vl.ls.ok && f.runs.front().run->trace.find(lowpassed(ax.channel.column)) != nullptr) {
+      const LeadInLaw l = lead_error_in_law(f.runs, ax, {}, vl);
+      if (l.P_mm > 0.0) {
+        ax.law_lead_period_mm = l.P_mm;
+        vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, {.lead_period_mm = l.P_mm});
+        lead = fmt::format("; the law's residual follows the position with a period of {:.4g} mm (t = {:.1f}, "
+                           "residual {:.3g} against {:.3g}): a lead error between the motor and the encoder, "
+                           "fitted with the law",
+                           l.P_mm, l.t, l.ls.residual_rms, l.base_residual);
+      }
+    }
     // A torque fed forward from the command's acceleration (the spec's
     // acceleration or torque feedforward): the law with that acceleration as
     // a column, taken where its coefficient is positive and it leaves under
@@ -2262,7 +2420,8 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
     // log samples every loop period, whose acceleration the loop takes.
     std::string fed_forward;
     if (vl.ls.ok && std::abs(f.r0.sample_period_s - f.Ts) <= 1e-9 + 1e-6 * f.Ts) {
-      VelocityLoopFit ff = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, {.torque_ff = true});
+      VelocityLoopFit ff = fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
+                                             {.torque_ff = true, .lead_period_mm = ax.law_lead_period_mm});
       if (ff.ls.ok && ff.ls.theta.back() > 0.0 &&
           ff.less_noise(ff.ls.residual_rms) < 0.8 * vl.less_noise(vl.ls.residual_rms)) {
         fed_forward = fmt::format("; a torque fed forward from the command's acceleration (Jff {:.4g}: the law with "
@@ -2284,7 +2443,8 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
       TorqueClip c{vl.ls.theta, vl.c_seg, vl.T_abs_max, vl.noise_rms};
       for (int pass = 0; pass < 3; ++pass) {
         const VelocityLoopFit inside =
-            fit_velocity_loop(f.runs, ax.axis, ax.channel.column, {.clip = &c, .torque_ff = ax.torque_feedforward});
+            fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
+                              {.clip = &c, .torque_ff = ax.torque_feedforward, .lead_period_mm = ax.law_lead_period_mm});
         if (!inside.ls.ok) break;
         clip = c;
         vl = inside;
@@ -2306,7 +2466,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
       ax.velocity_loop_from_data = true;
       ax.loop_source += fmt::format("; velocity loop from the logged torque against the speed error (residual "
                                     "{:.3g} of an RMS {:.3g}){}",
-                                    vl.ls.residual_rms, vl.T_rms, clipped + fed_forward);
+                                    vl.ls.residual_rms, vl.T_rms, lead + clipped + fed_forward);
       velocity_loop_lag(f, vl, clip ? &*clip : nullptr, ax);
       // Where the speed is taken from the position the law is fitted through
       // the low-pass, whose own lag the previous row's torque would fit.
@@ -2420,13 +2580,19 @@ void skip_unseen_effects(const std::vector<MeasuredRun>& fit, DataCalibration& o
                                   "in the log's unit, and a two-mass resonance needs the split of that "
                                   "inertia and a stiffness the replay of a cascade loop does not resolve");
   if (dt <= 2e-3 + 1e-12 && q <= 0.005) {
-    bool speed = true;
-    for (Axis a : out.axes)
-      for (const MeasuredRun& r : fit) speed = speed && r.trace.find(col(a, "_v_mm_s")) != nullptr;
-    if (!speed)
+    // Told from the logged motor speed against the position's, or without
+    // it from the velocity loop's law (screw_pitch_error_from_law).
+    bool seen = true;
+    for (const AxisFromData& ax : out.axis) {
+      bool speed = true;
+      for (const MeasuredRun& r : fit) speed = speed && r.trace.find(col(ax.axis, "_v_mm_s")) != nullptr;
+      seen = seen && (speed || ax.velocity_loop_from_data);
+    }
+    if (!seen)
       skip(EffectKind::kScrewPitchError, "a lead error moves the encoder and not the motor: it is told "
                                          "from the logged motor speed against the speed of the logged "
-                                         "position, and this log has no speed column");
+                                         "position, or from the velocity loop's law fitted on the logged "
+                                         "torque, and this log gives neither");
   }
   if (q > 0.005) {
     skip(EffectKind::kScrewPitchError, fmt::format("a lead error of microns is below the log's position "

@@ -130,6 +130,10 @@ struct AxisFromData {
   /// The law fitted with the command's acceleration as a column too: the
   /// loop feeds a torque forward (gains.Jff_torque_s2_per_rad).
   bool torque_feedforward{false};
+  /// Where the speed is the encoder's own (no motor speed logged): the
+  /// period of a lead error the velocity law shows, fitted with the law
+  /// from then on (0: none shown).
+  double law_lead_period_mm{0.0};
   std::string note;
 };
 
