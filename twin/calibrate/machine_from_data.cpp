@@ -338,12 +338,20 @@ std::vector<double> reference_acceleration(const RunData& rd, Axis a, const std:
 /// the speed error is short by e and its speed error by de/dt, so the law
 /// gains Ki e + Kvp de/dt: sin(w x), cos(w x), w v cos(w x), -w v sin(w x)
 /// (x the logged position, v the speed; through the same lag and dead time).
+/// With `by_table_motion`, the constants are per stretch of the axis's own
+/// motion (the speed beyond the moving threshold one way, less a low-pass
+/// support, 1 / cutoff, at each end), not per segment, and only those rows
+/// are fitted: where the speed is the encoder's own, a gap between the motor
+/// and the encoder parts them only while the encoder's side stands, and
+/// shifts the law's integral by the part between stretches.
 struct VelocityLoopFit {
   LsqResult ls;  ///< Kvp, Kvp / Tn (then a, with current_lag; then the lead columns; then Jff, with torque_ff)
   bool torque_ff{false};
-  /// The constant of each segment, in the order of the runs' segments
-  /// (0 where a segment has no row fitted).
-  std::vector<double> c_seg;
+  /// The constant of each segment (or stretch of motion, by_table_motion),
+  /// in the order of the runs' segments (0 where it has no row fitted), its
+  /// rows fitted, and the direction of the motion (0: a whole segment).
+  std::vector<double> c_seg, rows_seg;
+  std::vector<int> dir_seg;
   double T_rms{0.0};
   /// The largest |torque| of the rows fitted, and how many of those rows a
   /// limit at it holds by this fit (TorqueClip).
@@ -365,18 +373,28 @@ struct LawFitOptions {
   double lag_a{0.0};
   bool torque_ff{false};
   double lead_period_mm{0.0};
+  bool by_table_motion{false};
 };
 /// Where the lead columns start in VelocityLoopFit::ls.theta.
 std::size_t lead_column(const LawFitOptions& o) { return o.current_lag ? 3 : 2; }
+/// `o` with what the axis's law has been found to need where the speed is
+/// the encoder's own: its lead error's columns, its constants by the
+/// stretches of motion (a gap).
+LawFitOptions law_options(const AxisFromData& ax, LawFitOptions o) {
+  o.lead_period_mm = ax.law_lead_period_mm;
+  o.by_table_motion = ax.law_gap_mm > 0.0;
+  return o;
+}
 VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, const std::string& channel,
                                   const LawFitOptions& o = {}) {
-  const auto [lag, clip, current_lag, lag_a, torque_ff, lead_period_mm] = o;
+  const auto [lag, clip, current_lag, lag_a, torque_ff, lead_period_mm, by_table_motion] = o;
   const bool lead = lead_period_mm > 0.0;
   const double w = lead ? 2.0 * M_PI / lead_period_mm : 0.0;
   std::vector<double> ev, iev, Tm, Tp, aff;
   std::array<std::vector<double>, 4> ld;  // the lead columns
   std::vector<std::size_t> vrows, seg_of_row;
-  std::size_t g = 0;  // the segment's index over all runs
+  std::vector<int> dir_of;
+  std::size_t g = 0;  // the constants' count over all runs
   for (const auto& rd : runs) {
     const auto& t = rd.run->trace;
     const auto& vc = *filtered_alike(t, velocity_command_column(t, a));
@@ -384,10 +402,29 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
     const auto& ch = *filtered_alike(t, channel);
     const std::vector<double> a_ref = torque_ff ? reference_acceleration(rd, a, channel) : std::vector<double>{};
     const std::vector<double>* xm = lead ? &t.at(col(a, "_mm")) : nullptr;
-    for (std::size_t si = 0; si < rd.segments.size(); ++si, ++g) {
+    for (std::size_t si = 0; si < rd.segments.size(); ++si) {
       const Segment& s = rd.segments[si];
+      const std::size_t seg_group = g++;
+      dir_of.push_back(0);
       const std::size_t end = std::min(s.end, rd.n_fit);
       if (end <= s.begin) continue;
+      // The constant each row is fitted with; rows of seg_group are not
+      // fitted where the constants follow the motion.
+      std::vector<std::size_t> group(end - s.begin, seg_group);
+      if (by_table_motion) {
+        const auto margin = static_cast<std::size_t>(std::lround(1.0 / (kSpeedCutoff_Hz * rd.run->sample_period_s)));
+        for (std::size_t k = s.begin; k < end;) {
+          const int d = direction(v[k], rd.v_move[index(a)]);
+          std::size_t j = k + 1;
+          while (j < end && direction(v[j], rd.v_move[index(a)]) == d) ++j;
+          if (d != 0 && j - k > 2 * margin + 10) {
+            for (std::size_t r = k + margin; r < j - margin; ++r) group[r - s.begin] = g;
+            dir_of.push_back(d);
+            ++g;
+          }
+          k = j;
+        }
+      }
       std::vector<double> e(end - s.begin), ie(end - s.begin), ar;
       std::array<std::vector<double>, 4> l;
       if (torque_ff) ar.assign(a_ref.begin() + static_cast<std::ptrdiff_t>(s.begin),
@@ -420,9 +457,10 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
           for (std::size_t c = 0; c < 4; ++c) ld[c].push_back(j >= lag ? l[c][j - lag] : 0.0);
         Tm.push_back(ch[k]);
         Tp.push_back(j >= 1 ? ch[k - 1] : 0.0);
-        seg_of_row.push_back(g);
-        if (k < s.begin + 2 + lag) continue;
-        if (clip && clip->holds(clip->theta[0] * ev.back() + clip->theta[1] * iev.back() + clip->c_seg[g], ch[k]))
+        const std::size_t grp = group[j];
+        seg_of_row.push_back(grp);
+        if (k < s.begin + 2 + lag || (by_table_motion && grp == seg_group)) continue;
+        if (clip && clip->holds(clip->theta[0] * ev.back() + clip->theta[1] * iev.back() + clip->c_seg[grp], ch[k]))
           continue;
         vrows.push_back(ev.size() - 1);
       }
@@ -475,6 +513,8 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
   if (torque_ff) cols.push_back(&a0);
   f.ls = least_squares(cols, Tm0, vrows);
   f.c_seg.assign(g, 0.0);
+  f.rows_seg = n_seg;
+  f.dir_seg = dir_of;
   if (f.ls.ok)
     for (std::size_t sg = 0; sg < g; ++sg)
       if (n_seg[sg] > 0.0) {
@@ -1139,6 +1179,45 @@ LeadInLaw lead_error_in_law(const std::vector<RunData>& runs, const AxisFromData
   return out;
 }
 
+/// A gap between the motor and the encoder the velocity law shows where the
+/// speed is the encoder's own. Moving +, the motor pushes the encoder's side
+/// from half the gap behind it, moving - from half the gap ahead, and the
+/// two part only while the encoder's side stands: the law fitted with its
+/// constants by the stretches of motion (by_table_motion) gives the
+/// stretches moving - a constant Ki times the gap above those moving +. The
+/// gap is the difference of the two directions' mean constants over Ki, its
+/// t that difference over its standard error from the constants' scatter
+/// about their direction's mean (two stretches each way at least).
+struct GapInLaw {
+  double gap_mm{0.0}, t{0.0};
+  std::size_t stretches{0};
+};
+GapInLaw gap_in_law(const std::vector<RunData>& runs, const AxisFromData& ax, LawFitOptions o) {
+  o.by_table_motion = true;
+  const VelocityLoopFit f = fit_velocity_loop(runs, ax.axis, ax.channel.column, o);
+  GapInLaw out;
+  if (!(f.ls.ok && f.ls.theta[1] > 0.0)) return out;
+  std::array<double, 2> mean{};
+  std::array<std::size_t, 2> n{};
+  auto side = [&](std::size_t j) { return f.dir_seg[j] > 0 ? 0 : 1; };
+  for (std::size_t j = 0; j < f.c_seg.size(); ++j)
+    if (f.dir_seg[j] != 0 && f.rows_seg[j] > 0.0) {
+      mean[side(j)] += f.c_seg[j];
+      ++n[side(j)];
+    }
+  if (n[0] < 2 || n[1] < 2) return out;
+  for (std::size_t d = 0; d < 2; ++d) mean[d] /= static_cast<double>(n[d]);
+  double s2 = 0.0;
+  for (std::size_t j = 0; j < f.c_seg.size(); ++j)
+    if (f.dir_seg[j] != 0 && f.rows_seg[j] > 0.0) s2 += std::pow(f.c_seg[j] - mean[side(j)], 2);
+  s2 /= static_cast<double>(n[0] + n[1] - 2);
+  const double se = std::sqrt(s2 * (1.0 / static_cast<double>(n[0]) + 1.0 / static_cast<double>(n[1])));
+  out.stretches = n[0] + n[1];
+  out.gap_mm = (mean[1] - mean[0]) / f.ls.theta[1];
+  out.t = se > 0.0 ? std::abs(mean[1] - mean[0]) / se : 1e300;
+  return out;
+}
+
 }  // namespace
 
 namespace {
@@ -1608,9 +1687,10 @@ namespace {
 void screw_pitch_error_from_law(DataSearch& s) {
   const AxisFromData& ax = s.ax;
   if (!(ax.velocity_loop_from_data && ax.law_lead_period_mm > 0.0)) return;
-  LawFitOptions o{.lag = ax.torque_lag_samples,
-                  .lag_a = ax.gains.tau_i_s > 0.0 ? std::exp(-s.dt / ax.gains.tau_i_s) : 0.0,
-                  .torque_ff = ax.torque_feedforward};
+  LawFitOptions o = law_options(ax, {.lag = ax.torque_lag_samples,
+                                     .lag_a = ax.gains.tau_i_s > 0.0 ? std::exp(-s.dt / ax.gains.tau_i_s) : 0.0,
+                                     .torque_ff = ax.torque_feedforward});
+  o.lead_period_mm = 0.0;
   const VelocityLoopFit without = fit_velocity_loop(s.runs, ax.axis, ax.channel.column, o);
   o.lead_period_mm = ax.law_lead_period_mm;
   LeadInLaw l;
@@ -1805,10 +1885,29 @@ void backlash_from_position(DataSearch& s) {
   s.attempt(t);
 }
 
+// backlash where no motor speed is logged and the speed is the encoder's
+// own: the gap the velocity law shows (gap_in_law, found with the law in
+// identify_velocity_loop), 0.85 to 1.15 times it replayed. Returns whether
+// the law shows one.
+bool backlash_from_law(DataSearch& s) {
+  const double g = s.ax.law_gap_mm;
+  if (!(s.fast && s.logs_position() && g > 0.0)) return false;
+  Trial t;
+  t.kind = EffectKind::kBacklash;
+  for (double m : {0.85, 1.0, 1.15}) t.sets.push_back({{EffectParam::backlash_gap_mm, m * g}});
+  t.evidence = fmt::format("no motor speed is logged, so the velocity law runs on the encoder's speed: its constant "
+                           "over each stretch of motion steps with the direction as a gap of {:.4g} mm ({:.1f} "
+                           "position quanta) between the motor and the encoder makes it (0.85 to 1.15 times it "
+                           "replayed)",
+                           g, g / s.q);
+  s.attempt(t);
+  return true;
+}
+
 }  // namespace
 
 void detect_backlash_in_data(DataSearch& s) {
-  if (!backlash_from_speed(s)) backlash_from_position(s);
+  if (!backlash_from_law(s) && !backlash_from_speed(s)) backlash_from_position(s);
 }
 
 namespace {
@@ -2218,8 +2317,7 @@ void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const Torque
   for (std::size_t lag = 1; lag <= max_torque_lag_rows(f); ++lag) {
     const VelocityLoopFit vlag =
         fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
-                          {.lag = lag, .clip = clip, .torque_ff = ax.torque_feedforward,
-                           .lead_period_mm = ax.law_lead_period_mm});
+                          law_options(ax, {.lag = lag, .clip = clip, .torque_ff = ax.torque_feedforward}));
     if (!(vlag.ls.ok && vlag.ls.theta[0] > 0.0 && vlag.ls.theta[1] >= 0.0 && vlag.ls.residual_rms < best)) continue;
     best = vlag.ls.residual_rms;
     ax.torque_lag_samples = lag;
@@ -2239,10 +2337,7 @@ double plain_law_residual(const AxisFit& f, const VelocityLoopFit& vl, const Tor
   if (ax.torque_lag_samples > 0) {
     const VelocityLoopFit d = fit_velocity_loop(
         f.runs, ax.axis, ax.channel.column,
-        {.lag = ax.torque_lag_samples,
-         .clip = clip,
-         .torque_ff = ax.torque_feedforward,
-         .lead_period_mm = ax.law_lead_period_mm});
+        law_options(ax, {.lag = ax.torque_lag_samples, .clip = clip, .torque_ff = ax.torque_feedforward}));
     if (d.ls.ok) plain = std::min(plain, d.ls.residual_rms);
   }
   return plain;
@@ -2270,11 +2365,7 @@ void current_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueC
   for (std::size_t lag = 0; lag <= max_torque_lag_rows(f); ++lag) {
     VelocityLoopFit arx =
         fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
-                          {.lag = lag,
-                           .clip = clip,
-                           .current_lag = true,
-                           .torque_ff = ax.torque_feedforward,
-                           .lead_period_mm = ax.law_lead_period_mm});
+                          law_options(ax, {.lag = lag, .clip = clip, .current_lag = true, .torque_ff = ax.torque_feedforward}));
     if (!arx.ls.ok) continue;
     const double a = arx.ls.theta[2];
     if (!(a > 0.05 && a < 0.95 && arx.ls.theta[0] > 0.0 && arx.ls.theta[1] >= 0.0)) continue;
@@ -2333,11 +2424,7 @@ void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl
   const auto fit_at = [&](std::size_t lag, double tau_s) -> std::optional<VelocityLoopFit> {
     VelocityLoopFit v = fit_velocity_loop(
         f.runs, ax.axis, ax.channel.column,
-        {.lag = lag,
-         .clip = clip,
-         .lag_a = std::exp(-dt / tau_s),
-         .torque_ff = ax.torque_feedforward,
-         .lead_period_mm = ax.law_lead_period_mm});
+        law_options(ax, {.lag = lag, .clip = clip, .lag_a = std::exp(-dt / tau_s), .torque_ff = ax.torque_feedforward}));
     if (!(v.ls.ok && v.ls.theta[0] > 0.0 && v.ls.theta[1] >= 0.0)) return std::nullopt;
     return v;
   };
@@ -2401,16 +2488,31 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
   ax.gains.T_max = 1e9;
   if (have_vcmd && f.r0.sample_period_s <= 5e-3 + 1e-12 && all_runs_log(f.runs, col(ax.axis, "_v_mm_s"))) {
     VelocityLoopFit vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column);
+    // Where the speed is the encoder's own, what parts the motor from the
+    // encoder shows in the law: a gap (its constants step with the
+    // direction of motion by Ki times it, three position steps at least),
+    // then a lead error; each is fitted with the law from then on.
     std::string lead;
     if (vl.ls.ok && f.runs.front().run->trace.find(lowpassed(ax.channel.column)) != nullptr) {
-      const LeadInLaw l = lead_error_in_law(f.runs, ax, {}, vl);
+      const double q = std::max(f.position_quantum_mm, 1e-3);
+      const GapInLaw gp = gap_in_law(f.runs, ax, {});
+      if (gp.t >= kMinT && gp.gap_mm >= 3.0 * q && gp.gap_mm <= 1.0) {
+        ax.law_gap_mm = gp.gap_mm;
+        const double before = vl.ls.residual_rms;
+        vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, law_options(ax, {}));
+        lead = fmt::format("; the law's constant steps with the direction of motion as a gap of {:.4g} mm between "
+                           "the motor and the encoder makes it (t = {:.1f} over {} stretches of motion; residual "
+                           "{:.3g} against {:.3g}): fitted with a constant per stretch",
+                           gp.gap_mm, std::min(gp.t, 1e3), gp.stretches, vl.ls.residual_rms, before);
+      }
+      const LeadInLaw l = lead_error_in_law(f.runs, ax, law_options(ax, {}), vl);
       if (l.P_mm > 0.0) {
         ax.law_lead_period_mm = l.P_mm;
-        vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, {.lead_period_mm = l.P_mm});
-        lead = fmt::format("; the law's residual follows the position with a period of {:.4g} mm (t = {:.1f}, "
-                           "residual {:.3g} against {:.3g}): a lead error between the motor and the encoder, "
-                           "fitted with the law",
-                           l.P_mm, l.t, l.ls.residual_rms, l.base_residual);
+        vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, law_options(ax, {}));
+        lead += fmt::format("; the law's residual follows the position with a period of {:.4g} mm (t = {:.1f}, "
+                            "residual {:.3g} against {:.3g}): a lead error between the motor and the encoder, "
+                            "fitted with the law",
+                            l.P_mm, l.t, l.ls.residual_rms, l.base_residual);
       }
     }
     // A torque fed forward from the command's acceleration (the spec's
@@ -2421,7 +2523,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
     std::string fed_forward;
     if (vl.ls.ok && std::abs(f.r0.sample_period_s - f.Ts) <= 1e-9 + 1e-6 * f.Ts) {
       VelocityLoopFit ff = fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
-                                             {.torque_ff = true, .lead_period_mm = ax.law_lead_period_mm});
+                                             law_options(ax, {.torque_ff = true}));
       if (ff.ls.ok && ff.ls.theta.back() > 0.0 &&
           ff.less_noise(ff.ls.residual_rms) < 0.8 * vl.less_noise(vl.ls.residual_rms)) {
         fed_forward = fmt::format("; a torque fed forward from the command's acceleration (Jff {:.4g}: the law with "
@@ -2444,7 +2546,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
       for (int pass = 0; pass < 3; ++pass) {
         const VelocityLoopFit inside =
             fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
-                              {.clip = &c, .torque_ff = ax.torque_feedforward, .lead_period_mm = ax.law_lead_period_mm});
+                              law_options(ax, {.clip = &c, .torque_ff = ax.torque_feedforward}));
         if (!inside.ls.ok) break;
         clip = c;
         vl = inside;

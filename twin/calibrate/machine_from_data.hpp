@@ -134,6 +134,10 @@ struct AxisFromData {
   /// period of a lead error the velocity law shows, fitted with the law
   /// from then on (0: none shown).
   double law_lead_period_mm{0.0};
+  /// Where the speed is the encoder's own: a gap between the motor and the
+  /// encoder the velocity law shows (0: none shown); the law is then fitted
+  /// with its constants by the stretches of motion.
+  double law_gap_mm{0.0};
   std::string note;
 };
 
