@@ -4133,13 +4133,21 @@ std::string data_calibration_report_markdown(const DataCalibration& r, const std
     // or not.
     o << "\n## Effects tried (kept where the held-out error falls)\n\n";
     for (const DataEffect& e : r.effects) {
+      // A torque or a current of a machine identified from data is in the
+      // unit of the axis's logged channel, whatever the parameter's name says.
+      std::string channel_unit;
+      for (const AxisFromData& ax : r.axis)
+        if (ax.axis == e.axis && ax.channel.present())
+          channel_unit = ax.channel.unit == "raw" ? "(the log's unit)" : ax.channel.unit;
       std::vector<std::string> values;
       for (const feeddrive::EffectParamDef& d : feeddrive::effect_params()) {
         if (d.effect != e.kind) continue;
         const auto it = e.params.find(param_key(e.kind, d.id));
-        if (it != e.params.end())
-          values.push_back(d.unit == "1" ? fmt::format("{} {:.4g}", d.name, it->second)
-                                         : fmt::format("{} {:.4g} {}", d.name, it->second, d.unit));
+        if (it == e.params.end()) continue;
+        const bool torque_like = d.unit == "N m" || d.unit == "A";
+        const std::string unit = torque_like && !channel_unit.empty() ? channel_unit : std::string(d.unit);
+        values.push_back(unit == "1" ? fmt::format("{} {:.4g}", d.name, it->second)
+                                     : fmt::format("{} {:.4g} {}", d.name, it->second, unit));
       }
       const bool untried = e.evidence.starts_with("not tried");
       o << fmt::format("- {} on {}{}{}: {}\n", e.effect, axis_name(e.axis),
