@@ -412,7 +412,8 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
       // fitted where the constants follow the motion.
       std::vector<std::size_t> group(end - s.begin, seg_group);
       if (by_table_motion) {
-        const auto margin = static_cast<std::size_t>(std::lround(1.0 / (kSpeedCutoff_Hz * rd.run->sample_period_s)));
+        const auto margin =
+            static_cast<std::size_t>(std::lround(1.0 / (kSpeedCutoff_Hz * rd.run->sample_period_s)));
         for (std::size_t k = s.begin; k < end;) {
           const int d = direction(v[k], rd.v_move[index(a)]);
           std::size_t j = k + 1;
@@ -466,7 +467,7 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
       }
     }
   }
-  // Each segment's means over its rows fitted, taken off.
+  // Each constant's (segment's or stretch's) means over its rows fitted, taken off.
   std::vector<double> n_seg(g, 0.0), me(g, 0.0), mie(g, 0.0), mT(g, 0.0), mTp(g, 0.0), ma(g, 0.0);
   std::array<std::vector<double>, 4> ml;
   for (auto& m : ml) m.assign(lead ? g : 0, 0.0);
@@ -1809,6 +1810,15 @@ void travel_steps_at_reversals(const RunData& rd, Axis a, double dt, std::vector
   }
 }
 
+// A gap of g mm found by `found`, replayed at 0.85 to 1.15 times it.
+void attempt_gap(DataSearch& s, double g, const std::string& found) {
+  Trial t;
+  t.kind = EffectKind::kBacklash;
+  for (double m : {0.85, 1.0, 1.15}) t.sets.push_back({{EffectParam::backlash_gap_mm, m * g}});
+  t.evidence = found + ": a gap of that size (0.85 to 1.15 times it replayed)";
+  s.attempt(t);
+}
+
 // backlash, where a fast log has the motor's speed beside the encoder's
 // position (a linear scale on the table, the loop closed across the
 // gap): the motor's travel (the logged speed integrated) runs ahead of
@@ -1833,15 +1843,11 @@ bool backlash_from_speed(DataSearch& s) {
   // A step beyond 1 mm is no feed drive's gap but a run whose motor
   // and encoder have parted (a diverging loop, a slipping coupling).
   if (!(g >= 3.0 * s.q && g <= 1.0)) return false;
-  Trial t;
-  t.kind = EffectKind::kBacklash;
-  for (double m : {0.85, 1.0, 1.15}) t.sets.push_back({{EffectParam::backlash_gap_mm, m * g}});
-  t.evidence = fmt::format("across {} reversals of the command the motor's travel (the logged speed "
-                           "integrated) and the logged position part by a median {:.4g} mm ({:.1f} "
-                           "position quanta), signed by the new direction: a gap of that size (0.85 to "
-                           "1.15 times it replayed)",
-                           steps.size(), g, g / s.q);
-  s.attempt(t);
+  attempt_gap(s, g,
+              fmt::format("across {} reversals of the command the motor's travel (the logged speed integrated) "
+                          "and the logged position part by a median {:.4g} mm ({:.1f} position quanta), signed by "
+                          "the new direction",
+                          steps.size(), g, g / s.q));
   return true;
 }
 
@@ -1892,15 +1898,11 @@ void backlash_from_position(DataSearch& s) {
 bool backlash_from_law(DataSearch& s) {
   const double g = s.ax.law_gap_mm;
   if (!(s.fast && s.logs_position() && g > 0.0)) return false;
-  Trial t;
-  t.kind = EffectKind::kBacklash;
-  for (double m : {0.85, 1.0, 1.15}) t.sets.push_back({{EffectParam::backlash_gap_mm, m * g}});
-  t.evidence = fmt::format("no motor speed is logged, so the velocity law runs on the encoder's speed: its constant "
-                           "over each stretch of motion steps with the direction as a gap of {:.4g} mm ({:.1f} "
-                           "position quanta) between the motor and the encoder makes it (0.85 to 1.15 times it "
-                           "replayed)",
-                           g, g / s.q);
-  s.attempt(t);
+  attempt_gap(s, g,
+              fmt::format("no motor speed is logged, so the velocity law runs on the encoder's speed: its "
+                          "constant over each stretch of motion steps with the direction by Ki times {:.4g} mm "
+                          "({:.1f} position quanta)",
+                          g, g / s.q));
   return true;
 }
 
@@ -2365,7 +2367,10 @@ void current_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueC
   for (std::size_t lag = 0; lag <= max_torque_lag_rows(f); ++lag) {
     VelocityLoopFit arx =
         fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
-                          law_options(ax, {.lag = lag, .clip = clip, .current_lag = true, .torque_ff = ax.torque_feedforward}));
+                          law_options(ax, {.lag = lag,
+                                           .clip = clip,
+                                           .current_lag = true,
+                                           .torque_ff = ax.torque_feedforward}));
     if (!arx.ls.ok) continue;
     const double a = arx.ls.theta[2];
     if (!(a > 0.05 && a < 0.95 && arx.ls.theta[0] > 0.0 && arx.ls.theta[1] >= 0.0)) continue;
@@ -2424,7 +2429,10 @@ void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl
   const auto fit_at = [&](std::size_t lag, double tau_s) -> std::optional<VelocityLoopFit> {
     VelocityLoopFit v = fit_velocity_loop(
         f.runs, ax.axis, ax.channel.column,
-        law_options(ax, {.lag = lag, .clip = clip, .lag_a = std::exp(-dt / tau_s), .torque_ff = ax.torque_feedforward}));
+        law_options(ax, {.lag = lag,
+                         .clip = clip,
+                         .lag_a = std::exp(-dt / tau_s),
+                         .torque_ff = ax.torque_feedforward}));
     if (!(v.ls.ok && v.ls.theta[0] > 0.0 && v.ls.theta[1] >= 0.0)) return std::nullopt;
     return v;
   };
@@ -2490,8 +2498,9 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
     VelocityLoopFit vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column);
     // Where the speed is the encoder's own, what parts the motor from the
     // encoder shows in the law: a gap (its constants step with the
-    // direction of motion by Ki times it, three position steps at least),
-    // then a lead error; each is fitted with the law from then on.
+    // direction of motion by Ki times it; three position steps at least,
+    // 1 um where the log shows no rounding), then a lead error; each is
+    // fitted with the law from then on.
     std::string lead;
     if (vl.ls.ok && f.runs.front().run->trace.find(lowpassed(ax.channel.column)) != nullptr) {
       const double q = std::max(f.position_quantum_mm, 1e-3);
