@@ -1148,10 +1148,11 @@ struct LeadInLaw {
 /// half its cutoff at the fastest speed of the fitting rows) to half their
 /// travel. Shown where the pair's t reaches kMinT, counting the rows the
 /// low-pass correlates (1 / (2 cutoff)) as one, the residual falls by 2 %
-/// below `base`'s (the same law without them) and Ki stays positive.
-LeadInLaw lead_error_in_law(const std::vector<RunData>& runs, const AxisFromData& ax, LawFitOptions o,
-                            const VelocityLoopFit& base) {
+/// below the same law's without them and Ki stays positive.
+LeadInLaw lead_error_in_law(const std::vector<RunData>& runs, const AxisFromData& ax, LawFitOptions o) {
   LeadInLaw out;
+  o.lead_period_mm = 0.0;
+  const VelocityLoopFit base = fit_velocity_loop(runs, ax.axis, ax.channel.column, o);
   out.base_residual = base.ls.residual_rms;
   double v_high = 0.0, x_lo = 1e300, x_hi = -1e300;
   for (const RunData& rd : runs) {
@@ -2500,11 +2501,20 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
     // encoder shows in the law: a gap (its constants step with the
     // direction of motion by Ki times it; three position steps at least,
     // 1 um where the log shows no rounding), then a lead error; each is
-    // fitted with the law from then on.
+    // fitted with the law from then on. A torque fed forward is chosen after
+    // them (a gap made the law with the command's acceleration fit better
+    // when it had none), so each is looked for without that column and,
+    // where the log samples every loop period, with it, and the look with
+    // the larger t is taken: left out of the law, a feedforward of Jff
+    // 0.01 N m s^2/rad hid both; always in, its column's scatter hid a gap
+    // of 10 um under 0.2 N m of noise.
+    const bool every_period = std::abs(f.r0.sample_period_s - f.Ts) <= 1e-9 + 1e-6 * f.Ts;
     std::string lead;
     if (vl.ls.ok && f.runs.front().run->trace.find(lowpassed(ax.channel.column)) != nullptr) {
       const double q = std::max(f.position_quantum_mm, 1e-3);
-      const GapInLaw gp = gap_in_law(f.runs, ax, {});
+      GapInLaw gp = gap_in_law(f.runs, ax, {});
+      if (every_period)
+        if (GapInLaw with_ff = gap_in_law(f.runs, ax, {.torque_ff = true}); with_ff.t > gp.t) gp = with_ff;
       if (gp.t >= kMinT && gp.gap_mm >= 3.0 * q && gp.gap_mm <= 1.0) {
         ax.law_gap_mm = gp.gap_mm;
         const double before = vl.ls.residual_rms;
@@ -2514,7 +2524,11 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
                            "{:.3g} against {:.3g}): fitted with a constant per stretch",
                            gp.gap_mm, std::min(gp.t, 1e3), gp.stretches, vl.ls.residual_rms, before);
       }
-      const LeadInLaw l = lead_error_in_law(f.runs, ax, law_options(ax, {}), vl);
+      LeadInLaw l = lead_error_in_law(f.runs, ax, law_options(ax, {}));
+      if (every_period)
+        if (LeadInLaw with_ff = lead_error_in_law(f.runs, ax, law_options(ax, {.torque_ff = true}));
+            with_ff.P_mm > 0.0 && (l.P_mm == 0.0 || with_ff.t > l.t))
+          l = std::move(with_ff);
       if (l.P_mm > 0.0) {
         ax.law_lead_period_mm = l.P_mm;
         vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, law_options(ax, {}));
@@ -2530,7 +2544,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
     // 0.8 of the plain law's residual (both less the noise). Read where the
     // log samples every loop period, whose acceleration the loop takes.
     std::string fed_forward;
-    if (vl.ls.ok && std::abs(f.r0.sample_period_s - f.Ts) <= 1e-9 + 1e-6 * f.Ts) {
+    if (vl.ls.ok && every_period) {
       VelocityLoopFit ff = fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
                                              law_options(ax, {.torque_ff = true}));
       if (ff.ls.ok && ff.ls.theta.back() > 0.0 &&
