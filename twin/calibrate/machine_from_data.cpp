@@ -101,6 +101,18 @@ std::vector<double> lowpass_in_segments(const std::vector<double>& c, const std:
   return y;
 }
 
+/// The share of a white noise's RMS that lowpass_in_segments lets through
+/// at sample period dt: the root of the sum of squares of its response to a
+/// unit impulse (0.30 at 1 kHz, 0.42 at 500 Hz: about the root of the
+/// cutoff over the Nyquist frequency).
+double lowpass_noise_gain(double dt) {
+  std::vector<double> impulse(16 * kSpeedFilterRows, 0.0);
+  impulse[impulse.size() / 2] = 1.0;
+  double s2 = 0.0;
+  for (double y : lowpass(std::span<const double>(impulse), kSpeedCutoff_Hz, 1.0 / dt)) s2 += y * y;
+  return std::sqrt(s2);
+}
+
 bool is_multiple(double x, double q) {
   const double r = x / q;
   return std::abs(r - std::round(r)) < 1e-6 * std::max(1.0, std::abs(r)) + 1e-9;
@@ -530,7 +542,13 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
     f.T_abs_max = std::max(f.T_abs_max, std::abs(Tm[k]));
   }
   f.T_rms = vrows.empty() ? 0.0 : std::sqrt(t2 / static_cast<double>(vrows.size()));
+  // Where the law is fitted through the speed's low-pass, the noise left in
+  // its torque is the logged noise through that filter (taken whole, it
+  // exceeded the filtered law's residual, and every rule that asks a
+  // residual less the noise to fall compared zero with zero).
   f.noise_rms = fitting_rows_noise_rms(runs, channel);
+  if (runs.front().run->trace.find(lowpassed(channel)) != nullptr)
+    f.noise_rms *= lowpass_noise_gain(runs.front().run->sample_period_s);
   if (f.ls.ok && !current_lag) {
     const TorqueClip c{f.ls.theta, f.c_seg, f.T_abs_max, f.noise_rms};
     for (std::size_t k : vrows)
