@@ -3848,7 +3848,8 @@ void rebuild_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<
     }
     if (!best.ls.ok) continue;
     const std::vector<CommandGains> gains =
-        command_gains(best, own.front().sample_period_s, !filtered, top.noise_rms);
+        command_gains(best, own.front().sample_period_s, !filtered,
+                      filtered ? top.noise_rms * lowpass_noise_gain(own.front().sample_period_s) : top.noise_rms);
     if (gains.empty()) continue;
     // Of two, the one whose command the PI law fits better.
     std::size_t chosen = 0;
