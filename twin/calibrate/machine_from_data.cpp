@@ -995,7 +995,9 @@ AxisRows axis_rows(const std::vector<RunData>& runs, const AxisFromData& ax) {
   for (std::size_t run = 0; run < runs.size(); ++run) {
     const RunData& rd = runs[run];
     const auto& t = rd.run->trace;
-    const auto* ch = t.find(ax.channel.column);
+    // Where the speed is taken from the position, the torque low-passed
+    // alike (as the drive is fitted, drive_rows).
+    const auto* ch = filtered_alike(t, ax.channel.column);
     if (ch == nullptr) continue;
     const auto* xm = t.find(col(ax.axis, "_mm"));
     const auto& xs = xm ? *xm : rd.smooth->trace.at(col(ax.axis, "_ref_mm"));
@@ -1242,16 +1244,17 @@ GapInLaw gap_in_law(const std::vector<RunData>& runs, const AxisFromData& ax, La
 
 namespace {
 
-// The white noise on the detector's logged channel, from its second
-// differences over consecutive fitting rows.
-double channel_noise_rms(const AxisRows& rows) {
+// The white noise on the detector's logged channel (as logged, not
+// low-passed), from its second differences over consecutive fitting rows.
+double channel_noise_rms(const AxisRows& rows, const std::vector<RunData>& runs, const std::string& column) {
   std::vector<double> d2;
   for (std::size_t k = 1; k + 1 < rows.all.size(); ++k) {
     const auto [r0, k0] = rows.at[k - 1];
     const auto [r1, k1] = rows.at[k];
     const auto [r2, k2] = rows.at[k + 1];
     if (r0 != r1 || r1 != r2 || k1 != k0 + 1 || k2 != k1 + 1) continue;
-    d2.push_back(std::abs(rows.T[k + 1] - 2.0 * rows.T[k] + rows.T[k - 1]));
+    const auto& T = runs[r1].run->trace.at(column);
+    d2.push_back(std::abs(T[k2] - 2.0 * T[k1] + T[k0]));
   }
   return white_noise_rms(std::move(d2));
 }
@@ -1954,8 +1957,13 @@ FitRunErrors search_catalogue_effects(DataCalibration& out, const std::vector<Ru
     s.fast = dt <= 2e-3 + 1e-12;
     // The second difference shows the noise only where the torque is smooth
     // from sample to sample: at the loop's rate, not every 100 ms.
-    s.noise_rms = s.fast ? channel_noise_rms(s.rows) : 0.0;
-    s.corr = residual_correlation_rows(s.rows, s.base_cols, s.noise_rms, dt);
+    s.noise_rms = s.fast ? channel_noise_rms(s.rows, runs, ax.channel.column) : 0.0;
+    // Where the speed is taken from the position the detectors fit the
+    // torque low-passed alike (axis_rows), whose noise is correlated over
+    // the filter's span as a model error is: the whole residual is counted
+    // correlated there.
+    const bool filtered = runs.front().run->trace.find(lowpassed(ax.channel.column)) != nullptr;
+    s.corr = residual_correlation_rows(s.rows, s.base_cols, filtered ? 0.0 : s.noise_rms, dt);
     s.fine = q <= 0.005;
     for (const EffectEntry* e : detectors) e->from_data(s);
   }
