@@ -35,6 +35,13 @@ const std::vector<double>* filtered_alike(const io::TraceTable& t, const std::st
   return f ? f : t.find(column);
 }
 
+/// Whether `column` has a low-passed twin: the speed was taken from the
+/// position (add_speed_from_position) and laws on it are fitted through the
+/// low-pass.
+bool has_lowpassed_twin(const io::TraceTable& t, const std::string& column) {
+  return t.find(lowpassed(column)) != nullptr;
+}
+
 /// A channel the identification reads in place of the logged one: a
 /// velocity command rebuilt from the torque where the log has none
 /// (rebuild_velocity_commands), or the logged one moved to the rows it
@@ -326,7 +333,7 @@ std::vector<double> reference_acceleration(const RunData& rd, Axis a, const std:
   for (const Segment& sg : rd.segments)
     for (std::size_t k = sg.begin + 2; k < sg.end; ++k)
       acc[k] = (ref[k] - 2.0 * ref[k - 1] + ref[k - 2]) / (dt * dt);
-  return t.find(lowpassed(channel)) != nullptr ? lowpass_in_segments(acc, rd.segments, dt) : acc;
+  return has_lowpassed_twin(t, channel) ? lowpass_in_segments(acc, rd.segments, dt) : acc;
 }
 
 /// The PI velocity law fitted on the fitting rows: the logged torque at row k
@@ -547,7 +554,7 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
   // exceeded the filtered law's residual, and every rule that asks a
   // residual less the noise to fall compared zero with zero).
   f.noise_rms = fitting_rows_noise_rms(runs, channel);
-  if (runs.front().run->trace.find(lowpassed(channel)) != nullptr)
+  if (has_lowpassed_twin(runs.front().run->trace, channel))
     f.noise_rms *= lowpass_noise_gain(runs.front().run->sample_period_s);
   if (f.ls.ok && !current_lag) {
     const TorqueClip c{f.ls.theta, f.c_seg, f.T_abs_max, f.noise_rms};
@@ -1745,7 +1752,7 @@ void screw_pitch_error_from_law(DataSearch& s) {
 // encoder's own, screw_pitch_error_from_law.
 void detect_screw_pitch_error_in_data(DataSearch& s) {
   if (s.fast && s.fine && s.logs_position() &&
-      s.runs.front().run->trace.find(lowpassed(s.ax.channel.column)) != nullptr) {
+      has_lowpassed_twin(s.runs.front().run->trace, s.ax.channel.column)) {
     screw_pitch_error_from_law(s);
     return;
   }
@@ -1962,7 +1969,7 @@ FitRunErrors search_catalogue_effects(DataCalibration& out, const std::vector<Ru
     // torque low-passed alike (axis_rows), whose noise is correlated over
     // the filter's span as a model error is: the whole residual is counted
     // correlated there.
-    const bool filtered = runs.front().run->trace.find(lowpassed(ax.channel.column)) != nullptr;
+    const bool filtered = has_lowpassed_twin(runs.front().run->trace, ax.channel.column);
     s.corr = residual_correlation_rows(s.rows, s.base_cols, filtered ? 0.0 : s.noise_rms, dt);
     s.fine = q <= 0.005;
     for (const EffectEntry* e : detectors) e->from_data(s);
@@ -2330,6 +2337,12 @@ void set_velocity_loop(const VelocityLoopFit& vl, const AxisFit& f, controller::
   g.Jff_torque_s2_per_rad = vl.torque_ff ? vl.ls.theta.back() : 0.0;
 }
 
+/// Whether the log samples every loop period (the loop's own rows: a lag of
+/// a row is one of the loop's, and the command's acceleration is the loop's).
+bool samples_every_loop_period(const AxisFit& f) {
+  return std::abs(f.r0.sample_period_s - f.Ts) <= 1e-9 + 1e-6 * f.Ts;
+}
+
 /// The rows a torque may follow its law late: up to 10 ms, 1 to 10 rows.
 std::size_t max_torque_lag_rows(const AxisFit& f) {
   return static_cast<std::size_t>(std::clamp(std::lround(0.01 / f.r0.sample_period_s), 1L, 10L));
@@ -2388,7 +2401,7 @@ double plain_law_residual(const AxisFit& f, const VelocityLoopFit& vl, const Tor
 /// rising_friction, backlash or delay was named for the lag.
 void current_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueClip* clip, AxisFromData& ax) {
   const double dt = f.r0.sample_period_s;
-  if (!(std::abs(dt - f.Ts) <= 1e-9 + 1e-6 * f.Ts)) return;
+  if (!samples_every_loop_period(f)) return;
   std::optional<VelocityLoopFit> best;
   std::size_t best_lag = 0;
   for (std::size_t lag = 0; lag <= max_torque_lag_rows(f); ++lag) {
@@ -2443,7 +2456,7 @@ void current_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueC
 void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl, const TorqueClip* clip,
                                      AxisFromData& ax) {
   const double dt = f.r0.sample_period_s;
-  if (!(std::abs(dt - f.Ts) <= 1e-9 + 1e-6 * f.Ts)) return;
+  if (!samples_every_loop_period(f)) return;
   struct Best {
     VelocityLoopFit fit;
     std::size_t lag{0};
@@ -2534,9 +2547,9 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
     // the larger t is taken: left out of the law, a feedforward of Jff
     // 0.01 N m s^2/rad hid both; always in, its column's scatter hid a gap
     // of 10 um under 0.2 N m of noise.
-    const bool every_period = std::abs(f.r0.sample_period_s - f.Ts) <= 1e-9 + 1e-6 * f.Ts;
+    const bool every_period = samples_every_loop_period(f);
     std::string lead;
-    if (vl.ls.ok && f.runs.front().run->trace.find(lowpassed(ax.channel.column)) != nullptr) {
+    if (vl.ls.ok && has_lowpassed_twin(f.runs.front().run->trace, ax.channel.column)) {
       const double q = std::max(f.position_quantum_mm, 1e-3);
       GapInLaw gp = gap_in_law(f.runs, ax, {});
       if (every_period)
@@ -2621,7 +2634,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
       velocity_loop_lag(f, vl, clip ? &*clip : nullptr, ax);
       // Where the speed is taken from the position the law is fitted through
       // the low-pass, whose own lag the previous row's torque would fit.
-      if (f.r0.trace.find(lowpassed(ax.channel.column)) != nullptr)
+      if (has_lowpassed_twin(f.r0.trace, ax.channel.column))
         current_loop_lag_through_filter(f, vl, clip ? &*clip : nullptr, ax);
       else
         current_loop_lag(f, vl, clip ? &*clip : nullptr, ax);
@@ -3844,7 +3857,7 @@ void rebuild_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<
       usable = usable && r.trace.find(col(a, "_vcmd_mm_s")) == nullptr && r.trace.find(channel) != nullptr &&
                r.trace.find(col(a, "_v_mm_s")) != nullptr && r.trace.find(col(a, "_mm")) != nullptr;
     if (!usable) continue;
-    const bool filtered = own.front().trace.find(lowpassed(channel)) != nullptr;
+    const bool filtered = has_lowpassed_twin(own.front().trace, channel);
     const LawColumns law = command_law_columns(runs, a, Ts, filtered);
     const TorqueTop top = torque_top(runs, channel);
     const auto max_lag =
