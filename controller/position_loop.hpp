@@ -85,6 +85,10 @@ struct PositionLoopOutput {
   double a_ref_mm_per_s2{0.0};
   double vcmd_mm_per_s{0.0};  ///< cascade: the position loop's velocity command
   double torque_cmd{0.0};     ///< cascade: the torque command after the current loop
+  /// The torque the law asks of the drive, before the current loop and any
+  /// delay (cascade: the velocity loop's output after the torque limit;
+  /// FADAL: Ka Kt u).
+  double torque_demand{0.0};
   bool saturated{false};
 };
 

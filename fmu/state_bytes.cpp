@@ -77,7 +77,8 @@ void put_snapshot(Writer& w, const sim::Snapshot& s) {
   w.put(s.k);
   w.put(s.t_s);
   for (const auto& a : s.axes) {
-    for (double d : {a.x_ref_mm, a.x_mm, a.x_true_mm, a.e_mm, a.u_V, a.i_A, a.Tm_Nm, a.Td_Nm, a.v_mm_per_s}) w.put(d);
+    for (double d : {a.x_ref_mm, a.x_mm, a.x_true_mm, a.e_mm, a.u_V, a.i_A, a.Tm_Nm, a.Tcmd_Nm, a.Td_Nm, a.v_mm_per_s})
+      w.put(d);
     w.put<std::uint8_t>(a.saturated ? 1 : 0);
   }
   for (double d : s.F_N) w.put(d);
@@ -94,7 +95,8 @@ sim::Snapshot get_snapshot(Reader& r) {
   s.k = r.get<std::int64_t>();
   s.t_s = r.get<double>();
   for (auto& a : s.axes) {
-    for (double* d : {&a.x_ref_mm, &a.x_mm, &a.x_true_mm, &a.e_mm, &a.u_V, &a.i_A, &a.Tm_Nm, &a.Td_Nm, &a.v_mm_per_s})
+    for (double* d : {&a.x_ref_mm, &a.x_mm, &a.x_true_mm, &a.e_mm, &a.u_V, &a.i_A, &a.Tm_Nm, &a.Tcmd_Nm, &a.Td_Nm,
+                      &a.v_mm_per_s})
       *d = r.get<double>();
     a.saturated = r.get<std::uint8_t>() != 0;
   }

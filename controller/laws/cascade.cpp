@@ -51,6 +51,7 @@ void CascadeLaw::step(const PositionLoopParams& p, const LawSetup& setup, double
   const double T_unclamped = g.Kvp_torque_s_per_rad * (ev + integral) + g.Jff_torque_s2_per_rad * out.a_ref_mm_per_s2 / rg;
   const double T = std::clamp(T_unclamped, -g.T_max, g.T_max);
   out.saturated = T != T_unclamped;
+  out.torque_demand = T;
   // Anti-windup: the integral is frozen while the limit holds the command.
   if (!out.saturated) s.Iv_rad = Iv;
   s.T_filtered = setup.lag_a * s.T_filtered + (1.0 - setup.lag_a) * T;

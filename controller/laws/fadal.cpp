@@ -37,6 +37,7 @@ void FadalLaw::step(const PositionLoopParams& g, const LawSetup& setup, double, 
                       g.K2_V_s_per_mm * out.v_ref_mm_per_s;
   out.u_V = std::clamp(out.u_unclamped_V, -g.u_max_V, g.u_max_V);
   out.saturated = out.u_V != out.u_unclamped_V;
+  out.torque_demand = out.u_V * setup.drive.Ka_A_per_V * setup.drive.Kt_Nm_per_A;
   s.I_mm_s = I;
 }
 

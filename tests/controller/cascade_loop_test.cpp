@@ -52,6 +52,7 @@ std::vector<double> reference(double Ts_s, std::size_t n) {
 
 struct Exact {
   std::vector<double> x_mm, torque;
+  std::vector<double> command;  ///< the velocity loop's torque, before the current loop's lag
 };
 
 Exact exact_response(const sim::MachineDefinition& m, const std::vector<double>& r) {
@@ -78,6 +79,7 @@ Exact exact_response(const sim::MachineDefinition& m, const std::vector<double>&
     Tf = lag * Tf + (1.0 - lag) * T;
     out.x_mm.push_back(x);
     out.torque.push_back(Tf);
+    out.command.push_back(T);
     const Eigen::Vector3d s = E * Eigen::Vector3d(w, x, Tf);
     w = s(0);
     x = s(1);
@@ -101,6 +103,7 @@ void expect_matches_exact(const controller::CascadeGains& g, double Ts_s) {
     worst = std::max(worst, std::abs(s.axes[0].x_true_mm - ex.x_mm[k]));
     e_max = std::max(e_max, std::abs(r[k] - ex.x_mm[k]));
     ASSERT_NEAR(s.axes[0].Tm_Nm, ex.torque[k], 1e-9 * (1.0 + std::abs(ex.torque[k]))) << "tick " << k;
+    ASSERT_NEAR(s.axes[0].Tcmd_Nm, ex.command[k], 1e-9 * (1.0 + std::abs(ex.command[k]))) << "tick " << k;
   }
   EXPECT_LT(worst, 1e-9) << "largest difference from the exact discrete response, mm";
   EXPECT_GT(e_max, 1e-4) << "the move must load the loop, or the comparison shows nothing";
@@ -144,6 +147,7 @@ TEST(CascadeLoop, MachineFileChoosesTheLawAndRefusesTheOtherLawsGains) {
   EXPECT_NE(yaml.find("controller: cascade"), std::string::npos);
   EXPECT_EQ(yaml.find("Kp:"), std::string::npos);
   EXPECT_NE(yaml.find("Kvp:"), std::string::npos);
+  EXPECT_NE(yaml.find("torque_command_logged: 0"), std::string::npos);
   const auto dir = std::filesystem::temp_directory_path() / "twin_cascade_machine_test";
   std::filesystem::create_directories(dir);
   io::write_file_atomic(dir / "m.yaml", yaml);
@@ -154,6 +158,11 @@ TEST(CascadeLoop, MachineFileChoosesTheLawAndRefusesTheOtherLawsGains) {
   sim::MachineDefinition s = back;
   EXPECT_THROW(sim::apply_set(s, "x.Kp=100"), ConfigError);
   EXPECT_NO_THROW(sim::apply_set(s, "x.Kv=45"));
+  EXPECT_NO_THROW(sim::apply_set(s, "x.torque_command_logged=1"));
+  EXPECT_DOUBLE_EQ(s.axes[0].torque_command_logged, 1.0);
+  EXPECT_NO_THROW(s.validate());
+  sim::apply_set(s, "x.torque_command_logged=0.5");
+  EXPECT_THROW(s.validate(), ConfigError);
   io::write_file_atomic(dir / "bad.yaml", yaml + "    Kd: 0.1\n");
   EXPECT_THROW(io::load_machine(dir / "bad.yaml"), ConfigError);
   std::filesystem::remove_all(dir);

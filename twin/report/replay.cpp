@@ -600,30 +600,43 @@ void reserve_rows(ReplayResult& res, std::size_t n_rows) {
 // (S[b + 1] - S[a]) / (b - a + 1).
 using TickSums = AxisArray<std::array<std::vector<double>, 3>>;
 
+// The current and torque a log holds of an axis at a tick: the motor's, or
+// the loop's command before the current loop where the machine says the log
+// holds that (AxisDefinition::torque_command_logged).
+struct LoggedTorque {
+  double i_A{0.0}, T{0.0};
+};
+LoggedTorque logged_torque(const sim::AxisDefinition& def, const sim::AxisSnapshot& x) {
+  if (def.torque_command_logged == 0.0) return {x.i_A, x.Tm_Nm};
+  return {x.Tcmd_Nm / def.drive.Kt_Nm_per_A, x.Tcmd_Nm};
+}
+
 // Steps the co-simulation over every tick, keeping the outputs at the trace's
 // samples (and the running sums where `sums` is given).
-void run_ticks(sim::CoSimulation& cosim, const MeasuredRun& run, std::int64_t n_ticks, std::int64_t m,
-               ReplayResult& res, TickSums* sums) {
+void run_ticks(sim::CoSimulation& cosim, const sim::MachineDefinition& machine, const MeasuredRun& run,
+               std::int64_t n_ticks, std::int64_t m, ReplayResult& res, TickSums* sums) {
   const auto& t = run.trace.at("t_s");
   for (std::int64_t k = 0; k < n_ticks; ++k) {
     const sim::Snapshot& s = cosim.step();
     if (sums)
       for (Axis a : run.axes) {
         const auto& x = s.axes[index(a)];
+        const LoggedTorque lt = logged_torque(machine.axes[index(a)], x);
         auto& S = (*sums)[index(a)];
         S[0].push_back(S[0].back() + x.u_V);
-        S[1].push_back(S[1].back() + x.i_A);
-        S[2].push_back(S[2].back() + x.Tm_Nm);
+        S[1].push_back(S[1].back() + lt.i_A);
+        S[2].push_back(S[2].back() + lt.T);
       }
     if (k % m != 0) continue;
     res.t_s.push_back(t[static_cast<std::size_t>(k / m)]);
     for (Axis a : run.axes) {
       const auto& x = s.axes[index(a)];
+      const LoggedTorque lt = logged_torque(machine.axes[index(a)], x);
       res.x_ref_mm[index(a)].push_back(x.x_ref_mm);
       res.x_mm[index(a)].push_back(x.x_mm);
       res.u_V[index(a)].push_back(x.u_V);
-      res.i_A[index(a)].push_back(x.i_A);
-      res.Tm[index(a)].push_back(x.Tm_Nm);
+      res.i_A[index(a)].push_back(lt.i_A);
+      res.Tm[index(a)].push_back(lt.T);
       res.vcmd_mm_per_s[index(a)].push_back(x.vcmd_mm_per_s);
     }
   }
@@ -763,7 +776,7 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
         v.reserve(static_cast<std::size_t>(n_ticks) + 1);
         v.push_back(0.0);
       }
-  run_ticks(cosim, run, n_ticks, m, res, window ? &sums : nullptr);
+  run_ticks(cosim, machine, run, n_ticks, m, res, window ? &sums : nullptr);
   if (window) mean_over_neighbours(sums, run, n_ticks, m, res);
   return res;
 }

@@ -64,8 +64,11 @@ struct ReplayResult {
   AxisArray<std::vector<double>> x_ref_mm;
   AxisArray<std::vector<double>> x_mm;      ///< measured (quantised) position of the twin
   AxisArray<std::vector<double>> u_V;
+  /// Current and motor torque (the drive's torque unit), or the loop's
+  /// command where the machine says the log holds that
+  /// (AxisDefinition::torque_command_logged).
   AxisArray<std::vector<double>> i_A;
-  AxisArray<std::vector<double>> Tm;        ///< motor torque (the drive's torque unit)
+  AxisArray<std::vector<double>> Tm;
   AxisArray<std::vector<double>> vcmd_mm_per_s;  ///< cascade law: the velocity command (0 for FADAL)
   std::vector<std::string> notes;           ///< what was handled and how
 };

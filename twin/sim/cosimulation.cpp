@@ -90,6 +90,7 @@ const Snapshot& CoSimulation::step() {
     s.e_mm = lo.e_mm;
     s.vcmd_mm_per_s = lo.vcmd_mm_per_s;
     s.u_V = lo.u_V;
+    s.Tcmd_Nm = lo.torque_demand;
     s.saturated = lo.saturated;
     s.Td_Nm = F_avg_N[a] * drives_.params(i).rg_mm_per_rad * kMPerMm;
     inputs_[i] = feeddrive::DriveInput{lo.u_V, s.Td_Nm};

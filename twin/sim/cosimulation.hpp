@@ -31,6 +31,7 @@ struct AxisSnapshot {
   double u_V{0.0};
   double i_A{0.0};
   double Tm_Nm{0.0};
+  double Tcmd_Nm{0.0};       ///< the torque the loop commands, before the current loop and any delay
   double Td_Nm{0.0};         ///< cutting load torque held over the tick
   double v_mm_per_s{0.0};    ///< true axis speed
   double vcmd_mm_per_s{0.0}; ///< cascade law: the position loop's velocity command (0 for the FADAL law)

@@ -44,6 +44,10 @@ std::vector<AxisParamSpec> make_axis_specs() {
       TWIN_LAW_PARAM("tau_i", "s", "cascade: current-loop lag (0: ideal)", a.loop.cascade.tau_i_s, controller::LoopLaw::kCascade),
       TWIN_LAW_PARAM("T_max", "torque unit", "cascade: torque limit", a.loop.cascade.T_max, controller::LoopLaw::kCascade),
       TWIN_LAW_PARAM("Jff", "torque unit s^2/rad", "cascade: acceleration (torque) feedforward", a.loop.cascade.Jff_torque_s2_per_rad, controller::LoopLaw::kCascade),
+      TWIN_LAW_PARAM("torque_command_logged", "1",
+                     "cascade: 1 where the log's torque or current is the velocity loop's command, before the "
+                     "current loop and any delay; 0: the motor's",
+                     a.torque_command_logged, controller::LoopLaw::kCascade),
       TWIN_AXIS_PARAM("v_max", "mm/s", "interpolator speed limit", a.v_max_mm_per_s),
       TWIN_AXIS_PARAM("a_max", "mm/s^2", "interpolator acceleration limit", a.a_max_mm_per_s2),
       TWIN_AXIS_PARAM("j_max", "mm/s^3", "interpolator jerk limit", a.j_max_mm_per_s3),
@@ -144,6 +148,8 @@ void MachineDefinition::validate() const {
     pos("following_error_limit", ax.following_error_limit_mm);
     if (ax.logged_torque_sign != 1.0 && ax.logged_torque_sign != -1.0)
       throw ConfigError(fmt::format("{}: torque_sign = {} must be 1 or -1", w, ax.logged_torque_sign));
+    if (ax.torque_command_logged != 0.0 && ax.torque_command_logged != 1.0)
+      throw ConfigError(fmt::format("{}: torque_command_logged = {} must be 0 or 1", w, ax.torque_command_logged));
     if (!std::isfinite(ax.travel_min_mm) || !std::isfinite(ax.travel_max_mm) ||
         !(ax.travel_min_mm < ax.travel_max_mm))
       throw ConfigError(fmt::format("{}: travel [{}, {}] mm must be finite with min < max", w,

@@ -37,6 +37,11 @@ struct AxisDefinition {
   /// measured runs on a machine identified from data (calibrate, `twin replay
   /// --machine`) give those channels with it; the simulation does not use it.
   double logged_torque_sign{1.0};
+  /// Cascade: 1 where a measured run logs the torque (or current) the
+  /// velocity loop commands, before the current loop's lag and any delay (as
+  /// many drives trace it), 0 where it logs the motor's. The replays of
+  /// measured runs give that channel so; the simulation does not use it.
+  double torque_command_logged{0.0};
 };
 
 /// The machine's structure (`structure:` in a machine file): masses, stacking,
