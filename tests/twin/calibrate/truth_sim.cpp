@@ -120,7 +120,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   const char* a = sp.axis.c_str();
   const auto every = static_cast<std::size_t>(std::max(1, sp.log_every));
   const CascadeLaw& cl = sp.cascade;
-  double Iv = 0.0, Tf = 0.0;
+  double Iv = 0.0, Tf = 0.0, Tcmd = 0.0;
   const double lag_a = cl.tau_i > 0.0 ? std::exp(-Ts / cl.tau_i) : 0.0;
   auto pos = [&](double x) {
     if (sp.log_significant_figures <= 0 || x == 0.0) return x;
@@ -157,7 +157,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     if (cl.on) {
       const double ev = (vcmd - v_motor) / p.rg;
       Iv += Ts * ev;
-      const double Tcmd = cl.Kvp * (ev + (cl.Tn > 0.0 ? Iv / cl.Tn : 0.0)) + cl.Jff * aref / p.rg;
+      Tcmd = cl.Kvp * (ev + (cl.Tn > 0.0 ? Iv / cl.Tn : 0.0)) + cl.Jff * aref / p.rg;
       Tf = lag_a * Tf + (1.0 - lag_a) * Tcmd;
       u = Tf / (p.Ka * p.Kt);
     }
@@ -178,7 +178,8 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
       std::fprintf(f, "%.4f,%.10g,%.10g", static_cast<double>(k) * Ts, pos(ref[k]), pos(x_meas));
       if (cl.log_velocities) std::fprintf(f, ",%.6f", vcmd);
       if (cl.log_velocities && cl.log_motor_speed) std::fprintf(f, ",%.6f", v_motor);
-      std::fprintf(f, ",%.6f\n", cl.raw_per_Nm > 0.0 ? cl.raw_per_Nm * (Tm + noise(rng)) : i_measured);
+      const double T_logged = cl.log_torque_command ? Tcmd : Tm;
+      std::fprintf(f, ",%.6f\n", cl.raw_per_Nm > 0.0 ? cl.raw_per_Nm * (T_logged + noise(rng)) : i_measured);
     } else if (k % every == 0) {
       if (sp.log_current_only)
         std::fprintf(f, "%.4f,%.4f,%.3f,%.4f\n", static_cast<double>(k) * Ts, ref[k], x_meas, i_measured);

@@ -79,6 +79,11 @@ struct CascadeLaw {
   /// command alone, as a CNC that traces its loop's output but not the
   /// speed it feeds back).
   bool log_motor_speed{true};
+  /// Where the torque is logged raw: log the velocity loop's torque command
+  /// (the current loop's input, as many drives trace it) in place of the
+  /// torque the motor makes after the current loop's lag, any dead time and
+  /// any current limit.
+  bool log_torque_command{false};
 };
 
 struct RunSpec {
