@@ -138,6 +138,23 @@ struct AxisFromData {
   /// encoder the velocity law shows (0: none shown); the law is then fitted
   /// with its constants by the stretches of motion.
   double law_gap_mm{0.0};
+  /// Where the law shows no lag of its own: the lag and dead time the drive
+  /// fits the motion best at behind the logged torque (the drive's residual
+  /// so, and at the torque's own rows), the candidate for a logged torque
+  /// command (choose_torque_command).
+  struct MotionBehindTorque {
+    bool shown{false};
+    std::size_t rows{0};
+    double tau_s{0.0};
+    double residual{0.0}, plain{0.0};
+    double t{0.0};  ///< the fall from plain to residual in standard errors
+    bool decisive{false};  ///< the fall is large enough to decide without a replay
+  } motion_behind_torque;
+  /// The log's torque is the loop's command, ahead of the motion by the
+  /// current loop's lag (gains.tau_i_s) and the dead time
+  /// (torque_lag_samples): the drive is fitted so and replayed giving it.
+  bool torque_command_logged{false};
+  std::string torque_command_choice;  ///< how that was chosen, for the report
   std::string note;
 };
 

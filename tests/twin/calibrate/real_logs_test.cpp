@@ -526,6 +526,7 @@ TEST(RealLogs, ACurrentLoopLagIsIdentified) {
     const AxisFromData& ax = r.axis[0];
     EXPECT_NEAR(ax.gains.tau_i_s, tau_s, 0.05 * tau_s) << ax.loop_source;
     EXPECT_THAT(ax.loop_source, HasSubstr("a current loop lagging the law"));
+    EXPECT_FALSE(ax.torque_command_logged) << ax.torque_command_choice;
     expect_truth_gains(ax, sp);
     EXPECT_EQ(ax.torque_lag_samples, static_cast<std::size_t>(delay_ticks));
     expect_delay_kept(r, 1e-3 * delay_ticks);
@@ -540,6 +541,61 @@ TEST(RealLogs, ACurrentLoopLagIsIdentified) {
       // truth's levels). Held at 0.02, and the torque below the regression's.
       ASSERT_EQ(r.validation_runs.size(), 1u);
       const auto& e = r.validation_runs[0].calibrated.nrms;
+      EXPECT_LT(e.at("x_err_mm"), 0.02);
+      EXPECT_LT(e.at("x_torque_raw"), r.validation_runs[0].regression.nrms.at("x_torque_raw"));
+    }
+  }
+}
+
+// The truth's torque logged as its velocity loop's command, the current
+// loop's input (as many drives trace it), with its current loop a lag of 1
+// and 2 ms and a lag of 1 ms behind a dead time of 2 ms, and a Stribeck rise
+// the drive does not have. The law fits the logged torque with no lag; the
+// motion answers to it through the lag and the dead time. Read as the motor's
+// torque (the twin's current loop ideal), the other program tracked at 0.007
+// and its torque at 0.12 on the cascade sweep's run without an effect, and 19
+// of its 32 runs named an effect wrong. Oracles: the truth's lag (10 %: it is
+// read from the drive's fit, whose residual the Stribeck rise dominates; 5.2
+// and 2.6 % low at 1 and 2 ms) and gains (expect_truth_gains), its dead time
+// as the delay kept and none where it has none, and the held-out machine's
+// check on the other program; the same
+// truth logging the motor's torque is not taken for a command
+// (ACurrentLoopLagIsIdentified). A lag of 0.5 ms moves the torque by less
+// than the Stribeck rise's misfit (the drive fits the motion 0.42 ms behind,
+// residual 0.958 against 1.01, and replays the held-out rows' torque at
+// 0.3125 against 0.3081 read as the motor's): either reading must pass the
+// held-out check there.
+TEST(RealLogs, ATorqueCommandLoggedBeforeTheCurrentLoopIsFound) {
+  truth::RunSpec sp = cascade_spec_with_stribeck(1e-3);
+  sp.cascade.log_torque_command = true;
+  for (const auto& [tau_s, delay_ticks] :
+       std::vector<std::pair<double, int>>{{0.001, 0}, {0.002, 0}, {0.001, 2}, {0.0005, 0}}) {
+    SCOPED_TRACE(fmt::format("lag {} s, dead time {} periods", tau_s, delay_ticks));
+    sp.cascade.tau_i = tau_s;
+    sp.effects.delay_ticks = delay_ticks;
+    const DataCalibration r = calibrate_on_two_programs(sp, "command");
+    ASSERT_EQ(r.axis.size(), 1u);
+    const AxisFromData& ax = r.axis[0];
+    ASSERT_EQ(r.validation_runs.size(), 1u);
+    const auto& e = r.validation_runs[0].calibrated.nrms;
+    std::printf("  lag %g s, dead time %d: command %s, tau_i %.4g s, validation tracking %.4f, torque %.4f "
+                "(regression %.4f)\n",
+                tau_s, delay_ticks, ax.torque_command_logged ? "yes" : "no", ax.gains.tau_i_s, e.at("x_err_mm"),
+                e.at("x_torque_raw"), r.validation_runs[0].regression.nrms.at("x_torque_raw"));
+    if (tau_s < 0.001) {
+      expect_held_out_check(r);
+      continue;
+    }
+    EXPECT_TRUE(ax.torque_command_logged) << ax.loop_source << "\n" << ax.torque_command_choice;
+    EXPECT_EQ(r.final_machine.axes[index(Axis::kX)].torque_command_logged, 1.0);
+    EXPECT_NEAR(ax.gains.tau_i_s, tau_s, 0.1 * tau_s) << ax.loop_source;
+    expect_truth_gains(ax, sp);
+    EXPECT_EQ(ax.torque_lag_samples, static_cast<std::size_t>(delay_ticks));
+    expect_delay_kept(r, 1e-3 * delay_ticks);
+    if (delay_ticks == 0) {
+      expect_held_out_check(r);
+    } else {
+      // As in ACurrentLoopLagIsIdentified: the least damped loop, held at 0.02.
       EXPECT_LT(e.at("x_err_mm"), 0.02);
       EXPECT_LT(e.at("x_torque_raw"), r.validation_runs[0].regression.nrms.at("x_torque_raw"));
     }
