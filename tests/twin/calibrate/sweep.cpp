@@ -7,8 +7,8 @@
 //   calibrate_sweep [--example RUN_DIR] [--filter NAME] [--program NAME] [--magnitudes 0.5,1,2]
 //                   [--log-every M] [--current-only] [--keep DIR] [--verbose]
 //   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed]
-//                            [--encoder-mm Q] [--current-lag S] [--torque-command] [--kff K] [--jff J]
-//                            [--keep DIR]
+//                            [--encoder-mm Q] [--current-lag S] [--torque-command] [--torque-step R]
+//                            [--kff K] [--jff J] [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
 // measured run, each on the truth's X plant, and its y reference on the Y
@@ -35,7 +35,8 @@
 // first-order lag of S seconds (and its logged torque is the lagged one);
 // --torque-command logs the velocity loop's torque command instead, the
 // current loop's input, before its lag and any dead time (as many drives
-// trace it);
+// trace it); --torque-step rounds the logged raw torque to multiples of R
+// (a drive's integer counts or percent);
 // --kff sets its velocity feedforward (0.6 unless given), --jff gives it a
 // torque feedforward of J N m s^2/rad on the command's acceleration.
 #include <unistd.h>
@@ -164,6 +165,7 @@ struct CascadeOptions {
   double kff{-1.0};           ///< the velocity feedforward (< 0: the spec's)
   double Jff{0.0};            ///< the torque feedforward on the command's acceleration, N m s^2/rad
   bool log_torque_command{false};  ///< log the current loop's input, not the motor's torque
+  double raw_step{0.0};            ///< the raw torque logged to multiples of this (0: as computed)
 };
 
 int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filter, double noise_Nm,
@@ -187,6 +189,7 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     if (loop.kff >= 0.0) sp.cascade.kff = loop.kff;
     sp.cascade.Jff = loop.Jff;
     sp.cascade.log_torque_command = loop.log_torque_command;
+    sp.cascade.raw_step = loop.raw_step;
     const double load = sp.effects.load_Nm;
     c.set(sp.effects);
     sp.effects.load_Nm = load;
@@ -307,6 +310,8 @@ int main(int argc, char** argv) {
       if (!number_at_least_0("--jff", argv[++i], loop.Jff)) return 2;
     } else if (!std::strcmp(argv[i], "--kff") && has_value) {
       if (!number_at_least_0("--kff", argv[++i], loop.kff)) return 2;
+    } else if (!std::strcmp(argv[i], "--torque-step") && has_value) {
+      if (!number_at_least_0("--torque-step", argv[++i], loop.raw_step)) return 2;
     } else if (!std::strcmp(argv[i], "--torque-command")) {
       loop.log_torque_command = true;
     } else if (!std::strcmp(argv[i], "--no-motor-speed")) {

@@ -179,7 +179,9 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
       if (cl.log_velocities) std::fprintf(f, ",%.6f", vcmd);
       if (cl.log_velocities && cl.log_motor_speed) std::fprintf(f, ",%.6f", v_motor);
       const double T_logged = cl.log_torque_command ? Tcmd : Tm;
-      std::fprintf(f, ",%.6f\n", cl.raw_per_Nm > 0.0 ? cl.raw_per_Nm * (T_logged + noise(rng)) : i_measured);
+      double raw = cl.raw_per_Nm * (T_logged + noise(rng));
+      if (cl.raw_step > 0.0) raw = cl.raw_step * std::round(raw / cl.raw_step);
+      std::fprintf(f, ",%.6f\n", cl.raw_per_Nm > 0.0 ? raw : i_measured);
     } else if (k % every == 0) {
       if (sp.log_current_only)
         std::fprintf(f, "%.4f,%.4f,%.3f,%.4f\n", static_cast<double>(k) * Ts, ref[k], x_meas, i_measured);

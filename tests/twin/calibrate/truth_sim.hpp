@@ -74,6 +74,7 @@ struct CascadeLaw {
   bool on{false};
   double Kv{60.0}, kff{0.0}, Kvp{0.4}, Tn{0.01}, tau_i{0.0}, Jff{0.0};
   double raw_per_Nm{0.0};  ///< > 0: log <a>_torque_raw; 0: log <a>_i_A
+  double raw_step{0.0};    ///< > 0: the raw torque logged to multiples of this (a drive's integer counts)
   bool log_velocities{true};
   /// With log_velocities: also the motor's speed (false: the velocity
   /// command alone, as a CNC that traces its loop's output but not the
