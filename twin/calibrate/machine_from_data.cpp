@@ -298,6 +298,15 @@ double fitting_rows_noise_rms(const std::vector<RunData>& runs, const std::strin
   return white_noise_rms(std::move(d2));
 }
 
+/// The white noise on a logged channel as a fit on it sees it: through the
+/// speed's low-pass where laws on it are fitted so (has_lowpassed_twin).
+double noise_as_fitted(const std::vector<RunData>& runs, const std::string& channel) {
+  const double noise = fitting_rows_noise_rms(runs, channel);
+  return has_lowpassed_twin(runs.front().run->trace, channel)
+             ? noise * lowpass_noise_gain(runs.front().run->sample_period_s)
+             : noise;
+}
+
 /// Rows a torque limit holds before the limit is taken for one (as many as
 /// the saturation detector asks for).
 constexpr std::size_t kClippedRows = 10;
@@ -554,9 +563,7 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
   // its torque is the logged noise through that filter (taken whole, it
   // exceeded the filtered law's residual, and every rule that asks a
   // residual less the noise to fall compared zero with zero).
-  f.noise_rms = fitting_rows_noise_rms(runs, channel);
-  if (has_lowpassed_twin(runs.front().run->trace, channel))
-    f.noise_rms *= lowpass_noise_gain(runs.front().run->sample_period_s);
+  f.noise_rms = noise_as_fitted(runs, channel);
   if (f.ls.ok && !current_lag) {
     const TorqueClip c{f.ls.theta, f.c_seg, f.T_abs_max, f.noise_rms};
     for (std::size_t k : vrows)
@@ -2239,11 +2246,18 @@ DriveRows drive_rows(const AxisFit& f, const AxisFromData& ax, const DriveRowsOp
   struct Motion {
     double acc{0.0}, vel{0.0}, pos{0.0}, neg{0.0};
   };
+  // Each run's logged speed (where the drive is fitted on it) and torque.
+  std::vector<const std::vector<double>*> speed(f.runs.size(), nullptr), torque(f.runs.size(), nullptr);
+  for (std::size_t r = 0; r < f.runs.size(); ++r) {
+    const io::TraceTable& t = f.runs[r].run->trace;
+    if (own_speed) speed[r] = t.find(col(a, "_v_mm_s"));
+    torque[r] = own_speed ? filtered_alike(t, ax.channel.column) : t.find(ax.channel.column);
+  }
   // The motion's columns at row k of run r; nullopt where they cannot be had.
   const auto motion = [&](std::size_t r, std::size_t k) -> std::optional<Motion> {
     const RunData& rd = f.runs[r];
     if (k >= rd.n || !rd.interior[k]) return std::nullopt;
-    const auto* vm = own_speed ? rd.run->trace.find(col(a, "_v_mm_s")) : nullptr;
+    const auto* vm = speed[r];
     if (vm != nullptr && (k == 0 || k + 1 >= vm->size())) return std::nullopt;
     const double v = vm ? (*vm)[k] : rd.kin[i].v_mm_per_s[k];
     const int dir = direction(v, rd.v_move[i]);
@@ -2255,8 +2269,7 @@ DriveRows drive_rows(const AxisFit& f, const AxisFromData& ax, const DriveRowsOp
   };
   DriveRows d;
   f.fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
-    const auto* ch = own_speed ? filtered_alike(f.runs[r].run->trace, ax.channel.column)
-                               : f.runs[r].run->trace.find(ax.channel.column);
+    const auto* ch = torque[r];
     if (ch == nullptr || k + ahead >= f.runs[r].n_fit) return;  // the fitting rows' motion only
     const auto still = [&](const std::optional<Motion>& x) { return o.moving_only && x->pos == 0.0 && x->neg == 0.0; };
     std::optional<Motion> m = motion(r, k + ahead);
@@ -2361,19 +2374,33 @@ AxisFromData::OneLevel fit_one_level(const DriveRows& d, double Ts, const AxisFr
   return one;
 }
 
+/// The drive's columns on `d`: a, v, [v > 0] and -[v < 0] for the directions
+/// the axis moves in, and the constant (left out where `moving` rows move
+/// both ways: the two levels hold it then).
+struct DriveColumns {
+  std::vector<const std::vector<double>*> X;
+  bool pos{false}, neg{false};
+};
+DriveColumns drive_columns(const DriveRows& d, bool moving = false) {
+  DriveColumns c;
+  c.pos = std::any_of(d.pos.begin(), d.pos.end(), [](double x) { return x != 0.0; });
+  c.neg = std::any_of(d.neg.begin(), d.neg.end(), [](double x) { return x != 0.0; });
+  c.X = {&d.acc, &d.vel};
+  if (c.pos) c.X.push_back(&d.pos);
+  if (c.neg) c.X.push_back(&d.neg);
+  if (!(moving && c.pos && c.neg)) c.X.push_back(&d.one);
+  return c;
+}
+
 /// The drive fitted on drive_rows(f, ax, o): J, B, the Coulomb
 /// levels and the constant under clamp_drive's floors, the one-level fit
 /// beside it; false where it cannot be (why in `why_not`). The floors applied
 /// are in ax.note.
 bool fit_drive(const AxisFit& f, AxisFromData& ax, const DriveRowsOptions& o, std::string& why_not) {
   const DriveRows d = drive_rows(f, ax, o);
-  const bool moves_pos = std::any_of(d.pos.begin(), d.pos.end(), [](double x) { return x != 0.0; });
-  const bool moves_neg = std::any_of(d.neg.begin(), d.neg.end(), [](double x) { return x != 0.0; });
-  std::vector<const std::vector<double>*> X{&d.acc, &d.vel};
-  if (moves_pos) X.push_back(&d.pos);
-  if (moves_neg) X.push_back(&d.neg);
-  X.push_back(&d.one);
-  const LsqResult ls = least_squares(X, d.T, d.rows);
+  const DriveColumns c = drive_columns(d);
+  const bool moves_pos = c.pos, moves_neg = c.neg;
+  const LsqResult ls = least_squares(c.X, d.T, d.rows);
   ax.fit_rows = d.rows.size();
   if (!ls.ok || !(moves_pos || moves_neg)) {
     why_not = fmt::format("{} rows, {}", d.rows.size(),
@@ -2637,14 +2664,7 @@ void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl
 std::pair<double, std::size_t> drive_residual(const AxisFit& f, const AxisFromData& ax, std::size_t ahead,
                                               double a_lag) {
   const DriveRows d = drive_rows(f, ax, {.forward = true, .ahead = ahead, .a_lag = a_lag, .moving_only = true});
-  // Every row moves: the two directions' levels hold the constant.
-  std::vector<const std::vector<double>*> X{&d.acc, &d.vel};
-  const bool pos = std::any_of(d.pos.begin(), d.pos.end(), [](double x) { return x != 0.0; });
-  const bool neg = std::any_of(d.neg.begin(), d.neg.end(), [](double x) { return x != 0.0; });
-  if (pos) X.push_back(&d.pos);
-  if (neg) X.push_back(&d.neg);
-  if (!(pos && neg)) X.push_back(&d.one);
-  const LsqResult ls = least_squares(X, d.T, d.rows);
+  const LsqResult ls = least_squares(drive_columns(d, true).X, d.T, d.rows);
   return {ls.ok ? ls.residual_rms : 1e300, d.rows.size()};
 }
 
@@ -2695,8 +2715,7 @@ AxisFromData::MotionBehindTorque motion_behind_torque(const AxisFit& f, const Ax
                                best)
                    : 1e3;
   m.shown = (m.rows > 0 || m.tau_s > 0.0) && m.t >= kMinT;
-  double noise = fitting_rows_noise_rms(f.runs, ax.channel.column);
-  if (has_lowpassed_twin(f.r0.trace, ax.channel.column)) noise *= lowpass_noise_gain(dt);
+  const double noise = noise_as_fitted(f.runs, ax.channel.column);
   const auto less_noise = [&](double r) { return std::sqrt(std::max(0.0, r * r - noise * noise)); };
   m.decisive = m.shown && less_noise(best) < 0.8 * less_noise(m.plain);
   return m;
@@ -3054,6 +3073,14 @@ controller::CascadeGains first_loop_at(const AxisFromData& ax, double J) {
   return g;
 }
 
+/// Whether the tracking error of axis `a` in `after` is at most kRiseAllowed
+/// above the one in `before` (true where either has none).
+bool tracking_holds(const ChannelErrors& before, const ChannelErrors& after, Axis a) {
+  const auto t0 = before.nrms.find(col(a, "_err_mm"));
+  const auto t1 = after.nrms.find(col(a, "_err_mm"));
+  return t0 == before.nrms.end() || t1 == after.nrms.end() || t1->second <= t0->second * (1.0 + kRiseAllowed);
+}
+
 /// The held-out rows' errors of the fitting runs replayed on `machine`, each
 /// axis's torque channel low-passed without phase at kSpeedCutoff_Hz, log and
 /// replay alike, and its tracking error as it is; nullopt where a replay
@@ -3146,10 +3173,7 @@ void choose_torque_command(DataCalibration& out, const std::vector<RunData>& run
     const auto e0 = motor.nrms.find(ax.channel.column);
     const auto e1 = command.nrms.find(ax.channel.column);
     if (e0 == motor.nrms.end() || e1 == command.nrms.end()) continue;
-    const auto t0 = motor.nrms.find(col(ax.axis, "_err_mm"));
-    const auto t1 = command.nrms.find(col(ax.axis, "_err_mm"));
-    const bool tracking_ok =
-        t0 == motor.nrms.end() || t1 == command.nrms.end() || t1->second <= t0->second * (1.0 + kRiseAllowed);
+    const bool tracking_ok = tracking_holds(motor, command, ax.axis);
     const std::string behind =
         fmt::format("{}{}", m.tau_s > 0.0 ? fmt::format("a first-order lag of {:.3g} ms", 1e3 * m.tau_s) : "",
                     m.rows > 0 ? fmt::format("{}{} sample{} of dead time", m.tau_s > 0.0 ? " and " : "", m.rows,
@@ -3218,10 +3242,7 @@ void choose_coulomb_levels(DataCalibration& out, const std::vector<RunData>& run
     const auto e2 = two.nrms.find(ax.channel.column);
     const auto e1 = one.nrms.find(ax.channel.column);
     if (e2 == two.nrms.end() || e1 == one.nrms.end()) continue;
-    const auto t2 = two.nrms.find(col(ax.axis, "_err_mm"));
-    const auto t1 = one.nrms.find(col(ax.axis, "_err_mm"));
-    const bool tracking_ok =
-        t2 == two.nrms.end() || t1 == one.nrms.end() || t1->second <= t2->second * (1.0 + kRiseAllowed);
+    const bool tracking_ok = tracking_holds(two, one, ax.axis);
     const auto& o = ax.one_level;
     const std::string u = ax.channel.unit == "raw" ? "in the log's unit" : ax.channel.unit;
     if (!(e1->second < (1.0 - kKeepMargin) * e2->second && tracking_ok)) {
