@@ -462,6 +462,87 @@ TEST(DataEffects, CascadeLogWithoutTheMotorSpeed) {
   expect_held_out_machine_check(o);
 }
 
+// The truth's friction outside the catalogue, against its steady state: at
+// a cruise of speed v (w = v / rg) the motor's torque balances the load, B w
+// and the friction, Tm = load + B w + s Tf with
+//   load_friction: Tf = Tc_s + k |Tm|, so Tm = (load + B w + s Tc_s) / (1 - k);
+//   sqrt_friction: Tf = Tc_s + c sqrt(|w|);
+//   Dahl:          F settles at the sliding level, Tf = Tc_s.
+// The mean logged torque over the last 0.55 s of each of the program's ten
+// cruises (the loop settled: Tn is 8 ms) within 0.5 % and 0.2 raw (0.005
+// N m: the noise's 0.002 N m over 550 rows, and the position loop's count
+// hunting).
+TEST(DataEffects, TheTruthsFrictionOutsideTheCatalogueHoldsItsSteadyState) {
+  const truth::RunSpec base = cascade_spec();
+  const truth::Plant& p = base.plant;
+  struct Case {
+    const char* name;
+    truth::Effects fx;
+    double (*torque_Nm)(const truth::Plant&, double load_Nm, double w);
+  };
+  const Case cases[] = {
+      {"load_friction_ss", {.load_friction = 0.05},
+       [](const truth::Plant& q, double load, double w) {
+         return (load + q.B * w + (w > 0 ? q.Tc_pos : -q.Tc_neg)) / (1.0 - 0.05);
+       }},
+      {"sqrt_friction_ss", {.sqrt_friction = 0.04},
+       [](const truth::Plant& q, double load, double w) {
+         return load + q.B * w + (w > 0 ? 1.0 : -1.0) * ((w > 0 ? q.Tc_pos : q.Tc_neg) + 0.04 * std::sqrt(std::abs(w)));
+       }},
+      {"dahl_friction_ss", {.dahl_sigma = 64.0},
+       [](const truth::Plant& q, double load, double w) {
+         return load + q.B * w + (w > 0 ? q.Tc_pos : -q.Tc_neg);
+       }},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    truth::RunSpec sp = base;
+    sp.effects = c.fx;
+    sp.effects.load_Nm = base.effects.load_Nm;
+    const MeasuredRun run = truth_runs(c.name, sp).first;
+    const auto& t = run.trace.at("t_s");
+    const auto& raw = run.trace.at("x_torque_raw");
+    for (std::size_t k = 0; k < kFitSpeeds.size() && 2.0 * static_cast<double>(k) + 1.35 < t.back(); ++k) {
+      double sum = 0.0;
+      int n = 0;
+      for (std::size_t r = 0; r < t.size(); ++r)
+        if (t[r] >= 2.0 * static_cast<double>(k) + 0.8 && t[r] <= 2.0 * static_cast<double>(k) + 1.35) {
+          sum += raw[r];
+          ++n;
+        }
+      ASSERT_GT(n, 500);
+      const double want = kRawPerNm * c.torque_Nm(p, sp.effects.load_Nm, kFitSpeeds[k] / kRg);
+      EXPECT_NEAR(sum / n, want, 0.005 * std::abs(want) + 0.2) << "cruise at " << kFitSpeeds[k] << " mm/s";
+    }
+  }
+}
+
+// Friction the catalogue does not hold, on the held-out machine's log (no
+// motor speed, raw torque): friction that rises with the square root of the
+// speed (0.22 N m at 50 mm/s), and Dahl's pre-sliding friction in place of
+// stick/slip (0.2 N m over 5 um of travel). The drive cannot take either
+// exactly, so the oracle is the check the held-out machine is judged by on
+// the other program (tracking NRMS at most 0.01, the torque below the
+// rigid-body regression's) and that whatever the data path keeps does not
+// raise the validation program's torque and tracking NRMS above the
+// identified machine's: an effect named for such friction must still
+// predict better than naming none.
+TEST(DataEffects, FrictionOutsideTheCatalogueKeepsTheHeldOutCheck) {
+  const std::pair<const char*, truth::Effects> truths[] = {
+      {"sqrt_friction", {.sqrt_friction = 0.04}},
+      {"dahl_friction", {.dahl_sigma = 64.0}},
+  };
+  for (const auto& [name, fx] : truths) {
+    SCOPED_TRACE(name);
+    const Outcome o = calibrate_truth(name, fx, -1.0, false);
+    expect_held_out_machine_check(o);
+    const RunErrors& v = o.r.validation_runs[0];
+    const double cal = v.calibrated.nrms.at("x_torque_raw") + v.calibrated.nrms.at("x_err_mm");
+    const double id = v.identified.nrms.at("x_torque_raw") + v.identified.nrms.at("x_err_mm");
+    EXPECT_LE(cal, id) << describe(o);
+  }
+}
+
 // The same log of a truth whose current loop lags: 2.3 ms, and 0.9 ms behind
 // a 2 ms dead time (a drive that samples, then filters). With the speed taken
 // from the position the law is fitted through the low-pass, and the lag is

@@ -8,7 +8,7 @@
 //                   [--log-every M] [--current-only] [--keep DIR] [--verbose]
 //   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed]
 //                            [--encoder-mm Q] [--current-lag S] [--torque-command] [--torque-step R]
-//                            [--kff K] [--jff J] [--keep DIR]
+//                            [--kff K] [--jff J] [--friction load|sqrt|dahl] [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
 // measured run, each on the truth's X plant, and its y reference on the Y
@@ -38,7 +38,12 @@
 // trace it); --torque-step rounds the logged raw torque to multiples of R
 // (a drive's integer counts or percent);
 // --kff sets its velocity feedforward (0.6 unless given), --jff gives it a
-// torque feedforward of J N m s^2/rad on the command's acceleration.
+// torque feedforward of J N m s^2/rad on the command's acceleration;
+// --friction adds to every run a friction law of a real machine: friction
+// rising with the screw's load (load: the catalogue's
+// load_dependent_friction, then expected beside the run's own effect), with
+// the square root of the speed (sqrt), or Dahl's pre-sliding friction in
+// place of stick/slip (dahl); the last two are outside the catalogue.
 #include <unistd.h>
 
 #include <algorithm>
@@ -49,6 +54,7 @@
 #include <cstring>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -166,7 +172,30 @@ struct CascadeOptions {
   double Jff{0.0};            ///< the torque feedforward on the command's acceleration, N m s^2/rad
   bool log_torque_command{false};  ///< log the current loop's input, not the motor's torque
   double raw_step{0.0};            ///< the raw torque logged to multiples of this (0: as computed)
+  std::string friction;            ///< a friction law beside every run's effect (empty: none)
 };
+
+// A friction law added to every run of the sweep (--friction): the truth's
+// load_friction, sqrt_friction or dahl_sigma, each about as large as the
+// plant's Coulomb level where it shows most. The catalogue name the run
+// should then add to its own ("" where the catalogue does not hold the
+// law), or nullopt for an unknown kind.
+std::optional<std::string> add_friction(const std::string& kind, Effects& e) {
+  if (kind == "load") {
+    e.load_friction = 0.05;  // 0.13 N m at the program's 2.6 N m accelerations
+    return "load_dependent_friction";
+  }
+  if (kind == "sqrt") {
+    e.sqrt_friction = 0.04;  // 0.22 N m at 50 mm/s (31 rad/s), 0.06 N m at 3 mm/s
+    return "";
+  }
+  if (kind == "dahl") {
+    e.dahl_sigma = 64.0;  // 0.2 N m over 5 um of the screw's travel (rg 1.59 mm/rad)
+    return "";
+  }
+  if (kind.empty()) return "";
+  return std::nullopt;
+}
 
 int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filter, double noise_Nm,
                   bool log_motor_speed, double encoder_mm, const CascadeOptions& loop, const std::string& keep) {
@@ -193,6 +222,7 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     const double load = sp.effects.load_Nm;
     c.set(sp.effects);
     sp.effects.load_Nm = load;
+    const std::string also = add_friction(loop.friction, sp.effects).value_or("");
     try {
       sp.reference_mm = twin::truth::moves_program(sp.Ts_s, fit_speeds, 24.0);
       twin::truth::write_truth_run(dir / "fit", sp);
@@ -206,7 +236,7 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
       std::string kept;
       for (const ta::DataEffect& e : r.effects)
         if (e.kept) kept += (kept.empty() ? "" : "+") + e.effect;
-      const bool ok = split_sorted(kept) == split_sorted(c.effect);
+      const bool ok = split_sorted(kept) == split_sorted(also.empty() ? c.effect : c.effect + "+" + also);
       if (kept.empty()) kept = "none";
       if (r.validation_runs.size() != 1) throw twin::Error("no validation run in the result");
       const ta::RunErrors& v = r.validation_runs[0];
@@ -312,6 +342,13 @@ int main(int argc, char** argv) {
       if (!number_at_least_0("--kff", argv[++i], loop.kff)) return 2;
     } else if (!std::strcmp(argv[i], "--torque-step") && has_value) {
       if (!number_at_least_0("--torque-step", argv[++i], loop.raw_step)) return 2;
+    } else if (!std::strcmp(argv[i], "--friction") && has_value) {
+      loop.friction = argv[++i];
+      Effects probe;
+      if (loop.friction.empty() || !add_friction(loop.friction, probe)) {
+        std::fprintf(stderr, "calibrate_sweep: --friction takes load, sqrt or dahl, not '%s'\n", loop.friction.c_str());
+        return 2;
+      }
     } else if (!std::strcmp(argv[i], "--torque-command")) {
       loop.log_torque_command = true;
     } else if (!std::strcmp(argv[i], "--no-motor-speed")) {

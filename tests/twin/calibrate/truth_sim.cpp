@@ -105,15 +105,18 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     if (e.pdf_dTc != 0.0 && x_mm >= e.pdf_x0 && x_mm <= e.pdf_x1) T += e.pdf_dTc;
     return T;
   };
+  double Tm_now = 0.0;  // the motor's torque over the current tick (load_friction)
   auto sliding = [&](double w, double x_mm) {
     const int dir = w > 0 ? 1 : -1;
-    double T = coulomb(dir, x_mm);
+    double T = coulomb(dir, x_mm) + e.load_friction * std::abs(Tm_now) + e.sqrt_friction * std::sqrt(std::abs(w));
     if (e.stribeck_Ts > 0.0) T += (e.stribeck_Ts - (dir > 0 ? p.Tc_pos : p.Tc_neg)) * std::exp(-std::pow(w / e.stribeck_ws, 2));
     return dir * T;
   };
   auto breakaway = [&](int dir, double x_mm) {
-    return e.stribeck_Ts > 0.0 ? e.stribeck_Ts + coulomb(dir, x_mm) - (dir > 0 ? p.Tc_pos : p.Tc_neg) : coulomb(dir, x_mm);
+    const double T = coulomb(dir, x_mm) + e.load_friction * std::abs(Tm_now);
+    return e.stribeck_Ts > 0.0 ? e.stribeck_Ts + T - (dir > 0 ? p.Tc_pos : p.Tc_neg) : T;
   };
+  double F_dahl = 0.0;  // Dahl's friction state (dahl_sigma)
 
   std::filesystem::create_directories(out_dir);
   std::FILE* f = std::fopen((out_dir / "trace.csv").c_str(), "w");
@@ -172,6 +175,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     double i = p.Ka * u_app;
     if (e.i_max_A > 0.0) i = std::clamp(i, -e.i_max_A, e.i_max_A);
     const double Tm = p.Kt * i;
+    Tm_now = Tm;
     const double i_logged = e.delay_after_current ? p.Ka * u : i;
     const double i_measured = i_logged + noise(rng);
     if (k % every == 0 && cl.on) {
@@ -194,12 +198,34 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
       const double x_f = (two_mass ? s.th_l : s.th_m) * p.rg;
       const double cog_th = s.th_m;
       const double T_cog = e.cogging_A * std::sin(e.cogging_n * cog_th + e.cogging_phase);
-      if (!two_mass && e.creep_w > 0.0) {
+      if (!two_mass && e.dahl_sigma > 0.0) {
+        // Dahl: RK4 on (w, th, F); the level g at w is the sliding law's
+        // (at w = 0 its limit in the direction F points).
+        struct D {
+          double w, th, F;
+        };
+        auto rate = [&](const D& z) {
+          const double tc = e.cogging_A * std::sin(e.cogging_n * z.th + e.cogging_phase);
+          const double w_dir = z.w != 0.0 ? z.w : (z.F >= 0.0 ? dv : -dv);
+          const double g = std::abs(sliding(w_dir, z.th * p.rg));
+          return D{(Tm - p.B * z.w - e.load_Nm - tc - z.F) / p.J, z.w,
+                   e.dahl_sigma * (z.w - std::abs(z.w) * z.F / g)};
+        };
+        const D z0{s.w_m, s.th_m, F_dahl};
+        auto step = [](const D& z, const D& r, double hh) { return D{z.w + hh * r.w, z.th + hh * r.th, z.F + hh * r.F}; };
+        const D k1 = rate(z0), k2 = rate(step(z0, k1, 0.5 * h)), k3 = rate(step(z0, k2, 0.5 * h)), k4 = rate(step(z0, k3, h));
+        s.w_m += h / 6 * (k1.w + 2 * k2.w + 2 * k3.w + k4.w);
+        s.th_m += h / 6 * (k1.th + 2 * k2.th + 2 * k3.th + k4.th);
+        F_dahl += h / 6 * (k1.F + 2 * k2.F + 2 * k3.F + k4.F);
+        s.th_l = s.th_m;
+        s.w_l = s.w_m;
+      } else if (!two_mass && e.creep_w > 0.0) {
         // Creep below creep_w: friction linear in speed up to the Coulomb
         // level, never sticking; RK4 on (w, th).
         auto acc = [&](double w, double th) {
           const double tc = e.cogging_A * std::sin(e.cogging_n * th + e.cogging_phase);
-          const double Tfr = coulomb(w >= 0.0 ? 1 : -1, th * p.rg) * std::clamp(w / e.creep_w, -1.0, 1.0);
+          const double level = std::abs(sliding(w >= 0.0 ? std::max(w, dv) : std::min(w, -dv), th * p.rg));
+          const double Tfr = level * std::clamp(w / e.creep_w, -1.0, 1.0);
           return (Tm - p.B * w - e.load_Nm - tc - Tfr) / p.J;
         };
         const double k1w = acc(s.w_m, s.th_m), k1t = s.w_m;

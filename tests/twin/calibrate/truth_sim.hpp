@@ -61,6 +61,20 @@ struct Effects {
   /// torque below the Coulomb level creeps the axis, so a position loop that
   /// holds it at rest lets its torque relax towards the load.
   double creep_w{0.0};
+  // Friction the data path's catalogue does not hold, for runs that rehearse
+  // a real machine's undeclared friction (the catalogue's effects beside it).
+  /// > 0: friction that rises with the load the screw carries (its
+  /// efficiency): the sliding and breakaway levels gain this fraction of |Tm|.
+  double load_friction{0.0};
+  /// > 0 (N m per sqrt(rad/s)): sliding friction that rises with the square
+  /// root of the speed, beside the drive's linear B w.
+  double sqrt_friction{0.0};
+  /// > 0 (N m/rad): Dahl's pre-sliding friction in place of stick/slip
+  /// (rigid drive only): the friction torque F is a state, dF/dt = sigma
+  /// (w - |w| F / g(w)) with g the sliding level at w, so the axis moves
+  /// elastically, about g / sigma, before it slides, and holds any torque
+  /// below g at rest by that deflection.
+  double dahl_sigma{0.0};
 };
 
 /// The cascade law of spec/measured-data.md ("Position loops of real
