@@ -125,21 +125,28 @@ double position_friction_Nm(const DriveParams& p, double x_mm) {
   return band_friction_Nm(e.dTc_Nm, e.x_start_mm, e.x_end_mm, x_mm);
 }
 
-// Coulomb level moving in direction s.
-double coulomb_Nm(const DriveParams& p, int s, double x_mm) {
-  return (s > 0 ? p.Tc_pos_Nm : p.Tc_neg_Nm) + position_friction_Nm(p, x_mm);
+// The friction the motor's torque Tm adds (load_dependent_friction).
+double load_friction_Nm(const DriveParams& p, double Tm_Nm) {
+  const auto& e = p.effects.load_dependent_friction;
+  return e.enabled ? feeddrive::load_friction_Nm(e.fraction, Tm_Nm) : 0.0;
+}
+
+// Coulomb level moving in direction s under the motor's torque Tm.
+double coulomb_Nm(const DriveParams& p, int s, double x_mm, double Tm_Nm) {
+  return (s > 0 ? p.Tc_pos_Nm : p.Tc_neg_Nm) + position_friction_Nm(p, x_mm) + load_friction_Nm(p, Tm_Nm);
 }
 
 // Static friction that must be exceeded to start moving in direction s.
-double breakaway_Nm(const DriveParams& p, int s, double x_mm) {
-  if (p.effects.stribeck.enabled) return p.effects.stribeck.Ts_static_Nm + position_friction_Nm(p, x_mm);
-  if (p.effects.rising_friction.enabled) return p.effects.rising_friction.share * coulomb_Nm(p, s, x_mm);
-  return coulomb_Nm(p, s, x_mm);
+double breakaway_Nm(const DriveParams& p, int s, double x_mm, double Tm_Nm) {
+  if (p.effects.stribeck.enabled)
+    return p.effects.stribeck.Ts_static_Nm + position_friction_Nm(p, x_mm) + load_friction_Nm(p, Tm_Nm);
+  if (p.effects.rising_friction.enabled) return p.effects.rising_friction.share * coulomb_Nm(p, s, x_mm, Tm_Nm);
+  return coulomb_Nm(p, s, x_mm, Tm_Nm);
 }
 
 // Friction magnitude while sliding in direction s at speed w.
-double sliding_friction_Nm(const DriveParams& p, int s, double w, double x_mm) {
-  double T = coulomb_Nm(p, s, x_mm);
+double sliding_friction_Nm(const DriveParams& p, int s, double w, double x_mm, double Tm_Nm) {
+  double T = coulomb_Nm(p, s, x_mm, Tm_Nm);
   const auto& st = p.effects.stribeck;
   if (st.enabled) T += stribeck_excess_Nm(st.Ts_static_Nm, s > 0 ? p.Tc_pos_Nm : p.Tc_neg_Nm, w, st.ws_rad_per_s);
   const auto& rf = p.effects.rising_friction;
@@ -187,9 +194,9 @@ double rest_torque_Nm(const AxisConst& a, const AxisRun& r, const DriveState& s)
 
 // Karnopp decision at rest: +1 / -1 to slip in the direction of the net
 // torque, 0 to stick while |net| <= breakaway of that direction.
-int rest_decision(const AxisConst& a, double net_Nm, double x_friction_mm) {
-  if (net_Nm > 0.0 && net_Nm > breakaway_Nm(a.p, +1, x_friction_mm)) return +1;
-  if (net_Nm < 0.0 && -net_Nm > breakaway_Nm(a.p, -1, x_friction_mm)) return -1;
+int rest_decision(const AxisConst& a, const AxisRun& r, double net_Nm, double x_friction_mm) {
+  if (net_Nm > 0.0 && net_Nm > breakaway_Nm(a.p, +1, x_friction_mm, r.Tm_Nm)) return +1;
+  if (net_Nm < 0.0 && -net_Nm > breakaway_Nm(a.p, -1, x_friction_mm, r.Tm_Nm)) return -1;
   return 0;
 }
 
@@ -203,9 +210,9 @@ void axis_rhs(const AxisConst& a, const AxisRun& r, const double* y, double* yd)
     const double w = y[1];
     const double x_mm = r.x0_mm + y[0];
     const double Tf = p.effects.smooth_friction.enabled
-                          ? smooth_friction_Nm(coulomb_Nm(p, w >= 0.0 ? +1 : -1, x_mm), w,
+                          ? smooth_friction_Nm(coulomb_Nm(p, w >= 0.0 ? +1 : -1, x_mm, r.Tm_Nm), w,
                                                p.effects.smooth_friction.ws_rad_per_s)
-                          : r.mode * sliding_friction_Nm(p, r.mode, w, x_mm);
+                          : r.mode * sliding_friction_Nm(p, r.mode, w, x_mm, r.Tm_Nm);
     yd[0] = p.rg_mm_per_rad * w;
     yd[1] = (r.Tm_Nm - p.B_kg_m2_per_s * w - Tf - r.Tload_Nm - cogging_Nm(p, x_mm)) / a.Jm_kg_m2;
     yd[2] = p.B_kg_m2_per_s * w * w;
@@ -224,7 +231,7 @@ void axis_rhs(const AxisConst& a, const AxisRun& r, const double* y, double* yd)
     yd[2] = 0.0;
     yd[3] = 0.0;
   } else {
-    Tf = r.mode * sliding_friction_Nm(p, r.mode, wl, xl_mm);
+    Tf = r.mode * sliding_friction_Nm(p, r.mode, wl, xl_mm, r.Tm_Nm);
     yd[2] = p.rg_mm_per_rad * wl;
     yd[3] = (Tk - Tf - r.Tload_Nm) / a.Jl_kg_m2;
   }
@@ -248,8 +255,8 @@ void axis_roots(const AxisConst& a, const AxisRun& r, const double* y, double* g
       g[0] = r.mode * y[3];
     } else {
       const double net = spring_torque_Nm(a.p, r.x0_mm + y[0], x_friction_mm, y[1], 0.0) - r.Tload_Nm;
-      g[0] = breakaway_Nm(a.p, +1, x_friction_mm) - net;
-      g[1] = net + breakaway_Nm(a.p, -1, x_friction_mm);
+      g[0] = breakaway_Nm(a.p, +1, x_friction_mm, r.Tm_Nm) - net;
+      g[1] = net + breakaway_Nm(a.p, -1, x_friction_mm, r.Tm_Nm);
     }
   }
   if (pf.enabled && pf.dTc_Nm > 0.0) {
@@ -452,7 +459,7 @@ bool DriveBank::Impl::try_closed_form(std::size_t i) {
   const DriveParams& p = a.p;
   const LinearTick& k = a.tick;
   const int dir = s.w_rad_per_s > 0.0 ? +1 : -1;
-  const double Tf_Nm = dir * coulomb_Nm(p, dir, s.x_mm);
+  const double Tf_Nm = dir * coulomb_Nm(p, dir, s.x_mm, r.Tm_Nm);
   const double w0 = s.w_rad_per_s;
   const double c = (r.Tm_Nm - Tf_Nm - r.Tload_Nm) / a.Jm_kg_m2;
   const double w1 = k.e * w0 + k.f1_s * c;
@@ -485,7 +492,7 @@ void DriveBank::Impl::start_tick_mode(std::size_t i) {
       r.mode = s.w_rad_per_s > 0.0 ? +1 : -1;
       r.frozen = false;
     } else {
-      r.mode = rest_decision(a, rest_torque_Nm(a, r, s), s.x_mm);
+      r.mode = rest_decision(a, r, rest_torque_Nm(a, r, s), s.x_mm);
       r.frozen = r.mode == 0;
     }
     s.stuck = r.frozen;
@@ -495,7 +502,7 @@ void DriveBank::Impl::start_tick_mode(std::size_t i) {
   if (s.w_load_rad_per_s != 0.0) {
     r.mode = s.w_load_rad_per_s > 0.0 ? +1 : -1;
   } else {
-    r.mode = rest_decision(a, rest_torque_Nm(a, r, s), s.x_load_mm);
+    r.mode = rest_decision(a, r, rest_torque_Nm(a, r, s), s.x_load_mm);
   }
   s.load_stuck = r.mode == 0;
   s.stuck = s.load_stuck;
@@ -513,14 +520,14 @@ void DriveBank::Impl::handle_roots(Group& g, double t_s) {
     if (!a.compliant) {
       // The axis came to rest: stick, or slip back if the net torque breaks away.
       s.w_rad_per_s = 0.0;
-      r.mode = rest_decision(a, rest_torque_Nm(a, r, s), s.x_mm);
+      r.mode = rest_decision(a, r, rest_torque_Nm(a, r, s), s.x_mm);
       r.frozen = r.mode == 0;
       s.stuck = r.frozen;
       continue;
     }
     if (r.mode != 0) {
       s.w_load_rad_per_s = 0.0;
-      r.mode = rest_decision(a, rest_torque_Nm(a, r, s), s.x_load_mm);
+      r.mode = rest_decision(a, r, rest_torque_Nm(a, r, s), s.x_load_mm);
     } else {
       r.mode = f[0] != 0 ? +1 : -1;
     }

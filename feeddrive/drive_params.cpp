@@ -73,6 +73,11 @@ void DriveParams::validate(std::string_view where) const {
       c.fail("effects.rising_friction.enabled", 1.0,
              "off with stribeck and smooth_friction (each describes the friction at low speed: choose one)");
   }
+  if (e.load_dependent_friction.enabled) {
+    c.finite("effects.load_dependent_friction.fraction", e.load_dependent_friction.fraction);
+    if (!(e.load_dependent_friction.fraction >= 0.0 && e.load_dependent_friction.fraction <= 0.5))
+      c.fail("effects.load_dependent_friction.fraction", e.load_dependent_friction.fraction, "in [0, 0.5]");
+  }
   if (e.cogging.enabled) {
     c.non_negative("effects.cogging.amplitude_Nm", e.cogging.amplitude_Nm);
     c.positive("effects.cogging.cycles_per_rev", e.cogging.cycles_per_rev);

@@ -107,6 +107,21 @@ struct RisingFrictionEffect {
   double ws_rad_per_s{1.0};   ///< speed over which friction rises to Coulomb
 };
 
+/// Friction that rises with the load the drive carries: a ball screw (or a
+/// gear) loses a share of the torque it transmits, so its friction grows
+/// with the motor's torque,
+///   Tf = sign(w) (Tc_dir + fraction |Tm|)
+/// (the breakaway level alike). Under a rigid-body model with one inertia
+/// the motor then needs more torque to accelerate than the inertia says and
+/// less to brake (efficiency below one in both directions of power flow),
+/// which one J averages and the velocity loop's integral works off at every
+/// acceleration. With compliance the motor's torque stands for the
+/// coupling's.
+struct LoadDependentFrictionEffect {
+  bool enabled{false};
+  double fraction{0.05};  ///< friction per unit of |Tm|, [0, 0.5]
+};
+
 struct DriveEffects {
   StribeckEffect stribeck;
   CoggingEffect cogging;
@@ -119,6 +134,7 @@ struct DriveEffects {
   CurrentSaturationEffect current_saturation;
   SmoothFrictionEffect smooth_friction;
   RisingFrictionEffect rising_friction;
+  LoadDependentFrictionEffect load_dependent_friction;
 };
 
 struct DriveParams {

@@ -25,7 +25,8 @@
   E(compliance, kCompliance)                                                                                      \
   E(current_saturation, kCurrentSaturation)                                                                       \
   E(smooth_friction, kSmoothFriction)                                                                              \
-  E(rising_friction, kRisingFriction)
+  E(rising_friction, kRisingFriction)                                                                             \
+  E(load_dependent_friction, kLoadDependentFriction)
 
 /// P(effect, parameter name, field of the effect's struct, unit, description),
 /// in the order of the machine file's table.
@@ -50,7 +51,9 @@
   P(current_saturation, i_max_A, i_max_A, "A", "current limit")                                                   \
   P(smooth_friction, ws, ws_rad_per_s, "rad/s", "speed below which Coulomb friction is smoothed (no stiction)")   \
   P(rising_friction, share, share, "1", "breakaway friction as a share of the Coulomb level")                      \
-  P(rising_friction, ws, ws_rad_per_s, "rad/s", "speed over which friction rises to the Coulomb level")
+  P(rising_friction, ws, ws_rad_per_s, "rad/s", "speed over which friction rises to the Coulomb level")           \
+  P(load_dependent_friction, fraction, fraction, "1",                                                              \
+    "friction added per unit of the motor's torque (the screw's loss under load)")
 
 namespace twin::feeddrive {
 

@@ -74,6 +74,11 @@ inline double rising_friction_deficit_Nm(double Tc_Nm, double share, double w, d
   return (1.0 - share) * Tc_Nm * stribeck_shape(w, ws);
 }
 
+// load_dependent_friction: Tf = sign(w) (Tc_dir + fraction |Tm|).
+
+/// The friction the motor's torque Tm adds to the Coulomb level (a magnitude).
+inline double load_friction_Nm(double fraction, double Tm_Nm) { return fraction * std::abs(Tm_Nm); }
+
 // current_saturation: i = clamp(Ka u, -i_max, i_max).
 
 inline double saturated_current_A(double i_A, double i_max_A) { return std::clamp(i_A, -i_max_A, i_max_A); }

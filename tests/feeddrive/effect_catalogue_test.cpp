@@ -15,9 +15,9 @@ namespace {
 
 // Oracle: the names of spec/measured-data.md's table of effects a model may
 // lack, written out here from the spec; the drive's catalogue holds the
-// drive-side ones by exactly those names (plus smooth_friction and
-// rising_friction, which the spec's catalogue allows: "its own catalogue may
-// hold more").
+// drive-side ones by exactly those names (plus smooth_friction,
+// rising_friction and load_dependent_friction, which the spec's catalogue
+// allows: "its own catalogue may hold more").
 TEST(EffectCatalogue, NamesAreTheSpecs) {
   const std::set<std::string> spec{"stribeck",   "cogging",     "screw_pitch_error",
                                    "backlash",   "constant_load", "position_dependent_friction",
@@ -26,9 +26,10 @@ TEST(EffectCatalogue, NamesAreTheSpecs) {
   for (std::size_t i = 0; i < kDriveEffectCount; ++i)
     ours.insert(std::string(effect_name(static_cast<EffectKind>(i))));
   for (const auto& n : spec) EXPECT_TRUE(ours.count(n)) << n;
-  EXPECT_EQ(ours.size(), spec.size() + 2);
+  EXPECT_EQ(ours.size(), spec.size() + 3);
   EXPECT_TRUE(ours.count("smooth_friction"));
   EXPECT_TRUE(ours.count("rising_friction"));
+  EXPECT_TRUE(ours.count("load_dependent_friction"));
 }
 
 // Oracle: a parameter's qualified name is its effect's name, a dot and its

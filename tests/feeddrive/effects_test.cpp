@@ -401,5 +401,44 @@ TEST(RisingFriction, BreakawayBelowCoulombAndSteadyBalance) {
   EXPECT_THROW(both.validate("x"), ConfigError);
 }
 
+// Oracle: load-dependent friction. Under a constant torque Tm the axis
+// slides against Tc_dir + f |Tm|, so from rest w(t) = w_inf (1 - exp(-B t /
+// J)) with w_inf = (Tm - dir (Tc_dir + f |Tm|)) / B, in both directions;
+// a torque above Tc_dir but below Tc_dir / (1 - f) holds (exactly), since the
+// breakaway level rises with it. Tolerance 1e-7 relative on w at 20 ms
+// (the closed form is exact; the integrator's rtol is far below). The energy
+// balance closes to 1e-6 of the electrical work.
+TEST(LoadDependentFriction, FrictionRisesWithTheMotorsTorque) {
+  DriveParams p = fadal_y();
+  const double f = 0.2;
+  p.effects.load_dependent_friction = {true, f};
+  const double KaKt = p.Ka_A_per_V * p.Kt_Nm_per_A;
+  for (const int dir : {+1, -1}) {
+    const double Tc = dir > 0 ? p.Tc_pos_Nm : p.Tc_neg_Nm;
+    const double Tm = dir * 4.0 * Tc;
+    DriveBank bank = axis_at_rest(p);
+    const int n = 200;
+    run_constant(bank, Tm / KaKt, n);
+    const double t = n * kTs_s;
+    const double w_inf = (Tm - dir * (Tc + f * std::abs(Tm))) / p.B_kg_m2_per_s;
+    const double w = w_inf * (1.0 - std::exp(-p.B_kg_m2_per_s * t / p.J_kg_m2));
+    EXPECT_NEAR(bank.output(0).w_rad_per_s, w, 1e-7 * std::abs(w)) << dir;
+    const DriveState& s = bank.state(0);
+    EXPECT_NEAR(s.work_electrical_J, s.work_friction_J + s.work_damping_J + s.work_load_J + kinetic_energy_J(p, s),
+                1e-6 * std::abs(s.work_electrical_J));
+    // 1.1 Tc: above the Coulomb level, below Tc / (1 - f) = 1.25 Tc.
+    DriveBank held = axis_at_rest(p);
+    run_constant(held, dir * 1.1 * Tc / KaKt, 2000);
+    EXPECT_EQ(held.output(0).x_mm, 0.0) << dir;
+    DriveParams plain = fadal_y();
+    DriveBank slips = axis_at_rest(plain);
+    run_constant(slips, dir * 1.1 * Tc / KaKt, 2000);
+    EXPECT_NE(slips.output(0).x_mm, 0.0) << dir;
+  }
+  DriveParams bad = p;
+  bad.effects.load_dependent_friction.fraction = 0.6;
+  EXPECT_THROW(bad.validate("x"), ConfigError);
+}
+
 }  // namespace
 }  // namespace twin::feeddrive

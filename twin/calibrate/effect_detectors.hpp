@@ -26,6 +26,7 @@ void detect_delay_in_data(DataSearch& s);
 void detect_current_saturation_in_data(DataSearch& s);
 void detect_stribeck_in_data(DataSearch& s);
 void detect_position_dependent_friction_in_data(DataSearch& s);
+void detect_load_dependent_friction_in_data(DataSearch& s);
 void detect_cogging_in_data(DataSearch& s);
 void detect_screw_pitch_error_in_data(DataSearch& s);
 void detect_backlash_in_data(DataSearch& s);

@@ -237,7 +237,14 @@ void start_in_steady_motion(CoSimulation& cosim, const AxisArray<std::optional<R
     const double w = r->v_mm_per_s / d.rg_mm_per_rad;
     const double Tc = w > 0.0 ? d.Tc_pos_Nm : (w < 0.0 ? -d.Tc_neg_Nm : 0.0);
     const double load = d.effects.constant_load.enabled ? d.effects.constant_load.torque_Nm : 0.0;
-    const controller::SteadyMotion motion{Ts, v, w, d.B_kg_m2_per_s * w + Tc + load,
+    // Tm = A + sign(w) f |Tm| with load-dependent friction: A / (1 - f) where
+    // Tm takes the direction of motion, A / (1 + f) where it opposes it.
+    double Tm = d.B_kg_m2_per_s * w + Tc + load;
+    if (d.effects.load_dependent_friction.enabled && w != 0.0) {
+      const double f = d.effects.load_dependent_friction.fraction;
+      Tm = Tm * w > 0.0 ? Tm / (1.0 - f) : Tm / (1.0 + f);
+    }
+    const controller::SteadyMotion motion{Ts, v, w, Tm,
                                           controller::DriveScale{d.rg_mm_per_rad, d.Ka_A_per_V, d.Kt_Nm_per_A}};
     controller::PositionLoopState& ls = st.loops[i];
     ls = controller::PositionLoopState{};
