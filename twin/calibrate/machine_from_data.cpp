@@ -18,6 +18,7 @@
 #include "twin/calibrate/effect_detectors.hpp"
 #include "twin/calibrate/signal.hpp"
 #include "twin/core/error.hpp"
+#include "twin/core/golden_section.hpp"
 
 namespace twin::analysis {
 namespace {
@@ -2632,27 +2633,11 @@ LagFound search_lag(const std::function<double(double)>& residual) {
       at = g;
     }
   if (r_at >= 1e300) return {};
-  double lo = std::log(1e-3 * grid_ms[at == 0 ? 0 : at - 1]);
-  double hi = std::log(1e-3 * grid_ms[std::min(at + 1, grid_ms.size() - 1)]);
-  const double phi = 0.5 * (std::sqrt(5.0) - 1.0);
-  double x1 = hi - phi * (hi - lo), x2 = lo + phi * (hi - lo);
-  double r1 = residual(std::exp(x1)), r2 = residual(std::exp(x2));
-  for (int it = 0; it < 12; ++it)
-    if (r1 < r2) {
-      hi = x2;
-      x2 = x1;
-      r2 = r1;
-      x1 = hi - phi * (hi - lo);
-      r1 = residual(std::exp(x1));
-    } else {
-      lo = x1;
-      x1 = x2;
-      r1 = r2;
-      x2 = lo + phi * (hi - lo);
-      r2 = residual(std::exp(x2));
-    }
+  const GoldenSection s = golden_section_min([&](double x) { return residual(std::exp(x)); },
+                                             std::log(1e-3 * grid_ms[at == 0 ? 0 : at - 1]),
+                                             std::log(1e-3 * grid_ms[std::min(at + 1, grid_ms.size() - 1)]), 12);
   LagFound best{1e-3 * grid_ms[at], r_at};
-  for (const auto& [r, x] : {std::pair{r1, x1}, std::pair{r2, x2}})
+  for (const auto& [r, x] : {std::pair{s.f1, s.x1}, std::pair{s.f2, s.x2}})
     if (r < best.residual) best = {std::exp(x), r};
   return best;
 }

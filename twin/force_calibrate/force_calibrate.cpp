@@ -15,6 +15,7 @@
 #include "twin/report/fft.hpp"
 #include "twin/report/plots.hpp"
 #include "twin/core/error.hpp"
+#include "twin/core/golden_section.hpp"
 #include "twin/io/atomic_file.hpp"
 #include "twin/io/trace_csv.hpp"
 
@@ -750,25 +751,7 @@ std::vector<double> nelder_mead(const std::function<double(const std::vector<dou
 }
 
 double golden(const std::function<double(double)>& f, double lo, double hi, int iters) {
-  const double g = 0.5 * (std::sqrt(5.0) - 1.0);
-  double a = lo, b = hi, c = b - g * (b - a), d = a + g * (b - a);
-  double fc = f(c), fd = f(d);
-  for (int i = 0; i < iters; ++i) {
-    if (fc < fd) {
-      b = d;
-      d = c;
-      fd = fc;
-      c = b - g * (b - a);
-      fc = f(c);
-    } else {
-      a = c;
-      c = d;
-      fc = fd;
-      d = a + g * (b - a);
-      fd = f(d);
-    }
-  }
-  return 0.5 * (a + b);
+  return golden_section_min(f, lo, hi, iters).mid();
 }
 
 }  // namespace

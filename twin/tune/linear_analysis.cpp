@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 
 #include "twin/core/error.hpp"
+#include "twin/core/golden_section.hpp"
 #include "twin/core/units.hpp"
 
 namespace twin::analysis {
@@ -169,26 +170,9 @@ double bisect_log(Fn&& fn, double f0, double f1) {
 /// Golden-section search for the maximum of fn on [a, b] in log f.
 template <class Fn>
 std::pair<double, double> maximise_log(Fn&& fn, double a, double b) {
-  const double gr = (std::sqrt(5.0) - 1.0) / 2.0;
-  double la = std::log(a), lb = std::log(b);
-  double lc = lb - gr * (lb - la), ld = la + gr * (lb - la);
-  double fc = fn(std::exp(lc)), fd = fn(std::exp(ld));
-  for (int it = 0; it < 60; ++it) {
-    if (fc > fd) {
-      lb = ld;
-      ld = lc;
-      fd = fc;
-      lc = lb - gr * (lb - la);
-      fc = fn(std::exp(lc));
-    } else {
-      la = lc;
-      lc = ld;
-      fc = fd;
-      ld = la + gr * (lb - la);
-      fd = fn(std::exp(ld));
-    }
-  }
-  const double f = std::exp(0.5 * (la + lb));
+  const GoldenSection s =
+      golden_section_min([&](double lf) { return -fn(std::exp(lf)); }, std::log(a), std::log(b), 60);
+  const double f = std::exp(s.mid());
   return {f, fn(f)};
 }
 
