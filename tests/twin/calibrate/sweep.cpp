@@ -8,7 +8,8 @@
 //                   [--log-every M] [--current-only] [--keep DIR] [--verbose]
 //   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed]
 //                            [--encoder-mm Q] [--current-lag S] [--torque-command] [--torque-step R]
-//                            [--kff K] [--jff J] [--friction load|sqrt|dahl] [--keep DIR]
+//                            [--kff K] [--jff J] [--friction load|sqrt|dahl] [--limit-on-command]
+//                            [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
 // measured run, each on the truth's X plant, and its y reference on the Y
@@ -44,6 +45,9 @@
 // load_dependent_friction, then expected beside the run's own effect), with
 // the square root of the speed (sqrt), or Dahl's pre-sliding friction in
 // place of stick/slip (dahl); the last two are outside the catalogue.
+// --limit-on-command makes the limit cases a drive's own torque limit, the
+// velocity loop's command clamped (which a logged command shows), in place
+// of a current limit behind it.
 #include <unistd.h>
 
 #include <algorithm>
@@ -173,6 +177,7 @@ struct CascadeOptions {
   bool log_torque_command{false};  ///< log the current loop's input, not the motor's torque
   double raw_step{0.0};            ///< the raw torque logged to multiples of this (0: as computed)
   std::string friction;            ///< a friction law beside every run's effect (empty: none)
+  bool limit_on_command{false};    ///< the limit cases clamp the velocity loop's command, not the current
 };
 
 // A friction law added to every run of the sweep (--friction): the truth's
@@ -223,6 +228,10 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     c.set(sp.effects);
     sp.effects.load_Nm = load;
     const std::string also = add_friction(loop.friction, sp.effects).value_or("");
+    if (loop.limit_on_command && sp.effects.i_max_A > 0.0) {
+      sp.cascade.T_max_Nm = sp.plant.Kt * sp.effects.i_max_A;
+      sp.effects.i_max_A = 0.0;
+    }
     try {
       sp.reference_mm = twin::truth::moves_program(sp.Ts_s, fit_speeds, 24.0);
       twin::truth::write_truth_run(dir / "fit", sp);
@@ -349,6 +358,8 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "calibrate_sweep: --friction takes load, sqrt or dahl, not '%s'\n", loop.friction.c_str());
         return 2;
       }
+    } else if (!std::strcmp(argv[i], "--limit-on-command")) {
+      loop.limit_on_command = true;
     } else if (!std::strcmp(argv[i], "--torque-command")) {
       loop.log_torque_command = true;
     } else if (!std::strcmp(argv[i], "--no-motor-speed")) {

@@ -161,6 +161,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
       const double ev = (vcmd - v_motor) / p.rg;
       Iv += Ts * ev;
       Tcmd = cl.Kvp * (ev + (cl.Tn > 0.0 ? Iv / cl.Tn : 0.0)) + cl.Jff * aref / p.rg;
+      if (cl.T_max_Nm > 0.0) Tcmd = std::clamp(Tcmd, -cl.T_max_Nm, cl.T_max_Nm);
       Tf = lag_a * Tf + (1.0 - lag_a) * Tcmd;
       u = Tf / (p.Ka * p.Kt);
     }

@@ -89,6 +89,11 @@ struct CascadeLaw {
   double Kv{60.0}, kff{0.0}, Kvp{0.4}, Tn{0.01}, tau_i{0.0}, Jff{0.0};
   double raw_per_Nm{0.0};  ///< > 0: log <a>_torque_raw; 0: log <a>_i_A
   double raw_step{0.0};    ///< > 0: the raw torque logged to multiples of this (a drive's integer counts)
+  /// > 0 (N m): the velocity loop's torque command clamped to +-T_max, as
+  /// a drive's own torque limit (a logged command then shows it), its
+  /// integral running on (no anti-windup); the plant's i_max_A limits the
+  /// current behind it, which the command does not show.
+  double T_max_Nm{0.0};
   bool log_velocities{true};
   /// With log_velocities: also the motor's speed (false: the velocity
   /// command alone, as a CNC that traces its loop's output but not the
