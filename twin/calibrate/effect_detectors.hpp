@@ -18,6 +18,7 @@ void detect_position_dependent_friction(const DiagnoseContext& c, std::vector<Ef
 void detect_delay(const DiagnoseContext& c, std::vector<EffectCandidate>& out);
 void detect_compliance(const DiagnoseContext& c, std::vector<EffectCandidate>& out);
 void detect_current_saturation(const DiagnoseContext& c, std::vector<EffectCandidate>& out);
+void detect_load_dependent_friction(const DiagnoseContext& c, std::vector<EffectCandidate>& out);
 /// stribeck's torque taken out of the residual for the chosen Ts_static and ws.
 void stribeck_torque_after(const AxisSignals& s, const std::vector<double>& T_Nm, EffectCandidate& c);
 

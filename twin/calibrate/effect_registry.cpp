@@ -38,8 +38,8 @@ constexpr std::array<EffectEntry, feeddrive::kDriveEffectCount> kRegistry{{
     {EffectKind::kSmoothFriction, nullptr, nullptr, nullptr, 0, kTorque, 0, PlotAlong::kTime},
     {EffectKind::kRisingFriction, nullptr, nullptr, nullptr, 0, kTorque, effect_bit(EffectKind::kSmoothFriction),
      PlotAlong::kTime},
-    {EffectKind::kLoadDependentFriction, nullptr, nullptr, detect_load_dependent_friction_in_data, 2, kBoth, 0,
-     PlotAlong::kTime},
+    {EffectKind::kLoadDependentFriction, detect_load_dependent_friction, nullptr,
+     detect_load_dependent_friction_in_data, 2, kBoth, 0, PlotAlong::kTime},
 }};
 
 constexpr bool registry_in_catalogue_order() {

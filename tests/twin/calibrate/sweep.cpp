@@ -99,6 +99,7 @@ std::vector<EffectAt> catalogue() {
       {"delay", [](Effects& e, double m) { e.delay_ticks = static_cast<int>(4 * m); }},
       {"compliance", [](Effects& e, double m) { e.compliance_K = 2500.0 / m; e.compliance_C = 0.15; }},
       {"current_saturation", [](Effects& e, double m) { e.i_max_A = 16.0 / m; }},
+      {"load_dependent_friction", [](Effects& e, double m) { e.load_friction = 0.05 * m; }},
   };
 }
 
