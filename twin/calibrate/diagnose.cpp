@@ -521,16 +521,15 @@ void detect_position_dependent_friction(const DiagnoseContext& c, std::vector<Ef
 }
 
 // load_dependent_friction: friction that grows with the motor's torque,
-// fitted with the drive as a column load sgn(w). Where u is logged, the
-// loop's own command (exact, not measured), the load is |Kt Ka u| low-passed
-// as the torque is: the FADAL law's u chatters with the
-// encoder's counts, and the friction follows the chatter's magnitude, which
-// the low-passed torque averages away (the drive's own torque put the
-// truth's 5 % at 1.2 %). From a measured current, whose noise would then sit
-// on both sides of the fit, it is |T^|, the drive's own torque on the row
-// (the base fit's, with the friction found so far, refined twice).
-// Proposed where its share is positive (at most 0.5) with the base drive
-// refitted beside it.
+// fitted with the drive as a column load sgn(w). Where u is logged (the
+// loop's own command: exact, not measured) the load is |Kt Ka u|, low-passed
+// as the torque is. The FADAL law's u chatters with the encoder's counts,
+// and the friction follows the chatter's magnitude, which the low-passed
+// torque averages away: the drive's own torque put the truth's 5 % at 1.2 %.
+// From a measured current, whose noise would then sit on both sides of the
+// fit, the load is |T^|, the drive's own torque on the row (the base fit's,
+// with the friction found so far, refined twice). Proposed where its share
+// is positive (at most 0.5), with the base drive refitted beside it.
 void detect_load_dependent_friction(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   const auto& rows = c.fit_moving;
   if (rows.size() < 500) return;

@@ -4,6 +4,7 @@
 // are detected and named, never a NaN.
 #include <cmath>
 #include <memory>
+#include <optional>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -12,6 +13,7 @@
 #include "twin/core/error.hpp"
 #include "twin/io/machine_file.hpp"
 #include "twin/sim/cosimulation.hpp"
+#include "twin/sim/reference.hpp"
 
 namespace twin {
 namespace {
@@ -85,6 +87,36 @@ TEST(CoSimulation, TracksTheSquareWithinMicrons) {
   EXPECT_LT(max_e, 0.02);
   EXPECT_GT(max_e, 1e-4);  // and it is not zero: the drives are simulated
   EXPECT_NEAR(cs.last().axes[0].x_true_mm, 0.0, 0.005);
+}
+
+// Oracle: started in steady motion, the cascade's loop holds the torque the
+// drive needs at that speed, and the drive keeps the speed: with friction
+// that grows with the motor's torque that balance is Tm = (B w + Tc) / (1 -
+// f) (the motor drives, so the friction adds f |Tm|), not B w + Tc. Checked
+// on the first ticks at 30 mm/s with f = 0.3: the motor's torque within 0.5 %
+// of that balance (the encoder's count moves the PI law's input by under
+// that), where B w + Tc alone is 30 % short of it.
+TEST(CoSimulation, StartedInSteadyMotionHoldsTheTorqueOfLoadDependentFriction) {
+  auto m = io::load_machine(io::resolve_machine_path("fadal2216_cascade"));
+  auto& d = m.axes[0].drive;
+  d.effects.load_dependent_friction = {true, 0.3};
+  const double v = 30.0, Ts = m.Ts_s;
+  AxisArray<std::vector<double>> ref{};
+  for (int k = 0; k < 200; ++k) ref[0].push_back(10.0 + v * Ts * k);
+  ref[1].assign(200, 0.0);
+  ref[2].assign(200, 0.0);
+  sim::CoSimulation cs(m, std::make_shared<sim::SampledReference>(ref, Ts), nullptr, {10.0, 0.0, 0.0});
+  AxisArray<std::optional<sim::ReferenceAtStart>> start{};
+  start[0] = sim::ReferenceAtStart{10.0, 10.0 - v * Ts, 10.0 - 2.0 * v * Ts, v};
+  sim::start_in_steady_motion(cs, start, 0);
+  const double w = v / d.rg_mm_per_rad;
+  const double load = d.effects.constant_load.enabled ? d.effects.constant_load.torque_Nm : 0.0;
+  const double Tm = (d.B_kg_m2_per_s * w + d.Tc_pos_Nm + load) / (1.0 - 0.3);
+  for (int k = 0; k < 20; ++k) {
+    const auto& s = cs.step();
+    ASSERT_NEAR(s.axes[0].Tm_Nm, Tm, 0.005 * Tm) << "tick " << k;
+    ASSERT_NEAR(s.axes[0].v_mm_per_s, v, 0.005 * v) << "tick " << k;
+  }
 }
 
 TEST(CoSimulation, UnstableGainsAreDetectedAndNamed) {
