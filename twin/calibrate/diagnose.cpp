@@ -533,30 +533,19 @@ void detect_position_dependent_friction(const DiagnoseContext& c, std::vector<Ef
 void detect_load_dependent_friction(const DiagnoseContext& c, std::vector<EffectCandidate>& out) {
   const auto& rows = c.fit_moving;
   if (rows.size() < 500) return;
-  const std::vector<const std::vector<double>*> base{&c.reg.acc, &c.reg.vel, &c.reg.pos, &c.reg.neg};
-  LsqResult fit = least_squares(base, c.T, rows, corr_len(c.s));
-  if (!fit.ok) return;
+  std::vector<double> dir(c.s.n, 0.0);
+  for (std::size_t k = 0; k < c.s.n; ++k)
+    dir[k] = c.s.w_rad_per_s[k] > 0.0 ? 1.0 : (c.s.w_rad_per_s[k] < 0.0 ? -1.0 : 0.0);
   std::vector<double> psi(c.s.n, 0.0);
-  double f = 0.0;
-  const bool from_u = c.s.has_u && c.s.u_raw_V.size() == c.s.n;
-  if (from_u) {
+  if (c.s.has_u && c.s.u_raw_V.size() == c.s.n) {
     std::vector<double> load(c.s.n);
     for (std::size_t k = 0; k < c.s.n; ++k) load[k] = std::abs(c.d.Ka_A_per_V * c.d.Kt_Nm_per_A * c.s.u_raw_V[k]);
     load = lowpass(load, c.s.fc_Hz, 1.0 / c.s.dt_s);
-    for (std::size_t k = 0; k < c.s.n; ++k)
-      psi[k] = c.s.w_rad_per_s[k] > 0.0 ? load[k] : (c.s.w_rad_per_s[k] < 0.0 ? -load[k] : 0.0);
-  }
-  for (int pass = 0; pass < 3 && !from_u; ++pass) {
-    for (std::size_t k = 0; k < c.s.n; ++k) {
-      const double w = c.s.w_rad_per_s[k];
-      if (w == 0.0) continue;
-      double T_hat = f * psi[k];
-      for (std::size_t j = 0; j < base.size(); ++j) T_hat += (*base[j])[k] * fit.theta[j];
-      psi[k] = std::abs(T_hat) * (w > 0.0 ? 1.0 : -1.0);
-    }
-    fit = least_squares({&c.reg.acc, &c.reg.vel, &c.reg.pos, &c.reg.neg, &psi}, c.T, rows, corr_len(c.s));
-    if (!fit.ok) return;
-    f = fit.theta[4];
+    for (std::size_t k = 0; k < c.s.n; ++k) psi[k] = dir[k] * load[k];
+  } else if (!fit_with_own_torque_load({&c.reg.acc, &c.reg.vel, &c.reg.pos, &c.reg.neg}, c.T, rows, dir,
+                                       corr_len(c.s), 3, psi)
+                  .ok) {
+    return;
   }
   const Fit fa = fit_additive(c.s, c.T, c.reg, {&psi}, c.fit_moving, c.held_moving);
   if (!fa.ok || !(fa.with.theta[4] > 0.0 && fa.with.theta[4] <= 0.5)) return;

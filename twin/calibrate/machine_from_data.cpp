@@ -1725,20 +1725,10 @@ void detect_load_dependent_friction_in_data(DataSearch& s) {
   const std::size_t nb = s.base_cols.size();
   const LsqResult base = least_squares(s.base_cols, rows.T, rows.all, s.corr);
   if (!base.ok) return;
-  std::vector<double> psi(rows.all.size(), 0.0);
-  LsqResult joint;
-  double f = 0.0;
-  for (int pass = 0; pass < 3; ++pass) {
-    const LsqResult& prev = pass == 0 ? base : joint;
-    for (std::size_t k : rows.moving) {
-      double T_hat = pass == 0 ? 0.0 : f * psi[k];
-      for (std::size_t j = 0; j < nb; ++j) T_hat += (*s.base_cols[j])[k] * prev.theta[j];
-      psi[k] = std::abs(T_hat) * rows.dir[k];
-    }
-    joint = least_squares(s.with_base({&psi}), rows.T, rows.all, s.corr);
-    if (!joint.ok) return;
-    f = joint.theta[nb];
-  }
+  std::vector<double> psi;
+  const LsqResult joint = fit_with_own_torque_load(s.base_cols, rows.T, rows.all, rows.dir, s.corr, 3, psi);
+  if (!joint.ok) return;
+  const double f = joint.theta[nb];
   const double t_f = t_of(joint, nb);
   if (!(f > 0.0 && f <= 0.5 && t_f >= kMinTOneColumn)) return;
   Trial t;

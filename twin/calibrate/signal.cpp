@@ -162,6 +162,30 @@ LsqResult least_squares(const std::vector<const std::vector<double>*>& columns, 
   return r;
 }
 
+LsqResult fit_with_own_torque_load(const std::vector<const std::vector<double>*>& columns,
+                                   const std::vector<double>& y, const std::vector<std::size_t>& rows,
+                                   const std::vector<double>& dir, double correlation_length, int passes,
+                                   std::vector<double>& load) {
+  load.assign(y.size(), 0.0);
+  LsqResult fit = least_squares(columns, y, rows, correlation_length);
+  if (!fit.ok) return fit;
+  std::vector<const std::vector<double>*> with = columns;
+  with.push_back(&load);
+  double share = 0.0;
+  for (int pass = 0; pass < passes; ++pass) {
+    for (std::size_t k = 0; k < y.size(); ++k) {
+      if (dir[k] == 0.0) continue;
+      double T_hat = share * load[k];
+      for (std::size_t j = 0; j < columns.size(); ++j) T_hat += (*columns[j])[k] * fit.theta[j];
+      load[k] = std::abs(T_hat) * dir[k];
+    }
+    fit = least_squares(with, y, rows, correlation_length);
+    if (!fit.ok) return fit;
+    share = fit.theta[columns.size()];
+  }
+  return fit;
+}
+
 std::vector<double> amplitude_spectrum(std::span<const double> x, double fs_Hz, double* df_Hz) {
   std::size_t n = 1;
   while (2 * n <= x.size()) n *= 2;

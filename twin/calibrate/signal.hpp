@@ -47,6 +47,17 @@ struct LsqResult {
 LsqResult least_squares(const std::vector<const std::vector<double>*>& columns, const std::vector<double>& y,
                         const std::vector<std::size_t>& rows, double correlation_length = 1.0);
 
+/// Friction that grows with the torque, as a column: `load` = |T^| dir on
+/// each row where dir (+1, -1, 0 at rest) is not 0, T^ the fit of y on
+/// `columns` over `rows` (from the second pass on with `load` itself, times
+/// its coefficient), refitted `passes` times. Returns the last fit of y on
+/// the columns and `load` (its last coefficient the share), or the first
+/// failed one.
+LsqResult fit_with_own_torque_load(const std::vector<const std::vector<double>*>& columns,
+                                   const std::vector<double>& y, const std::vector<std::size_t>& rows,
+                                   const std::vector<double>& dir, double correlation_length, int passes,
+                                   std::vector<double>& load);
+
 /// Amplitude spectrum of x (mean removed, Hann window) at bins k fs / N for a
 /// power-of-two N = largest power of two <= x.size(): returns |X_k| for
 /// k = 0..N/2 and sets df_Hz.

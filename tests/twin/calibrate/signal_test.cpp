@@ -125,6 +125,37 @@ TEST(Signal, NrmsMatchesDefinition) {
 }
 
 // Bin means of y = x over [0, 1) in 4 bins are the bin centres.
+// Oracle: a torque made exactly as T = A + f |T| dir (A = 3 a + 0.4 dir +
+// 0.1, the friction growing with the torque), so T = A / (1 - f dir sgn A)
+// row by row. Fitted on a, dir, 1 and the load column of the fit's own
+// torque, the share is recovered: each pass moves the column towards |T|
+// (noise-free: one pass, |A^| for |T|, leaves 3e-4 of f = 0.05, two 9e-5,
+// three 7e-7), so three are held to 1e-5 and the acceleration's 3 to 1e-4.
+// The rows at rest keep the column at 0.
+TEST(Signal, OwnTorqueLoadRecoversTheShareOfAnExactTorque) {
+  const std::size_t n = 4000;
+  const double f = 0.05;
+  std::vector<double> a(n), dir(n), one(n, 1.0), T(n);
+  std::vector<std::size_t> rows(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    rows[k] = k;
+    a[k] = std::sin(0.013 * static_cast<double>(k)) * (1.0 + 0.5 * std::cos(0.0031 * static_cast<double>(k)));
+    dir[k] = (k / 500) % 3 == 0 ? 0.0 : ((k / 500) % 3 == 1 ? 1.0 : -1.0);
+    const double A = 3.0 * a[k] + 0.4 * dir[k] + 0.1;
+    T[k] = dir[k] == 0.0 ? A : A / (1.0 - f * dir[k] * (A > 0.0 ? 1.0 : -1.0));
+  }
+  std::vector<double> load;
+  const LsqResult fit = fit_with_own_torque_load({&a, &dir, &one}, T, rows, dir, 1.0, 3, load);
+  ASSERT_TRUE(fit.ok);
+  EXPECT_NEAR(fit.theta[3], f, 1e-5);
+  EXPECT_NEAR(fit.theta[0], 3.0, 1e-4);
+  for (std::size_t k = 0; k < n; ++k) {
+    if (dir[k] == 0.0) {
+      ASSERT_EQ(load[k], 0.0);
+    }
+  }
+}
+
 TEST(Signal, BinMeans) {
   std::vector<double> x, y;
   std::vector<std::size_t> rows;
