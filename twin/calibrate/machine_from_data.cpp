@@ -331,6 +331,55 @@ struct TorqueClip {
   }
 };
 
+/// The log's rows at a limit, fit_velocity_loop's limit_rows: per run, the
+/// rows whose |torque| lies within 2 % of the fitting rows' largest (and
+/// four times the white noise on the logged channel: the largest sits the
+/// noise's reach above the limit), stretches under 5 rows apart joined (a
+/// limit that holds the integral lets the command off it for a tick and
+/// back), each widened by 2 rows (a current loop's lag rounds the log's
+/// corners) and, where the law is fitted through the speed's low-pass, by
+/// that filter's support (its columns spread the integral's step over it).
+/// Returns the fitting rows at the limit and the median of their |torque|
+/// (the limit's level).
+struct RowsAtLimit {
+  std::size_t held{0};
+  double level{0.0};
+};
+RowsAtLimit rows_at_limit(const std::vector<RunData>& runs, const std::string& channel,
+                          std::vector<std::vector<char>>& at) {
+  const double noise_rms = fitting_rows_noise_rms(runs, channel);
+  double T_max = 0.0;
+  for (const RunData& rd : runs) {
+    const std::vector<double>& T = rd.run->trace.at(channel);
+    for (std::size_t k = 0; k < rd.n_fit; ++k) T_max = std::max(T_max, std::abs(T[k]));
+  }
+  const double from = T_max - std::max(0.02 * T_max, 4.0 * noise_rms);
+  std::vector<double> held;
+  at.assign(runs.size(), {});
+  for (std::size_t r = 0; r < runs.size(); ++r) {
+    const RunData& rd = runs[r];
+    const std::vector<double>& T = rd.run->trace.at(channel);
+    const double dt = rd.run->sample_period_s;
+    const auto widen = static_cast<std::ptrdiff_t>(
+        2 + (has_lowpassed_twin(rd.run->trace, channel) ? std::lround(1.0 / (kSpeedCutoff_Hz * dt)) : 0));
+    const auto n = static_cast<std::ptrdiff_t>(rd.n_fit);
+    std::vector<char>& m = at[r];
+    m.assign(rd.n, 0);
+    std::ptrdiff_t last = -1000;  // the last row at the limit
+    for (std::ptrdiff_t k = 0; k < n; ++k) {
+      if (!(std::abs(T[static_cast<std::size_t>(k)]) >= from && from > 0.0)) continue;
+      held.push_back(std::abs(T[static_cast<std::size_t>(k)]));
+      const std::ptrdiff_t lo = k - last < 5 ? last : k - widen;
+      for (std::ptrdiff_t j = std::max<std::ptrdiff_t>(lo, 0); j <= std::min(k + widen, n - 1); ++j)
+        m[static_cast<std::size_t>(j)] = 1;
+      last = k;
+    }
+  }
+  if (held.empty()) return {};
+  std::nth_element(held.begin(), held.begin() + static_cast<std::ptrdiff_t>(held.size() / 2), held.end());
+  return {held.size(), held[held.size() / 2]};
+}
+
 /// The command's acceleration as the loop takes it for a torque
 /// feedforward, on a log that samples every loop period: the backward
 /// difference of the backward difference of the reference, within each
@@ -373,7 +422,12 @@ std::vector<double> reference_acceleration(const RunData& rd, Axis a, const std:
 /// support, 1 / cutoff, at each end), not per segment, and only those rows
 /// are fitted: where the speed is the encoder's own, a gap between the motor
 /// and the encoder parts them only while the encoder's side stands, and
-/// shifts the law's integral by the part between stretches.
+/// shifts the law's integral by the part between stretches. With
+/// `limit_rows` (per run, the log's rows a limit holds the torque at), those
+/// rows are not fitted and (with `constant_after_limit`) each row after such
+/// a stretch starts a new constant: a limit that holds the integral while
+/// it clamps (anti-windup) leaves it short of the running sum by what the
+/// stretch would have added.
 struct VelocityLoopFit {
   LsqResult ls;  ///< Kvp, Kvp / Tn (then a, with current_lag; then the lead columns; then Jff, with torque_ff)
   bool torque_ff{false};
@@ -394,6 +448,10 @@ struct VelocityLoopFit {
   /// An RMS of the logged torque (or of a residual of it) less the white
   /// noise, which no law fits.
   double less_noise(double rms) const { return std::sqrt(std::max(rms * rms - noise_rms * noise_rms, 0.0)); }
+  /// Gains a loop can have: Kvp > 0, Kvp / Tn >= 0, and Jff >= 0 where fitted.
+  bool gains_physical() const {
+    return ls.ok && ls.theta[0] > 0.0 && ls.theta[1] >= 0.0 && (!torque_ff || ls.theta.back() >= 0.0);
+  }
 };
 /// The columns and rows fit_velocity_loop fits with (see above).
 struct LawFitOptions {
@@ -404,6 +462,8 @@ struct LawFitOptions {
   bool torque_ff{false};
   double lead_period_mm{0.0};
   bool by_table_motion{false};
+  const std::vector<std::vector<char>>* limit_rows{nullptr};
+  bool constant_after_limit{true};  ///< with limit_rows: false leaves the rows out, the constants as they are
 };
 /// Where the lead columns start in VelocityLoopFit::ls.theta.
 std::size_t lead_column(const LawFitOptions& o) { return o.current_lag ? 3 : 2; }
@@ -413,11 +473,13 @@ std::size_t lead_column(const LawFitOptions& o) { return o.current_lag ? 3 : 2; 
 LawFitOptions law_options(const AxisFromData& ax, LawFitOptions o) {
   o.lead_period_mm = ax.law_lead_period_mm;
   o.by_table_motion = ax.law_gap_mm > 0.0;
+  if (ax.law_holds_integral_at_limit()) o.limit_rows = &ax.law_limit_rows;
   return o;
 }
 VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, const std::string& channel,
                                   const LawFitOptions& o = {}) {
-  const auto [lag, clip, current_lag, lag_a, torque_ff, lead_period_mm, by_table_motion] = o;
+  const auto [lag, clip, current_lag, lag_a, torque_ff, lead_period_mm, by_table_motion, limit_rows,
+              constant_after_limit] = o;
   const bool lead = lead_period_mm > 0.0;
   const double w = lead ? 2.0 * M_PI / lead_period_mm : 0.0;
   std::vector<double> ev, iev, Tm, Tp, aff;
@@ -425,8 +487,10 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
   std::vector<std::size_t> vrows, seg_of_row;
   std::vector<int> dir_of;
   std::size_t g = 0;  // the constants' count over all runs
-  for (const auto& rd : runs) {
+  for (std::size_t ri = 0; ri < runs.size(); ++ri) {
+    const RunData& rd = runs[ri];
     const auto& t = rd.run->trace;
+    const std::vector<char>* at_limit = limit_rows ? &(*limit_rows)[ri] : nullptr;
     const auto& vc = *filtered_alike(t, velocity_command_column(t, a));
     const auto& v = t.at(col(a, "_v_mm_s"));
     const auto& ch = *filtered_alike(t, channel);
@@ -456,6 +520,16 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
           k = j;
         }
       }
+      // A new constant from each row after a stretch at the limit on, to
+      // the end of its segment or stretch of motion.
+      if (at_limit && constant_after_limit)
+        for (std::size_t k = s.begin + 1; k < end; ++k) {
+          const std::size_t old = group[k - s.begin];
+          if (!(*at_limit)[k - 1] || (*at_limit)[k] || (by_table_motion && old == seg_group)) continue;
+          dir_of.push_back(dir_of[old]);
+          const std::size_t fresh = g++;
+          for (std::size_t j = k; j < end && group[j - s.begin] == old; ++j) group[j - s.begin] = fresh;
+        }
       std::vector<double> e(end - s.begin), ie(end - s.begin), ar;
       std::array<std::vector<double>, 4> l;
       if (torque_ff) ar.assign(a_ref.begin() + static_cast<std::ptrdiff_t>(s.begin),
@@ -490,7 +564,7 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
         Tp.push_back(j >= 1 ? ch[k - 1] : 0.0);
         const std::size_t grp = group[j];
         seg_of_row.push_back(grp);
-        if (k < s.begin + 2 + lag || (by_table_motion && grp == seg_group)) continue;
+        if (k < s.begin + 2 + lag || (by_table_motion && grp == seg_group) || (at_limit && (*at_limit)[k])) continue;
         if (clip && clip->holds(clip->theta[0] * ev.back() + clip->theta[1] * iev.back() + clip->c_seg[grp], ch[k]))
           continue;
         vrows.push_back(ev.size() - 1);
@@ -1561,6 +1635,12 @@ void detect_current_saturation_in_data(DataSearch& s) {
   Trial t;
   t.kind = EffectKind::kCurrentSaturation;
   t.sets = {{{EffectParam::current_saturation_i_max_A, level}}};
+  // Where the law holds its integral at a limit (AxisFromData::law_limit_rows)
+  // the limit clamps the law's command, which holds it alike.
+  if (ax.law_holds_integral_at_limit()) {
+    t.gains = s.out.final_machine.axes[s.ai()].loop.cascade;
+    t.gains->T_max = level;
+  }
   t.evidence = fmt::format(
       "the log's {} holds {} samples within {:.3g} of its largest value {:.4g} (noise {:.3g} RMS) while the replay "
       "asks for up to {:.4g}: a limit at {:.4g} (in the channel's unit; {})",
@@ -2526,7 +2606,7 @@ void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const Torque
     const VelocityLoopFit vlag =
         fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
                           law_options(ax, {.lag = lag, .clip = clip, .torque_ff = ax.torque_feedforward}));
-    if (!(vlag.ls.ok && vlag.ls.theta[0] > 0.0 && vlag.ls.theta[1] >= 0.0 && vlag.ls.residual_rms < best)) continue;
+    if (!(vlag.gains_physical() && vlag.ls.residual_rms < best)) continue;
     best = vlag.ls.residual_rms;
     ax.torque_lag_samples = lag;
     set_velocity_loop(vlag, f, ax.gains_at_lag);
@@ -2579,7 +2659,7 @@ void current_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueC
                                            .torque_ff = ax.torque_feedforward}));
     if (!arx.ls.ok) continue;
     const double a = arx.ls.theta[2];
-    if (!(a > 0.05 && a < 0.95 && arx.ls.theta[0] > 0.0 && arx.ls.theta[1] >= 0.0)) continue;
+    if (!(a > 0.05 && a < 0.95 && arx.gains_physical())) continue;
     if (!best || arx.ls.residual_rms < best->ls.residual_rms) {
       best = std::move(arx);
       best_lag = lag;
@@ -2664,7 +2744,7 @@ void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl
                          .clip = clip,
                          .lag_a = std::exp(-dt / tau_s),
                          .torque_ff = ax.torque_feedforward}));
-    if (!(v.ls.ok && v.ls.theta[0] > 0.0 && v.ls.theta[1] >= 0.0)) return std::nullopt;
+    if (!v.gains_physical()) return std::nullopt;
     return v;
   };
   // Each dead time's lag (search_lag).
@@ -2767,6 +2847,35 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
   ax.gains.T_max = 1e9;
   if (have_vcmd && f.r0.sample_period_s <= 5e-3 + 1e-12 && all_runs_log(f.runs, col(ax.axis, "_v_mm_s"))) {
     VelocityLoopFit vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column);
+    // A limit that holds the integral while it clamps (anti-windup): after
+    // each stretch at the limit the law resumes short of its running sum, so
+    // the law is fitted with a new constant there from then on. Taken where
+    // it leaves under 0.8 of the residual the law leaves without the rows at
+    // the limit but with its running sum through them (both less the noise);
+    // where the integral runs on through the limit the constants agree and
+    // fit no better. Looked for first: the running sum's misfit was read as
+    // a lead error, a gap or a feedforward.
+    std::string held_integral;
+    if (vl.ls.ok) {
+      std::vector<std::vector<char>> at;
+      if (const RowsAtLimit lim = rows_at_limit(f.runs, ax.channel.column, at); lim.held >= kClippedRows) {
+        ax.law_limit_rows = std::move(at);
+        VelocityLoopFit w = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, law_options(ax, {}));
+        const VelocityLoopFit on = fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
+                                                     law_options(ax, {.constant_after_limit = false}));
+        if (w.gains_physical() && on.ls.ok &&
+            w.less_noise(w.ls.residual_rms) < 0.8 * on.less_noise(on.ls.residual_rms)) {
+          held_integral = fmt::format("; the logged torque stands at its largest ({} rows, median {:.4g}) and the law "
+                                      "resumes after each stretch there from a new constant (residual {:.3g} against "
+                                      "{:.3g}): a limit that holds the integral while it clamps (anti-windup)",
+                                      lim.held, lim.level, w.ls.residual_rms, on.ls.residual_rms);
+          ax.law_limit_level = lim.level;
+          vl = std::move(w);
+        } else {
+          ax.law_limit_rows.clear();
+        }
+      }
+    }
     // Where the speed is the encoder's own, what parts the motor from the
     // encoder shows in the law: a gap (its constants step with the
     // direction of motion by Ki times it; three position steps at least,
@@ -2782,9 +2891,10 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
     std::string lead;
     if (vl.ls.ok && has_lowpassed_twin(f.runs.front().run->trace, ax.channel.column)) {
       const double q = std::max(f.position_quantum_mm, 1e-3);
-      GapInLaw gp = gap_in_law(f.runs, ax, {});
+      GapInLaw gp = gap_in_law(f.runs, ax, law_options(ax, {}));
       if (every_period)
-        if (GapInLaw with_ff = gap_in_law(f.runs, ax, {.torque_ff = true}); with_ff.t > gp.t) gp = with_ff;
+        if (GapInLaw with_ff = gap_in_law(f.runs, ax, law_options(ax, {.torque_ff = true})); with_ff.t > gp.t)
+          gp = with_ff;
       if (gp.t >= kMinT && gp.gap_mm >= 3.0 * q && gp.gap_mm <= 1.0) {
         ax.law_gap_mm = gp.gap_mm;
         const double before = vl.ls.residual_rms;
@@ -2831,7 +2941,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
     // law is fitted on the rest.
     std::optional<TorqueClip> clip;
     std::string clipped;
-    if (vl.ls.ok && vl.held_by_limit >= kClippedRows) {
+    if (vl.ls.ok && vl.held_by_limit >= kClippedRows && !ax.law_holds_integral_at_limit()) {
       const std::size_t held = vl.held_by_limit;
       // The rows held are found with the law fitted so far; a fit without
       // them asks for the unlimited torque more nearly, so twice more.
@@ -2855,13 +2965,12 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
     // the torque's RMS, both less the white noise on the log (which no law
     // fits; at 0.2 N m of noise on a torque of 0.75 N m RMS the residual is
     // mostly the noise).
-    if (vl.ls.ok && vl.ls.theta[0] > 0.0 && vl.ls.theta[1] >= 0.0 &&
-        vl.less_noise(vl.ls.residual_rms) < 0.3 * vl.less_noise(vl.T_rms)) {
+    if (vl.gains_physical() && vl.less_noise(vl.ls.residual_rms) < 0.3 * vl.less_noise(vl.T_rms)) {
       set_velocity_loop(vl, f, ax.gains);
       ax.velocity_loop_from_data = true;
       ax.loop_source += fmt::format("; velocity loop from the logged torque against the speed error (residual "
                                     "{:.3g} of an RMS {:.3g}){}",
-                                    vl.ls.residual_rms, vl.T_rms, lead + clipped + fed_forward);
+                                    vl.ls.residual_rms, vl.T_rms, held_integral + lead + clipped + fed_forward);
       velocity_loop_lag(f, vl, clip ? &*clip : nullptr, ax);
       // Where the speed is taken from the position the law is fitted through
       // the low-pass, whose own lag the previous row's torque would fit.
@@ -3180,7 +3289,13 @@ std::optional<ChannelErrors> held_out_lowpassed(DataCalibration& out, const std:
 /// taken, the dead time is left to the catalogue search to propose as the
 /// delay (torque_lag_samples).
 void choose_torque_command(DataCalibration& out, const std::vector<RunData>& runs, const AxisFit& f) {
-  sim::MachineDefinition trial = out.identified;
+  // Both readings are replayed with the limit a law that holds its integral
+  // shows (its level from the log), so that what the limit does is not
+  // taken for what the current loop does.
+  sim::MachineDefinition limited = out.identified;
+  for (const AxisFromData& ax : out.axis)
+    if (ax.law_holds_integral_at_limit()) limited.axes[index(ax.axis)].loop.cascade.T_max = ax.law_limit_level;
+  sim::MachineDefinition trial = limited;
   AxisArray<std::optional<AxisFromData>> with{};
   const double dt = f.r0.sample_period_s;
   for (const AxisFromData& ax : out.axis) {
@@ -3196,6 +3311,7 @@ void choose_torque_command(DataCalibration& out, const std::vector<RunData>& run
     c.torque_command_logged = true;
     sim::AxisDefinition& def = trial.axes[index(ax.axis)];
     set_identified_axis(def, c);
+    if (c.law_holds_integral_at_limit()) def.loop.cascade.T_max = c.law_limit_level;
     if (m.rows > 0) {
       def.drive.effects.delay.enabled = true;
       def.drive.effects.delay.delay_s = static_cast<double>(m.rows) * dt;
@@ -3203,7 +3319,7 @@ void choose_torque_command(DataCalibration& out, const std::vector<RunData>& run
     with[index(ax.axis)] = std::move(c);
   }
   if (std::none_of(with.begin(), with.end(), [](const auto& c) { return c.has_value(); })) return;
-  const std::optional<ChannelErrors> motor_e = held_out_lowpassed(out, runs, out.identified);
+  const std::optional<ChannelErrors> motor_e = held_out_lowpassed(out, runs, limited);
   const std::optional<ChannelErrors> command_e = held_out_lowpassed(out, runs, trial);
   if (!motor_e || !command_e) return;
   const ChannelErrors &motor = *motor_e, &command = *command_e;

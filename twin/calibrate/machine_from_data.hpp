@@ -138,6 +138,16 @@ struct AxisFromData {
   /// encoder the velocity law shows (0: none shown); the law is then fitted
   /// with its constants by the stretches of motion.
   double law_gap_mm{0.0};
+  /// Where the logged torque stands at a limit after which the law resumes
+  /// from a constant its running integral does not give: a limit that holds
+  /// the velocity loop's integral while it clamps (anti-windup). The log's
+  /// rows at the limit, per fitting run (empty: none shown); the law is then
+  /// fitted without them and with a new constant after each stretch, and a
+  /// limit found on the axis clamps the law's command (its T_max, which holds
+  /// the integral alike) as well as the current.
+  std::vector<std::vector<char>> law_limit_rows;
+  double law_limit_level{0.0};  ///< the median |torque| the log holds at the limit
+  bool law_holds_integral_at_limit() const { return !law_limit_rows.empty(); }
   /// Where the law shows no lag of its own: the lag and dead time the drive
   /// fits the motion best at behind the logged torque (the drive's residual
   /// so, and at the torque's own rows), the candidate for a logged torque

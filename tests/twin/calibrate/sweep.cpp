@@ -9,7 +9,7 @@
 //   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed]
 //                            [--encoder-mm Q] [--current-lag S] [--torque-command] [--torque-step R]
 //                            [--kff K] [--jff J] [--friction load|sqrt|dahl] [--limit-on-command]
-//                            [--keep DIR]
+//                            [--anti-windup] [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
 // measured run, each on the truth's X plant, and its y reference on the Y
@@ -47,7 +47,8 @@
 // place of stick/slip (dahl); the last two are outside the catalogue.
 // --limit-on-command makes the limit cases a drive's own torque limit, the
 // velocity loop's command clamped (which a logged command shows), in place
-// of a current limit behind it.
+// of a current limit behind it; --anti-windup does so with the loop's
+// integral frozen while the limit clamps (conditional integration).
 #include <unistd.h>
 
 #include <algorithm>
@@ -179,6 +180,7 @@ struct CascadeOptions {
   double raw_step{0.0};            ///< the raw torque logged to multiples of this (0: as computed)
   std::string friction;            ///< a friction law beside every run's effect (empty: none)
   bool limit_on_command{false};    ///< the limit cases clamp the velocity loop's command, not the current
+  bool anti_windup{false};         ///< with limit_on_command: the integral frozen while the limit clamps
 };
 
 // A friction law added to every run of the sweep (--friction): the truth's
@@ -231,6 +233,7 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     const std::string also = add_friction(loop.friction, sp.effects).value_or("");
     if (loop.limit_on_command && sp.effects.i_max_A > 0.0) {
       sp.cascade.T_max_Nm = sp.plant.Kt * sp.effects.i_max_A;
+      sp.cascade.anti_windup = loop.anti_windup;
       sp.effects.i_max_A = 0.0;
     }
     try {
@@ -361,6 +364,8 @@ int main(int argc, char** argv) {
       }
     } else if (!std::strcmp(argv[i], "--limit-on-command")) {
       loop.limit_on_command = true;
+    } else if (!std::strcmp(argv[i], "--anti-windup")) {
+      loop.limit_on_command = loop.anti_windup = true;
     } else if (!std::strcmp(argv[i], "--torque-command")) {
       loop.log_torque_command = true;
     } else if (!std::strcmp(argv[i], "--no-motor-speed")) {

@@ -159,9 +159,11 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     const double v_motor = s.w_m * p.rg;
     if (cl.on) {
       const double ev = (vcmd - v_motor) / p.rg;
-      Iv += Ts * ev;
-      Tcmd = cl.Kvp * (ev + (cl.Tn > 0.0 ? Iv / cl.Tn : 0.0)) + cl.Jff * aref / p.rg;
-      if (cl.T_max_Nm > 0.0) Tcmd = std::clamp(Tcmd, -cl.T_max_Nm, cl.T_max_Nm);
+      const double Iv_next = Iv + Ts * ev;
+      Tcmd = cl.Kvp * (ev + (cl.Tn > 0.0 ? Iv_next / cl.Tn : 0.0)) + cl.Jff * aref / p.rg;
+      const bool clamped = cl.T_max_Nm > 0.0 && std::abs(Tcmd) > cl.T_max_Nm;
+      if (clamped) Tcmd = std::clamp(Tcmd, -cl.T_max_Nm, cl.T_max_Nm);
+      if (!(clamped && cl.anti_windup)) Iv = Iv_next;
       Tf = lag_a * Tf + (1.0 - lag_a) * Tcmd;
       u = Tf / (p.Ka * p.Kt);
     }

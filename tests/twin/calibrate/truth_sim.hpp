@@ -94,6 +94,9 @@ struct CascadeLaw {
   /// integral running on (no anti-windup); the plant's i_max_A limits the
   /// current behind it, which the command does not show.
   double T_max_Nm{0.0};
+  /// With T_max_Nm: the integral frozen on the ticks the limit clamps the
+  /// command (conditional integration, the anti-windup most drives have).
+  bool anti_windup{false};
   bool log_velocities{true};
   /// With log_velocities: also the motor's speed (false: the velocity
   /// command alone, as a CNC that traces its loop's output but not the
