@@ -9,7 +9,7 @@
 //   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed]
 //                            [--encoder-mm Q] [--current-lag S] [--torque-command] [--torque-step R]
 //                            [--kff K] [--jff J] [--friction load|sqrt|dahl] [--limit-on-command]
-//                            [--anti-windup] [--keep DIR]
+//                            [--anti-windup] [--contour] [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
 // measured run, each on the truth's X plant, and its y reference on the Y
@@ -49,6 +49,9 @@
 // velocity loop's command clamped (which a logged command shows), in place
 // of a current limit behind it; --anti-windup does so with the loop's
 // integral frozen while the limit clamps (conditional integration).
+// --contour makes both programs circular contours as one axis of them sees
+// it (contour_program: reversals through zero speed, no constant-speed
+// moves), the fitting program's arcs other than the validation's.
 #include <unistd.h>
 
 #include <algorithm>
@@ -181,6 +184,7 @@ struct CascadeOptions {
   std::string friction;            ///< a friction law beside every run's effect (empty: none)
   bool limit_on_command{false};    ///< the limit cases clamp the velocity loop's command, not the current
   bool anti_windup{false};         ///< with limit_on_command: the integral frozen while the limit clamps
+  bool contour{false};             ///< both programs of circular contours (contour_program), not moves
 };
 
 // A friction law added to every run of the sweep (--friction): the truth's
@@ -210,6 +214,9 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
   namespace ta = twin::analysis;
   const std::vector<double> fit_speeds{20.0, -35.0, 3.0, -12.0, 50.0, -30.0, 8.0, -4.0, 25.0, -25.0};
   const std::vector<double> val_speeds{30.0, -45.0, 5.0, -15.0, 40.0, -6.0, 12.0, -20.0};
+  const std::vector<std::pair<double, double>> fit_arcs{{10.0, 10.0}, {20.0, 40.0}, {5.0, 20.0},
+                                                        {25.0, 60.0}, {15.0, 5.0},  {5.0, 45.0}};
+  const std::vector<std::pair<double, double>> val_arcs{{12.0, 25.0}, {8.0, 50.0}, {20.0, 15.0}, {6.0, 8.0}};
   const auto tmp = std::filesystem::temp_directory_path() / ("calibrate_sweep_" + std::to_string(::getpid()));
   int wrong = 0, track = 0, torque = 0, rose = 0, total = 0;
   const std::string tq = "x_torque_raw", err = "x_err_mm";
@@ -237,9 +244,11 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
       sp.effects.i_max_A = 0.0;
     }
     try {
-      sp.reference_mm = twin::truth::moves_program(sp.Ts_s, fit_speeds, 24.0);
+      sp.reference_mm = loop.contour ? twin::truth::contour_program(sp.Ts_s, fit_arcs, 24.0)
+                                     : twin::truth::moves_program(sp.Ts_s, fit_speeds, 24.0);
       twin::truth::write_truth_run(dir / "fit", sp);
-      sp.reference_mm = twin::truth::moves_program(sp.Ts_s, val_speeds, 16.0);
+      sp.reference_mm = loop.contour ? twin::truth::contour_program(sp.Ts_s, val_arcs, 16.0)
+                                     : twin::truth::moves_program(sp.Ts_s, val_speeds, 16.0);
       sp.seed = 7;
       twin::truth::write_truth_run(dir / "validate", sp);
       const ta::MeasuredRun fit = ta::load_run(dir / "fit"), val = ta::load_run(dir / "validate");
@@ -364,6 +373,8 @@ int main(int argc, char** argv) {
       }
     } else if (!std::strcmp(argv[i], "--limit-on-command")) {
       loop.limit_on_command = true;
+    } else if (!std::strcmp(argv[i], "--contour")) {
+      loop.contour = true;
     } else if (!std::strcmp(argv[i], "--anti-windup")) {
       loop.limit_on_command = loop.anti_windup = true;
     } else if (!std::strcmp(argv[i], "--torque-command")) {

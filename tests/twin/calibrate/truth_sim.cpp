@@ -77,6 +77,26 @@ std::vector<double> moves_program(double Ts_s, const std::vector<double>& speeds
   return r;
 }
 
+std::vector<double> contour_program(double Ts_s, const std::vector<std::pair<double, double>>& arcs, double seconds) {
+  std::vector<double> r;
+  double x = 50.0;
+  const auto n = static_cast<std::size_t>(seconds / Ts_s);
+  for (std::size_t i = 0; r.size() < n; ++i) {
+    const auto [R, F] = arcs[i % arcs.size()];
+    const double c = x - R, alpha = 500.0 / R, w_max = F / R, end = 4.0 * kPi;
+    double th = 0.0, w = 0.0;
+    while (th < end && r.size() < n) {
+      const double left = end - th;
+      w = left <= 0.5 * w * w / alpha ? std::max(w - alpha * Ts_s, 0.05 * w_max) : std::min(w + alpha * Ts_s, w_max);
+      th = std::min(th + w * Ts_s, end);
+      r.push_back(c + R * std::cos(th));
+    }
+    x = c + R;
+    for (int k = 0; k < static_cast<int>(0.3 / Ts_s) && r.size() < n; ++k) r.push_back(x);
+  }
+  return r;
+}
+
 std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec& sp) {
   const Plant& p = sp.plant;
   const Effects& e = sp.effects;
