@@ -1152,8 +1152,9 @@ AxisRows axis_rows(const std::vector<RunData>& runs, const AxisFromData& ax) {
   return r;
 }
 
-/// The drive refitted with an effect: J and B stay; the Coulomb levels and
-/// the constant load move by what fitting the effect beside them moves them
+/// The drive refitted with an effect: J and B stay (or move too:
+/// drive_moved's move_J_B); the Coulomb levels and the constant load move
+/// by what fitting the effect beside them moves them
 /// (the joint fit against the same fit without it, both with the drive's
 /// columns a, v, [v > 0], -[v < 0], 1 first), since a Coulomb level fitted
 /// without the effect takes up part of it.
@@ -1170,15 +1171,27 @@ void set_drive(feeddrive::DriveParams& drive, const DriveRefit& d) {
   drive.effects.constant_load.torque_Nm = d.c;
 }
 /// `one_level`: the drive has one Coulomb level for both directions, which
-/// moves by the mean of what the two move by.
+/// moves by the mean of what the two move by. With `move_J_B`, J and B move
+/// so too: where the motion lines the effect up with the acceleration or
+/// the speed (a contour reverses through zero speed where its acceleration
+/// is largest), the rigid-body fit takes part of the effect into them.
 DriveRefit drive_moved(const feeddrive::DriveParams& cur, const LsqResult& joint, const LsqResult& without,
-                       bool one_level) {
+                       bool one_level, bool move_J_B = false) {
   const double c0 = cur.effects.constant_load.enabled ? cur.effects.constant_load.torque_Nm : 0.0;
   double dpos = joint.theta[2] - without.theta[2];
   double dneg = joint.theta[3] - without.theta[3];
   if (one_level) dpos = dneg = 0.5 * (dpos + dneg);
-  return {cur.J_kg_m2, cur.B_kg_m2_per_s, std::max(cur.Tc_pos_Nm + dpos, 0.0), std::max(cur.Tc_neg_Nm + dneg, 0.0),
-          c0 + joint.theta[4] - without.theta[4]};
+  const double dJ = move_J_B ? joint.theta[0] - without.theta[0] : 0.0;
+  const double dB = move_J_B ? joint.theta[1] - without.theta[1] : 0.0;
+  return {std::max(cur.J_kg_m2 + dJ, 0.0), std::max(cur.B_kg_m2_per_s + dB, 0.0), std::max(cur.Tc_pos_Nm + dpos, 0.0),
+          std::max(cur.Tc_neg_Nm + dneg, 0.0), c0 + joint.theta[4] - without.theta[4]};
+}
+
+/// What a drive refit with J and B moved says in the evidence ("" without).
+std::string moved_J_B_note(bool moved, const feeddrive::DriveParams& cur, const DriveRefit& d) {
+  if (!moved) return "";
+  return fmt::format("; the drive's J and B moved with it ({:.4g} -> {:.4g}, {:.4g} -> {:.4g}, in the channel's unit)",
+                     cur.J_kg_m2, d.J, cur.B_kg_m2_per_s, d.B);
 }
 
 /// A candidate: the effect, one or more parameter sets (the fitting rows'
@@ -1193,6 +1206,7 @@ struct Trial {
   std::optional<controller::CascadeGains> gains;
   std::string evidence;
   std::function<double(std::size_t row, const ParamSet& p, const DriveRefit* d)> torque;
+  std::vector<std::string> set_notes;  ///< said of each set where it is the one chosen (or empty)
 };
 
 sim::MachineDefinition with_trial(const sim::MachineDefinition& base, Axis a, const Trial& t, std::size_t set) {
@@ -1529,6 +1543,7 @@ void DataSearch::attempt(const Trial& t) {
   eff.axis = ax.axis;
   eff.evidence = t.evidence;
   BestSet b = best_set_on_fit_rows(t);
+  if (b.set < t.set_notes.size()) eff.evidence += t.set_notes[b.set];
   for (const auto& [k, v] : t.sets[b.set]) eff.params[param_key(t.kind, k)] = v;
   for (const auto& k : keys)
     if (const auto it = current.held.nrms.find(k); it != current.held.nrms.end()) eff.before_channels[k] = it->second;
@@ -1692,12 +1707,16 @@ void detect_stribeck_in_data(DataSearch& s) {
   for (double f : {0.7, 1.0, 1.4}) {
     const LsqResult ls = fit_at(f * best_ws);
     if (!ls.ok) continue;
-    const DriveRefit d = drive_moved(s.out.final_machine.axes[s.ai()].drive, ls, base, s.ax.one_coulomb_level);
     // The breakaway level as fitted on the axis's own motion.
     const double Ts_set = ls.theta[5];
-    if (!(Ts_set > std::max(d.Tc_pos, d.Tc_neg))) continue;
-    t.sets.push_back({{EffectParam::stribeck_Ts_static, Ts_set}, {EffectParam::stribeck_ws, f * best_ws}});
-    t.drives.push_back(d);
+    for (const bool move_J_B : {false, true}) {
+      const DriveRefit d =
+          drive_moved(s.out.final_machine.axes[s.ai()].drive, ls, base, s.ax.one_coulomb_level, move_J_B);
+      if (!(Ts_set > std::max(d.Tc_pos, d.Tc_neg))) continue;
+      t.sets.push_back({{EffectParam::stribeck_Ts_static, Ts_set}, {EffectParam::stribeck_ws, f * best_ws}});
+      t.drives.push_back(d);
+      t.set_notes.push_back(moved_J_B_note(move_J_B, s.out.final_machine.axes[s.ai()].drive, d));
+    }
   }
   t.evidence = fmt::format("friction rising to {:.4g} (t = {:.1f} over the Coulomb mean {:.4g}) below "
                            "{:.3g} mm/s cuts the fitting rows' torque residual from {:.4g} to {:.4g}",
@@ -1772,7 +1791,11 @@ void detect_position_dependent_friction_in_data(DataSearch& s) {
   t.sets = {{{EffectParam::position_dependent_friction_dTc_Nm, f.theta[5]},
              {EffectParam::position_dependent_friction_x_start_mm, x0},
              {EffectParam::position_dependent_friction_x_end_mm, x1}}};
-  t.drives = {drive_moved(s.out.final_machine.axes[s.ai()].drive, f, f0, s.ax.one_coulomb_level)};
+  t.sets.push_back(t.sets.front());
+  for (const bool move_J_B : {false, true}) {
+    t.drives.push_back(drive_moved(s.out.final_machine.axes[s.ai()].drive, f, f0, s.ax.one_coulomb_level, move_J_B));
+    t.set_notes.push_back(moved_J_B_note(move_J_B, s.out.final_machine.axes[s.ai()].drive, t.drives.back()));
+  }
   t.evidence = fmt::format("friction {:+.4g} (t = {:.1f}) between x = {:.4g} and {:.4g} mm, in the "
                            "channel's unit",
                            f.theta[5], t_of(f, 5), x0, x1);
