@@ -3365,6 +3365,7 @@ void choose_torque_command(DataCalibration& out, const std::vector<RunData>& run
           "rows replay {} low-passed to {:.4g} against {:.4g}{}",
           behind, m.residual, m.plain, ax.channel.column, e1->second, e0->second,
           tracking_ok ? "" : ", and the tracking error rises");
+      ax.loop_source += "; " + ax.torque_command_choice;
       continue;
     }
     const std::string before_note = ax.note;

@@ -570,7 +570,7 @@ TEST(RealLogs, ACurrentLoopLagIsIdentified) {
 // than the Stribeck rise's misfit (the drive fits the motion 0.42 ms behind,
 // residual 0.958 against 1.01, and replays the held-out rows' torque at
 // 0.3125 against 0.3081 read as the motor's): either reading must pass the
-// held-out check there.
+// held-out check there, and the report's loop line says which was taken.
 TEST(RealLogs, ATorqueCommandLoggedBeforeTheCurrentLoopIsFound) {
   truth::RunSpec sp = cascade_spec_with_stribeck(1e-3);
   sp.cascade.log_torque_command = true;
@@ -590,6 +590,9 @@ TEST(RealLogs, ATorqueCommandLoggedBeforeTheCurrentLoopIsFound) {
                 e.at("x_torque_raw"), r.validation_runs[0].regression.nrms.at("x_torque_raw"));
     if (tau_s < 0.001) {
       expect_held_out_check(r);
+      // Either reading, the report's loop line says which and why.
+      EXPECT_THAT(ax.loop_source, HasSubstr(ax.torque_command_logged ? "the logged torque is the loop's command"
+                                                                     : "the logged torque is taken as the motor's"));
       continue;
     }
     EXPECT_TRUE(ax.torque_command_logged) << ax.loop_source << "\n" << ax.torque_command_choice;
