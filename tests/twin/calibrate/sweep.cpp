@@ -9,7 +9,7 @@
 //   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed]
 //                            [--encoder-mm Q] [--current-lag S] [--torque-command] [--torque-step R]
 //                            [--kff K] [--jff J] [--friction load|sqrt|dahl] [--limit-on-command]
-//                            [--anti-windup] [--contour] [--keep DIR]
+//                            [--anti-windup] [--contour | --contour2] [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
 // measured run, each on the truth's X plant, and its y reference on the Y
@@ -51,7 +51,9 @@
 // integral frozen while the limit clamps (conditional integration).
 // --contour makes both programs circular contours as one axis of them sees
 // it (contour_program: reversals through zero speed, no constant-speed
-// moves), the fitting program's arcs other than the validation's.
+// moves), the fitting program's arcs other than the validation's;
+// --contour2 takes other arcs, one turn each, so that the fitting part (the
+// program's first 60 %) holds five arcs where --contour's holds one.
 #include <unistd.h>
 
 #include <algorithm>
@@ -184,7 +186,7 @@ struct CascadeOptions {
   std::string friction;            ///< a friction law beside every run's effect (empty: none)
   bool limit_on_command{false};    ///< the limit cases clamp the velocity loop's command, not the current
   bool anti_windup{false};         ///< with limit_on_command: the integral frozen while the limit clamps
-  bool contour{false};             ///< both programs of circular contours (contour_program), not moves
+  int contour{0};                  ///< both programs of circular contours (contour_program): 1 or 2; 0: moves
 };
 
 // A friction law added to every run of the sweep (--friction): the truth's
@@ -217,6 +219,10 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
   const std::vector<std::pair<double, double>> fit_arcs{{10.0, 10.0}, {20.0, 40.0}, {5.0, 20.0},
                                                         {25.0, 60.0}, {15.0, 5.0},  {5.0, 45.0}};
   const std::vector<std::pair<double, double>> val_arcs{{12.0, 25.0}, {8.0, 50.0}, {20.0, 15.0}, {6.0, 8.0}};
+  // --contour2: one turn each, the fitting part of five arcs and four dwells.
+  const std::vector<std::pair<double, double>> fit_arcs2{{20.0, 40.0}, {5.0, 45.0}, {4.0, 4.0},
+                                                         {25.0, 60.0}, {5.0, 20.0}, {10.0, 10.0}};
+  const std::vector<std::pair<double, double>> val_arcs2{{12.0, 25.0}, {8.0, 50.0}, {6.0, 8.0}, {20.0, 15.0}};
   const auto tmp = std::filesystem::temp_directory_path() / ("calibrate_sweep_" + std::to_string(::getpid()));
   int wrong = 0, track = 0, torque = 0, rose = 0, total = 0;
   const std::string tq = "x_torque_raw", err = "x_err_mm";
@@ -244,11 +250,13 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
       sp.effects.i_max_A = 0.0;
     }
     try {
-      sp.reference_mm = loop.contour ? twin::truth::contour_program(sp.Ts_s, fit_arcs, 24.0)
-                                     : twin::truth::moves_program(sp.Ts_s, fit_speeds, 24.0);
+      sp.reference_mm = loop.contour == 1   ? twin::truth::contour_program(sp.Ts_s, fit_arcs, 24.0)
+                        : loop.contour == 2 ? twin::truth::contour_program(sp.Ts_s, fit_arcs2, 24.0, 1)
+                                            : twin::truth::moves_program(sp.Ts_s, fit_speeds, 24.0);
       twin::truth::write_truth_run(dir / "fit", sp);
-      sp.reference_mm = loop.contour ? twin::truth::contour_program(sp.Ts_s, val_arcs, 16.0)
-                                     : twin::truth::moves_program(sp.Ts_s, val_speeds, 16.0);
+      sp.reference_mm = loop.contour == 1   ? twin::truth::contour_program(sp.Ts_s, val_arcs, 16.0)
+                        : loop.contour == 2 ? twin::truth::contour_program(sp.Ts_s, val_arcs2, 16.0, 1)
+                                            : twin::truth::moves_program(sp.Ts_s, val_speeds, 16.0);
       sp.seed = 7;
       twin::truth::write_truth_run(dir / "validate", sp);
       const ta::MeasuredRun fit = ta::load_run(dir / "fit"), val = ta::load_run(dir / "validate");
@@ -374,7 +382,9 @@ int main(int argc, char** argv) {
     } else if (!std::strcmp(argv[i], "--limit-on-command")) {
       loop.limit_on_command = true;
     } else if (!std::strcmp(argv[i], "--contour")) {
-      loop.contour = true;
+      loop.contour = 1;
+    } else if (!std::strcmp(argv[i], "--contour2")) {
+      loop.contour = 2;
     } else if (!std::strcmp(argv[i], "--anti-windup")) {
       loop.limit_on_command = loop.anti_windup = true;
     } else if (!std::strcmp(argv[i], "--torque-command")) {

@@ -77,13 +77,14 @@ std::vector<double> moves_program(double Ts_s, const std::vector<double>& speeds
   return r;
 }
 
-std::vector<double> contour_program(double Ts_s, const std::vector<std::pair<double, double>>& arcs, double seconds) {
+std::vector<double> contour_program(double Ts_s, const std::vector<std::pair<double, double>>& arcs, double seconds,
+                                    int turns) {
   std::vector<double> r;
   double x = 50.0;
   const auto n = static_cast<std::size_t>(seconds / Ts_s);
   for (std::size_t i = 0; r.size() < n; ++i) {
     const auto [R, F] = arcs[i % arcs.size()];
-    const double c = x - R, alpha = 500.0 / R, w_max = F / R, end = 4.0 * kPi;
+    const double c = x - R, alpha = 500.0 / R, w_max = F / R, end = 2.0 * kPi * turns;
     double th = 0.0, w = 0.0;
     while (th < end && r.size() < n) {
       const double left = end - th;

@@ -139,12 +139,13 @@ struct RunSpec {
 std::vector<double> moves_program(double Ts_s, const std::vector<double>& speeds, double seconds);
 
 /// A reference of one axis of circular contours (a part program's pockets
-/// and bosses as one axis sees them): per arc (radius mm, feed mm/s), two
-/// turns of x = c + R cos(theta) from the axis's position, the feed reached
+/// and bosses as one axis sees them): per arc (radius mm, feed mm/s),
+/// `turns` turns of x = c + R cos(theta) from the axis's position, the feed reached
 /// and left at 500 mm/s^2 along the path, 0.3 s dwells between, the arcs in
 /// turn for `seconds`. The axis reverses through zero speed at every half
 /// turn with the path's acceleration F^2 / R.
-std::vector<double> contour_program(double Ts_s, const std::vector<std::pair<double, double>>& arcs, double seconds);
+std::vector<double> contour_program(double Ts_s, const std::vector<std::pair<double, double>>& arcs, double seconds,
+                                    int turns = 2);
 
 /// The cascade runs of the data-path tests: the perturbed X plant with
 /// Coulomb 0.25 / 0.15 N m and a 0.05 N m load, Kv 45, kff 0.6, Kvp 0.5,
