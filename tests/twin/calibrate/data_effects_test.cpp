@@ -45,15 +45,6 @@ std::vector<double> program(double Ts_s, const std::vector<double>& speeds, doub
 // program: other speeds, another order.
 const std::vector<double> kFitSpeeds{20.0, -35.0, 3.0, -12.0, 50.0, -30.0, 8.0, -4.0, 25.0, -25.0};
 const std::vector<double> kValSpeeds{30.0, -45.0, 5.0, -15.0, 40.0, -6.0, 12.0, -20.0};
-// Or circular contours (radius mm, feed mm/s), as calibrate_sweep --contour.
-const std::vector<std::pair<double, double>> kFitArcs{{10.0, 10.0}, {20.0, 40.0}, {5.0, 20.0},
-                                                      {25.0, 60.0}, {15.0, 5.0},  {5.0, 45.0}};
-const std::vector<std::pair<double, double>> kValArcs{{12.0, 25.0}, {8.0, 50.0}, {20.0, 15.0}, {6.0, 8.0}};
-// And as calibrate_sweep --contour2: one turn each, five arcs in the fitting part.
-const std::vector<std::pair<double, double>> kFitArcs2{{20.0, 40.0}, {5.0, 45.0}, {4.0, 4.0},
-                                                       {25.0, 60.0}, {5.0, 20.0}, {10.0, 10.0}};
-const std::vector<std::pair<double, double>> kValArcs2{{12.0, 25.0}, {8.0, 50.0}, {6.0, 8.0}, {20.0, 15.0}};
-
 truth::RunSpec cascade_spec() { return truth::cascade_run_spec(kRawPerNm, 0.001); }
 
 struct Outcome {
@@ -66,16 +57,16 @@ struct Outcome {
 // torque is logged raw); else the cascade spec's 0.002.
 // The fitting program's run and the validation program's (another seed) of
 // the truth with `sp`, written under `name` and read back as measured runs.
-/// `contour`: 0 the moves programs, 1 and 2 the contour programs above.
+/// `contour`: 0 the moves programs, 1 and 2 truth::contour_programs (as
+/// calibrate_sweep --contour and --contour2).
 std::pair<MeasuredRun, MeasuredRun> truth_runs(const std::string& name, truth::RunSpec sp, int contour = 0) {
-  sp.reference_mm = contour == 1   ? truth::contour_program(sp.Ts_s, kFitArcs, 24.0)
-                    : contour == 2 ? truth::contour_program(sp.Ts_s, kFitArcs2, 24.0, 1)
-                                   : program(sp.Ts_s, kFitSpeeds, 24.0);
+  const truth::ContourPrograms cp = truth::contour_programs(contour);
+  sp.reference_mm = contour > 0 ? truth::contour_program(sp.Ts_s, cp.fit_arcs, 24.0, cp.turns)
+                                : program(sp.Ts_s, kFitSpeeds, 24.0);
   const auto fit_dir = work(name + "_fit");
   truth::write_truth_run(fit_dir, sp);
-  sp.reference_mm = contour == 1   ? truth::contour_program(sp.Ts_s, kValArcs, 16.0)
-                    : contour == 2 ? truth::contour_program(sp.Ts_s, kValArcs2, 16.0, 1)
-                                   : program(sp.Ts_s, kValSpeeds, 16.0);
+  sp.reference_mm = contour > 0 ? truth::contour_program(sp.Ts_s, cp.val_arcs, 16.0, cp.turns)
+                                : program(sp.Ts_s, kValSpeeds, 16.0);
   sp.seed = 7;
   const auto val_dir = work(name + "_val");
   truth::write_truth_run(val_dir, sp);

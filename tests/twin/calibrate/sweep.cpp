@@ -216,13 +216,6 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
   namespace ta = twin::analysis;
   const std::vector<double> fit_speeds{20.0, -35.0, 3.0, -12.0, 50.0, -30.0, 8.0, -4.0, 25.0, -25.0};
   const std::vector<double> val_speeds{30.0, -45.0, 5.0, -15.0, 40.0, -6.0, 12.0, -20.0};
-  const std::vector<std::pair<double, double>> fit_arcs{{10.0, 10.0}, {20.0, 40.0}, {5.0, 20.0},
-                                                        {25.0, 60.0}, {15.0, 5.0},  {5.0, 45.0}};
-  const std::vector<std::pair<double, double>> val_arcs{{12.0, 25.0}, {8.0, 50.0}, {20.0, 15.0}, {6.0, 8.0}};
-  // --contour2: one turn each, the fitting part of five arcs and four dwells.
-  const std::vector<std::pair<double, double>> fit_arcs2{{20.0, 40.0}, {5.0, 45.0}, {4.0, 4.0},
-                                                         {25.0, 60.0}, {5.0, 20.0}, {10.0, 10.0}};
-  const std::vector<std::pair<double, double>> val_arcs2{{12.0, 25.0}, {8.0, 50.0}, {6.0, 8.0}, {20.0, 15.0}};
   const auto tmp = std::filesystem::temp_directory_path() / ("calibrate_sweep_" + std::to_string(::getpid()));
   int wrong = 0, track = 0, torque = 0, rose = 0, total = 0;
   const std::string tq = "x_torque_raw", err = "x_err_mm";
@@ -250,13 +243,12 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
       sp.effects.i_max_A = 0.0;
     }
     try {
-      sp.reference_mm = loop.contour == 1   ? twin::truth::contour_program(sp.Ts_s, fit_arcs, 24.0)
-                        : loop.contour == 2 ? twin::truth::contour_program(sp.Ts_s, fit_arcs2, 24.0, 1)
-                                            : twin::truth::moves_program(sp.Ts_s, fit_speeds, 24.0);
+      const twin::truth::ContourPrograms cp = twin::truth::contour_programs(loop.contour);
+      sp.reference_mm = loop.contour > 0 ? twin::truth::contour_program(sp.Ts_s, cp.fit_arcs, 24.0, cp.turns)
+                                         : twin::truth::moves_program(sp.Ts_s, fit_speeds, 24.0);
       twin::truth::write_truth_run(dir / "fit", sp);
-      sp.reference_mm = loop.contour == 1   ? twin::truth::contour_program(sp.Ts_s, val_arcs, 16.0)
-                        : loop.contour == 2 ? twin::truth::contour_program(sp.Ts_s, val_arcs2, 16.0, 1)
-                                            : twin::truth::moves_program(sp.Ts_s, val_speeds, 16.0);
+      sp.reference_mm = loop.contour > 0 ? twin::truth::contour_program(sp.Ts_s, cp.val_arcs, 16.0, cp.turns)
+                                         : twin::truth::moves_program(sp.Ts_s, val_speeds, 16.0);
       sp.seed = 7;
       twin::truth::write_truth_run(dir / "validate", sp);
       const ta::MeasuredRun fit = ta::load_run(dir / "fit"), val = ta::load_run(dir / "validate");

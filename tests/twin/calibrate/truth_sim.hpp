@@ -6,6 +6,7 @@
 // (trace.csv + meta.json) that `calibrate` reads without being told what is in it.
 #include <filesystem>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "tests/feeddrive/fadal_fixture.hpp"
@@ -146,6 +147,25 @@ std::vector<double> moves_program(double Ts_s, const std::vector<double>& speeds
 /// turn with the path's acceleration F^2 / R.
 std::vector<double> contour_program(double Ts_s, const std::vector<std::pair<double, double>>& arcs, double seconds,
                                     int turns = 2);
+
+/// The contour programs of the data-path tests and calibrate_sweep: the
+/// fitting program's arcs, the validation program's, and the turns of each.
+/// 1: two turns each; the fitting part (the first 60 %) is its first arc and
+/// 1.5 s of the second. 2: a turn each; five arcs and four dwells in the
+/// fitting part.
+struct ContourPrograms {
+  std::vector<std::pair<double, double>> fit_arcs, val_arcs;
+  int turns{2};
+};
+inline ContourPrograms contour_programs(int which) {
+  if (which == 2)
+    return {{{20.0, 40.0}, {5.0, 45.0}, {4.0, 4.0}, {25.0, 60.0}, {5.0, 20.0}, {10.0, 10.0}},
+            {{12.0, 25.0}, {8.0, 50.0}, {6.0, 8.0}, {20.0, 15.0}},
+            1};
+  return {{{10.0, 10.0}, {20.0, 40.0}, {5.0, 20.0}, {25.0, 60.0}, {15.0, 5.0}, {5.0, 45.0}},
+          {{12.0, 25.0}, {8.0, 50.0}, {20.0, 15.0}, {6.0, 8.0}},
+          2};
+}
 
 /// The cascade runs of the data-path tests: the perturbed X plant with
 /// Coulomb 0.25 / 0.15 N m and a 0.05 N m load, Kv 45, kff 0.6, Kvp 0.5,
