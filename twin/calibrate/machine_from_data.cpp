@@ -1683,8 +1683,10 @@ void detect_stribeck_in_data(DataSearch& s) {
     }
     return least_squares({&rows.acc, &rows.vel, &p1, &n1, &rows.one, &sg}, rows.T, fit_rows, s.corr);
   };
-  // The drive without the curve: on every row, its columns; on the moving
-  // rows alone the constant is one with the levels there, so it is left out.
+  // The drive without the curve on every row: what the drive refits move
+  // from (to the curve's fit on the moving rows too, where that is the one
+  // taken). The moving rows' own comparison fit, below, leaves the constant
+  // out: there it is one with the two levels.
   const LsqResult base = least_squares(s.base_cols, rows.T, rows.all, s.corr);
   if (!base.ok) return;
   struct Scan {
