@@ -1819,8 +1819,22 @@ void detect_position_dependent_friction_in_data(DataSearch& s) {
   const auto band = friction_band(bins, kBins, min_rows);
   if (!band) return;
   const double w = (rows.x_hi - rows.x_lo) / static_cast<double>(kBins);
-  const double x0 = rows.x_lo + w * static_cast<double>(band->first);
-  const double x1 = rows.x_lo + w * static_cast<double>(band->second + 1);
+  double x0 = rows.x_lo + w * static_cast<double>(band->first);
+  double x1 = rows.x_lo + w * static_cast<double>(band->second + 1);
+  // A band that reaches an end of the travel the axis moves over goes on
+  // past it as far as the data shows: to the rows at rest beyond it, and
+  // half a bin further. A program that stops at the end of its travel
+  // (a contour's dwells where its arcs start and end) holds its stops
+  // there, and their breakaway is the band's: cut at the last moving row,
+  // the replay's stops slipped out of the held torque (on the contour sweep,
+  // held-out torque 0.25 against 0.13 without the band).
+  double x_rest_lo = x0, x_rest_hi = x1;
+  for (std::size_t k : rows.all) {
+    x_rest_lo = std::min(x_rest_lo, rows.x[k]);
+    x_rest_hi = std::max(x_rest_hi, rows.x[k]);
+  }
+  if (band->first == 0) x0 = x_rest_lo - 0.5 * w;
+  if (band->second + 1 == kBins) x1 = x_rest_hi + 0.5 * w;
   std::vector<double> psi(rows.all.size(), 0.0);
   for (std::size_t k : rows.all)
     if (feeddrive::in_friction_band(rows.x[k], x0, x1)) psi[k] = rows.dir[k];

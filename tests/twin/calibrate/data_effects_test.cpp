@@ -180,6 +180,37 @@ TEST(DataEffects, PositionDependentFrictionIsFound) {
   expect_validation_improves(o);
 }
 
+// The same band on the two contour programs, whose arcs all start and end
+// at x = 50 mm, inside it: the axis moves over x = 0 .. 50 and stops at 50
+// between arcs, so the band runs from 40 to the end of the travel and the
+// stops are held in it. Before, the band ended at the last moving row
+// (49.99 mm); the stops at 50.00 fell outside it, their breakaway 4 raw
+// lower than the truth's, and the replay slipped out of every stop: the
+// held-out torque rose 0.13 -> 0.25 on the second program, and the band was
+// not kept. Oracles: the band's start within 3 mm as in
+// PositionDependentFrictionIsFound; its end at or past the stops at 50 (the
+// truth's 60 is beyond any row, so no further end can be asked), and at most
+// a bin (under 1 mm) past them; the rise within 25 %; only the band kept;
+// the held-out machine's check and the other program improved.
+TEST(DataEffects, PositionDependentFrictionIsFoundOnContours) {
+  truth::RunSpec sp = cascade_spec();
+  sp.effects.pdf_dTc = 0.1;
+  sp.effects.pdf_x0 = 40.0;
+  sp.effects.pdf_x1 = 60.0;
+  for (const int contour : {1, 2}) {
+    SCOPED_TRACE(contour);
+    const Outcome o = calibrate_spec("pdf_contour" + std::to_string(contour), sp, contour);
+    expect_only(o, "position_dependent_friction");
+    const DataEffect& e = kept_effect(o, "position_dependent_friction");
+    EXPECT_NEAR(e.params.at("x_start_mm"), 40.0, 3.0) << describe(o);
+    EXPECT_GE(e.params.at("x_end_mm"), 50.0) << describe(o);
+    EXPECT_LE(e.params.at("x_end_mm"), 51.0) << describe(o);
+    EXPECT_NEAR(e.params.at("dTc_Nm"), 0.1 * kRawPerNm, 0.25 * 0.1 * kRawPerNm) << describe(o);
+    expect_held_out_machine_check(o);
+    expect_validation_improves(o);
+  }
+}
+
 // A lead error of 4 um with a period of 8 mm on a 1 um encoder: the
 // amplitude within 20 % and the period within 0.5 % (a regression of the
 // logged speed on the speed of the logged position, whose 1 um steps are
