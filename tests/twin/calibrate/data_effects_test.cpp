@@ -533,6 +533,47 @@ TEST(DataEffects, ALimitThatHoldsTheIntegralIsFoundInTheLaw) {
   }
 }
 
+// A limit on the motor's current (8 A and 7.2 A: 152.6 and 137.3 raw) behind
+// a 1 ms current loop, where the log holds the velocity loop's command before
+// both. The log never shows the limit: the command runs on past it, the more
+// as the loop falls behind the motion it cannot get. Before, the command
+// reading was refused (its replay without the limit was no better than the
+// motor reading's), the limit was never looked for, and load-dependent and
+// rising friction were named; at 7.2 A the other program tracked at 0.030.
+// Now the drive is fitted on the motor's torque rebuilt from the command,
+// clipped at a scan of levels (limit_in_motion), for the command reading's
+// replay and for the catalogue's candidate. Cases: both limits with the
+// motor's speed, and 8 A without it. Oracles: the command reading taken,
+// only current_saturation kept, its level within 2 % (the scan's step is
+// 1 %), no limit on the law's command (the truth clips the current, not the
+// command, and the integral runs on), and the held-out machine's check.
+TEST(DataEffects, ACurrentLimitBehindALoggedCommandIsFoundInTheMotion) {
+  struct Case {
+    const char* name;
+    double i_max_A;
+    bool motor_speed;
+  };
+  for (const Case c : {Case{"limit_behind_command_8A", 8.0, true}, Case{"limit_behind_command_7A", 7.2, true},
+                       Case{"limit_behind_command_no_speed", 8.0, false}}) {
+    SCOPED_TRACE(c.name);
+    truth::RunSpec sp = cascade_spec();
+    sp.effects.i_max_A = c.i_max_A;
+    sp.cascade.tau_i = 0.001;
+    sp.cascade.log_torque_command = true;
+    sp.cascade.log_motor_speed = c.motor_speed;
+    const Outcome o = calibrate_spec(c.name, sp);
+    ASSERT_EQ(o.r.axis.size(), 1u);
+    const AxisFromData& ax = o.r.axis[0];
+    EXPECT_TRUE(ax.torque_command_logged) << ax.loop_source;
+    expect_only(o, "current_saturation");
+    const double limit_raw = kRawPerNm * 0.4769 * c.i_max_A;
+    EXPECT_NEAR(kept_effect(o, "current_saturation").params.at("i_max_A"), limit_raw, 0.02 * limit_raw)
+        << describe(o);
+    EXPECT_GT(o.r.final_machine.axes[index(Axis::kX)].loop.cascade.T_max, 1e6);
+    expect_held_out_machine_check(o);
+  }
+}
+
 // The ripple of CoggingIsFound under noise of 0.2 N m (a ripple of a third
 // of the noise's RMS). The detector's standard errors count the residual's
 // correlation over 10 ms only for the share of its variance that is not the
