@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -93,6 +94,15 @@ Outcome calibrate_truth(const std::string& name, const truth::Effects& fx, doubl
   sp.effects = fx;
   sp.effects.load_Nm = load;
   return calibrate_spec(name, sp);
+}
+
+/// The runs of `sp` on both contour programs (truth::contour_programs),
+/// each calibrated and validated as calibrate_spec, and `check` on each.
+void on_contours(const std::string& name, const truth::RunSpec& sp, const std::function<void(const Outcome&)>& check) {
+  for (const int contour : {1, 2}) {
+    SCOPED_TRACE(contour);
+    check(calibrate_spec(name + std::to_string(contour), sp, contour));
+  }
 }
 
 const DataEffect& kept_effect(const Outcome& o, const std::string& name) {
@@ -197,9 +207,7 @@ TEST(DataEffects, PositionDependentFrictionIsFoundOnContours) {
   sp.effects.pdf_dTc = 0.1;
   sp.effects.pdf_x0 = 40.0;
   sp.effects.pdf_x1 = 60.0;
-  for (const int contour : {1, 2}) {
-    SCOPED_TRACE(contour);
-    const Outcome o = calibrate_spec("pdf_contour" + std::to_string(contour), sp, contour);
+  on_contours("pdf_contour", sp, [&](const Outcome& o) {
     expect_only(o, "position_dependent_friction");
     const DataEffect& e = kept_effect(o, "position_dependent_friction");
     EXPECT_NEAR(e.params.at("x_start_mm"), 40.0, 3.0) << describe(o);
@@ -208,7 +216,7 @@ TEST(DataEffects, PositionDependentFrictionIsFoundOnContours) {
     EXPECT_NEAR(e.params.at("dTc_Nm"), 0.1 * kRawPerNm, 0.25 * 0.1 * kRawPerNm) << describe(o);
     expect_held_out_machine_check(o);
     expect_validation_improves(o);
-  }
+  });
 }
 
 // A lead error of 4 um with a period of 8 mm on a 1 um encoder: the
@@ -351,9 +359,7 @@ TEST(DataEffects, StribeckIsFoundOnContours) {
   truth::RunSpec sp = cascade_spec();
   sp.effects.stribeck_Ts = 0.45;
   sp.effects.stribeck_ws = 3.0;
-  for (const int contour : {1, 2}) {
-    SCOPED_TRACE(contour);
-    const Outcome o = calibrate_spec("stribeck_contour" + std::to_string(contour), sp, contour);
+  on_contours("stribeck_contour", sp, [&](const Outcome& o) {
     expect_only(o, "stribeck");
     const feeddrive::DriveParams& d = o.r.final_machine.axes[index(Axis::kX)].drive;
     EXPECT_NEAR(d.J_kg_m2, kRawPerNm * sp.plant.J / kRg, 0.05 * kRawPerNm * sp.plant.J / kRg) << describe(o);
@@ -363,7 +369,7 @@ TEST(DataEffects, StribeckIsFoundOnContours) {
     EXPECT_NEAR(e.params.at("ws"), 3.0 * kRg, 0.15 * 3.0 * kRg) << describe(o);
     expect_held_out_machine_check(o);
     expect_validation_improves(o);
-  }
+  });
 }
 
 // A gap of 20 um between the motor and the table, the encoder on the table
