@@ -1074,6 +1074,8 @@ struct AxisRows {
   bool measured_speed{true};
   std::vector<std::size_t> all, moving;
   double v_move{0.0}, v_high{0.0}, x_lo{0.0}, x_hi{0.0};
+  /// The drive's columns a, v, [v > 0], -[v < 0], 1.
+  std::vector<const std::vector<double>*> drive_columns() const { return {&acc, &vel, &pos, &neg, &one}; }
 };
 
 /// The motor's torque rebuilt from a logged torque command, within each
@@ -1535,6 +1537,18 @@ void DataSearch::keep(const Trial& t, std::size_t best, FitRunErrors&& best_e) {
   current = std::move(best_e);
 }
 
+/// `set` offered twice, with the drive refitted from `joint` against
+/// `without` (drive_moved) keeping J and B and moving them, each with its note.
+void offer_with_drive_refits(Trial& t, const DataSearch& s, const ParamSet& set, const LsqResult& joint,
+                             const LsqResult& without) {
+  const feeddrive::DriveParams& cur = s.out.final_machine.axes[s.ai()].drive;
+  for (const bool move_J_B : {false, true}) {
+    t.sets.push_back(set);
+    t.drives.push_back(drive_moved(cur, joint, without, s.ax.one_coulomb_level, move_J_B));
+    t.set_notes.push_back(moved_J_B_note(move_J_B, cur, t.drives.back()));
+  }
+}
+
 /// Replays each of the trial's sets on the fitting rows, the best on the
 /// held-out rows, and keeps the effect where the held-out error falls.
 void DataSearch::attempt(const Trial& t) {
@@ -1629,7 +1643,7 @@ struct LimitInMotion {
   LsqResult clipped, plain;
 };
 std::optional<LimitInMotion> limit_in_motion(const AxisRows& rows, double corr) {
-  const std::vector<const std::vector<double>*> cols{&rows.acc, &rows.vel, &rows.pos, &rows.neg, &rows.one};
+  const std::vector<const std::vector<double>*> cols = rows.drive_columns();
   std::vector<double> mag;
   mag.reserve(rows.all.size());
   for (std::size_t k : rows.all) mag.push_back(std::abs(rows.T[k]));
@@ -1663,12 +1677,7 @@ void current_limit_from_motion(DataSearch& s) {
   if (!lim) return;
   Trial t;
   t.kind = EffectKind::kCurrentSaturation;
-  for (const bool move_J_B : {false, true}) {
-    t.sets.push_back({{EffectParam::current_saturation_i_max_A, lim->level}});
-    t.drives.push_back(
-        drive_moved(s.out.final_machine.axes[s.ai()].drive, lim->clipped, lim->plain, s.ax.one_coulomb_level, move_J_B));
-    t.set_notes.push_back(moved_J_B_note(move_J_B, s.out.final_machine.axes[s.ai()].drive, t.drives.back()));
-  }
+  offer_with_drive_refits(t, s, {{EffectParam::current_saturation_i_max_A, lim->level}}, lim->clipped, lim->plain);
   t.evidence = fmt::format(
       "the log's {} is the loop's command, which a limit on the motor's current does not clip: the motion answers "
       "to that command clipped at {:.4g} (in the channel's unit; {} of its rows beyond), which takes the drive's "
@@ -1927,14 +1936,11 @@ void detect_position_dependent_friction_in_data(DataSearch& s) {
   if (!(f.ok && f0.ok && f.theta[5] > 0.0 && t_of(f, 5) >= kMinT)) return;
   Trial t;
   t.kind = EffectKind::kPositionDependentFriction;
-  t.sets = {{{EffectParam::position_dependent_friction_dTc_Nm, f.theta[5]},
-             {EffectParam::position_dependent_friction_x_start_mm, x0},
-             {EffectParam::position_dependent_friction_x_end_mm, x1}}};
-  t.sets.push_back(t.sets.front());
-  for (const bool move_J_B : {false, true}) {
-    t.drives.push_back(drive_moved(s.out.final_machine.axes[s.ai()].drive, f, f0, s.ax.one_coulomb_level, move_J_B));
-    t.set_notes.push_back(moved_J_B_note(move_J_B, s.out.final_machine.axes[s.ai()].drive, t.drives.back()));
-  }
+  offer_with_drive_refits(t, s,
+                          {{EffectParam::position_dependent_friction_dTc_Nm, f.theta[5]},
+                           {EffectParam::position_dependent_friction_x_start_mm, x0},
+                           {EffectParam::position_dependent_friction_x_end_mm, x1}},
+                          f, f0);
   t.evidence = fmt::format("friction {:+.4g} (t = {:.1f}) between x = {:.4g} and {:.4g} mm, in the "
                            "channel's unit",
                            f.theta[5], t_of(f, 5), x0, x1);
@@ -2290,7 +2296,7 @@ FitRunErrors search_catalogue_effects(DataCalibration& out, const std::vector<Ru
     if (!ax.identified) continue;
     DataSearch s{out, runs, ax, current, axis_rows(runs, ax), axis_keys(ax), {}};
     if (s.rows.moving.size() < 200) continue;
-    s.base_cols = {&s.rows.acc, &s.rows.vel, &s.rows.pos, &s.rows.neg, &s.rows.one};
+    s.base_cols = s.rows.drive_columns();
     s.dt = dt;
     s.q = q;
     s.fast = dt <= 2e-3 + 1e-12;
@@ -3485,8 +3491,7 @@ void choose_torque_command(DataCalibration& out, const std::vector<RunData>& run
     // the limit is not held against the reading. The machine keeps the
     // drive fitted as before; the catalogue search proposes the limit.
     const AxisRows rows = axis_rows(runs, c);
-    const double corr =
-        residual_correlation_rows(rows, {&rows.acc, &rows.vel, &rows.pos, &rows.neg, &rows.one}, 0.0, dt);
+    const double corr = residual_correlation_rows(rows, rows.drive_columns(), 0.0, dt);
     if (const auto lim = limit_in_motion(rows, corr); lim && lim->clipped.theta[0] > 0.0) {
       const std::vector<double>& th = lim->clipped.theta;
       set_drive(def.drive, DriveRefit{th[0], std::max(th[1], 0.0), std::max(th[2], 0.0), std::max(th[3], 0.0), th[4]});
