@@ -7,7 +7,9 @@ baselines (standard library only).
 For every run folder in RUNS_DIR: `twin calibrate RUN -o OUT_DIR/RUN` (fitted
 on the first 60 % of the rows, judged on the rest), then the held-out NRMS of
 each torque channel for the twin, the rigid-body regression and the zero
-model, per run and pooled (root of the row-weighted mean square). With
+model, per run and pooled (root of the row-weighted mean square), and the
+90 % interval of the twin's NRMS minus the regression's over 1 s blocks of
+the rows (report.json's twin_minus_regression). With
 --cross RUN: calibrated on RUN alone and validated on every other run (whole
 runs, never fitted on), the same table. --jobs N calibrates N runs at once.
 Prints markdown tables.
@@ -33,8 +35,9 @@ def calibrate(twin, runs, out, validate=()):
 
 
 def table(rows, keys):
-    print("| run | channel | rows | twin | rigid-body regression | zero | twin beats regression |")
-    print("|---|---|---|---|---|---|---|")
+    print("| run | channel | rows | twin | rigid-body regression | zero | twin beats regression | "
+          "twin - regression, 90 % interval |")
+    print("|---|---|---|---|---|---|---|---|")
     pooled = {}
     for name, entry in rows:
         n = entry["rows_compared"]
@@ -43,16 +46,18 @@ def table(rows, keys):
             rg = entry["baseline"]["rigid_body_regression"].get(k)
             zr = entry["baseline"]["zero"].get(k)
             if tw is None or rg is None:
-                print(f"| {name} | {k} | {n} | {tw} | {rg} | {zr} | not computed |")
+                print(f"| {name} | {k} | {n} | {tw} | {rg} | {zr} | not computed | |")
                 continue
-            print(f"| {name} | {k} | {n} | {tw:.4g} | {rg:.4g} | {zr:.4g} | {'yes' if tw < rg else 'no'} |")
+            d = entry.get("twin_minus_regression", {}).get(k)
+            iv = f"{d['interval_90'][0]:+.3f} to {d['interval_90'][1]:+.3f}" if d else "not computed"
+            print(f"| {name} | {k} | {n} | {tw:.4g} | {rg:.4g} | {zr:.4g} | {'yes' if tw < rg else 'no'} | {iv} |")
             p = pooled.setdefault(k, [0.0, 0.0, 0])
             p[0] += tw * tw * n
             p[1] += rg * rg * n
             p[2] += n
     for k, (t2, r2, n) in pooled.items():
         t, r = math.sqrt(t2 / n), math.sqrt(r2 / n)
-        print(f"| pooled | {k} | {n} | {t:.4g} | {r:.4g} | 1 | {'yes' if t < r else 'no'} |")
+        print(f"| pooled | {k} | {n} | {t:.4g} | {r:.4g} | 1 | {'yes' if t < r else 'no'} | |")
 
 
 def main():

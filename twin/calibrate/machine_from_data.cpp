@@ -3287,7 +3287,8 @@ void skip_unseen_effects(const std::vector<MeasuredRun>& fit, DataCalibration& o
 /// Replays `machine` on `rd` and puts its errors on rows [from, to) in `dst`
 /// (the replay kept in `keep`, the pools added to `pooled`, where given).
 void errors_on(DataCalibration& out, const sim::MachineDefinition& machine, const RunData& rd, std::size_t from,
-               std::size_t to, bool same_unit, ReplayResult* keep, ChannelErrors& dst, PoolSet* pooled) {
+               std::size_t to, bool same_unit, ReplayResult* keep, ChannelErrors& dst, PoolSet* pooled,
+               std::vector<char>* compared = nullptr) {
   PoolSet pools;
   std::vector<char> cmp;
   try {
@@ -3300,6 +3301,7 @@ void errors_on(DataCalibration& out, const sim::MachineDefinition& machine, cons
     dst = errors_from(pools);
     for (auto& [k, why] : nc) dst.not_computed[k] = why;
     if (keep) *keep = std::move(rr);
+    if (compared) *compared = std::move(cmp);
     if (pooled)
       for (const auto& [k, p] : pools) (*pooled)[k].add(p);
   } catch (const Error& e) {
@@ -4028,6 +4030,47 @@ struct ModelPools {
   PoolSet nominal, identified, calibrated, zero, regression;
 };
 
+/// The regression's torque at row k of axis i.
+double regression_torque(const Regression& reg, const RunData& rd, std::size_t i, std::size_t k) {
+  const auto& kin = rd.kin[i];
+  const double v = kin.v_mm_per_s[k];
+  return reg.theta[0] * kin.a_mm_per_s2[k] + reg.theta[1] * direction(v, rd.v_move[i]) + reg.theta[2] * v +
+         reg.theta[3];
+}
+
+/// The twin against the regression, per torque channel, on the rows of
+/// [from, to) both are compared on (the twin's compared rows; the regression
+/// is compared on every interior row): the difference of their NRMS and its
+/// interval over blocks of 1 s of rows (10 rows at least).
+void versus_regression(const DataCalibration& out, const AxisArray<Regression>& reg, const RunData& rd,
+                       const ReplayResult& twin, const std::vector<char>& compared, std::size_t from, std::size_t to,
+                       RunErrors& re) {
+  const double dt = rd.run->sample_period_s;
+  const auto block_rows =
+      std::max<std::size_t>(10, dt > 0.0 ? static_cast<std::size_t>(std::llround(1.0 / dt)) : std::size_t{10});
+  for (const AxisFromData& ax : out.axis) {
+    const std::size_t i = index(ax.axis);
+    const TorqueChannel ch = torque_channel(*rd.run, ax.axis);
+    if (!ch.present() || !reg[i].ok || twin.x_mm[i].empty()) continue;
+    const std::vector<double>* model = model_channel(twin, ax.axis, ch, true);
+    if (model == nullptr) continue;
+    const auto& meas = rd.run->trace.at(ch.column);
+    std::vector<double> m, a, b;
+    for (std::size_t k = from; k < std::min(to, compared.size()); ++k) {
+      if (!compared[k]) continue;
+      m.push_back(meas[k]);
+      a.push_back((*model)[k]);
+      b.push_back(regression_torque(reg[i], rd, i, k));
+    }
+    if (m.size() < 2 * block_rows) continue;
+    try {
+      re.twin_minus_regression[ch.column] = paired_nrms_difference(m, a, b, block_rows);
+    } catch (const ConfigError&) {
+      // a measured signal of zeros: the NRMS table says so already
+    }
+  }
+}
+
 /// The zero model and the regression baselines of one run on rows [from, to).
 void baselines(const DataCalibration& out, const AxisArray<Regression>& reg, const RunData& rd, std::size_t from,
                std::size_t to, RunErrors& re, ModelPools& pools) {
@@ -4061,11 +4104,7 @@ void baselines(const DataCalibration& out, const AxisArray<Regression>& reg, con
     for (std::size_t k = from; k < to; ++k) {
       if (!rd.interior[k]) continue;
       pz2.add(meas[k], 0.0);
-      if (!reg[i].ok) continue;
-      const double v = kin.v_mm_per_s[k];
-      const double pred = reg[i].theta[0] * kin.a_mm_per_s2[k] + reg[i].theta[1] * direction(v, rd.v_move[i]) +
-                          reg[i].theta[2] * v + reg[i].theta[3];
-      pg2.add(meas[k], pred);
+      if (reg[i].ok) pg2.add(meas[k], regression_torque(reg[i], rd, i, k));
     }
   }
   re.zero = errors_from(z);
@@ -4107,8 +4146,11 @@ void errors_on_fit_part(DataCalibration& out, const std::vector<RunData>& runs, 
     for (std::size_t k = from; k < to; ++k) re.rows_compared += runs[r].interior[k] ? 1 : 0;
     errors_on(out, out.identified, runs[r], from, to, true, r == 0 ? &out.replay_before : nullptr, re.identified,
               &pools.identified);
-    errors_on(out, out.final_machine, runs[r], from, to, true, r == 0 ? &out.replay_after : nullptr, re.calibrated,
-              &pools.calibrated);
+    ReplayResult twin;
+    std::vector<char> compared;
+    errors_on(out, out.final_machine, runs[r], from, to, true, &twin, re.calibrated, &pools.calibrated, &compared);
+    versus_regression(out, reg, runs[r], twin, compared, from, to, re);
+    if (r == 0) out.replay_after = std::move(twin);
     errors_on(out, nominal, runs[r], from, to, false, nullptr, re.nominal, &pools.nominal);
     baselines(out, reg, runs[r], from, to, re, pools);
     out.fit_runs.push_back(std::move(re));
@@ -4128,7 +4170,10 @@ void errors_on_validation_runs(DataCalibration& out, const std::vector<MeasuredR
     re.run = v.dir.string();
     re.rows = rd.n;
     for (std::size_t k = 0; k < rd.n; ++k) re.rows_compared += rd.interior[k] ? 1 : 0;
-    errors_on(out, out.final_machine, rd, 0, rd.n, true, nullptr, re.calibrated, &pools.calibrated);
+    ReplayResult twin;
+    std::vector<char> compared;
+    errors_on(out, out.final_machine, rd, 0, rd.n, true, &twin, re.calibrated, &pools.calibrated, &compared);
+    versus_regression(out, reg, rd, twin, compared, 0, rd.n, re);
     errors_on(out, out.identified, rd, 0, rd.n, true, nullptr, re.identified, &pools.identified);
     errors_on(out, nominal, rd, 0, rd.n, false, nullptr, re.nominal, &pools.nominal);
     baselines(out, reg, rd, 0, rd.n, re, pools);
@@ -4739,6 +4784,12 @@ nlohmann::json run_errors_json(const RunErrors& e) {
   j["error_nominal"] = e.nominal.to_json();
   j["error_calibrated"] = e.calibrated.to_json();
   j["baseline"] = {{"zero", e.zero.to_json()}, {"rigid_body_regression", e.regression.to_json()}};
+  if (!e.twin_minus_regression.empty()) {
+    nlohmann::json d = nlohmann::json::object();
+    for (const auto& [k, p] : e.twin_minus_regression)
+      d[k] = {{"nrms_difference", p.difference}, {"interval_90", {p.lo, p.hi}}, {"blocks", p.blocks}};
+    j["twin_minus_regression"] = d;
+  }
   nlohmann::json why = nlohmann::json::object();
   for (const auto* ce : {&e.nominal, &e.calibrated, &e.regression})
     for (const auto& [k, w] : ce->not_computed) why[k] = w;
@@ -4863,6 +4914,21 @@ std::string data_calibration_report_markdown(const DataCalibration& r, const std
           << get(e.nominal) << " | " << get(e.calibrated) << " |\n";
       }
     }
+    bool first = true;
+    for (const auto& e : list)
+      for (const auto& [k, p] : e.twin_minus_regression) {
+        if (first) o << "\nThe twin against the regression, with the scatter of the rows (the 90 % interval of the "
+                        "difference over blocks of 1 s of them, at least 10 rows, resampled):\n\n";
+        first = false;
+        const auto side = [](double x) {
+          return x <= 0.0 ? fmt::format("{:.3g} below", -x) : fmt::format("{:.3g} above", x);
+        };
+        const std::string verdict = p.hi < 0.0   ? "the twin is better beyond the scatter of these rows"
+                                    : p.lo > 0.0 ? "the regression is better beyond the scatter of these rows"
+                                                 : "within the scatter of these rows (they cannot tell the two apart)";
+        o << fmt::format("- {} {}: the twin's NRMS is {} the regression's (from {} to {}, {} blocks): {}\n", e.run, k,
+                         side(p.difference), side(p.lo), side(p.hi), p.blocks, verdict);
+      }
   };
   if (!r.effects.empty()) {
     // Each candidate once, in the order tried: what was chosen (the values the

@@ -34,6 +34,7 @@
 #include <nlohmann/json.hpp>
 
 #include "twin/calibrate/effect_registry.hpp"
+#include "twin/calibrate/signal.hpp"
 #include "twin/report/replay.hpp"
 
 namespace twin::analysis {
@@ -196,6 +197,11 @@ struct RunErrors {
   ChannelErrors calibrated;   ///< final
   ChannelErrors zero;         ///< the zero model
   ChannelErrors regression;   ///< rigid-body regression (torque) and first-order lag (tracking), fitted on the fit runs
+  /// Per torque channel: the twin's NRMS minus the regression's on the rows
+  /// both are compared on, with its 90 % interval over 1 s blocks of them
+  /// (paired_nrms_difference): whether a win or a loss is beyond the scatter
+  /// of the rows. Absent where the rows are fewer than two blocks.
+  std::map<std::string, PairedDifference> twin_minus_regression;
   std::size_t rows{0}, rows_compared{0};
 };
 

@@ -1,9 +1,11 @@
 #include "twin/calibrate/signal.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <complex>
 #include <numbers>
+#include <random>
 
 #include <Eigen/Dense>
 #include <fmt/format.h>
@@ -228,6 +230,53 @@ Bins bin_means(const std::vector<double>& x, const std::vector<double>& y, const
   for (std::size_t i = 0; i < num_bins; ++i)
     if (b.count[i] > 0) b.mean[i] /= static_cast<double>(b.count[i]);
   return b;
+}
+
+PairedDifference paired_nrms_difference(std::span<const double> meas, std::span<const double> a,
+                                        std::span<const double> b, std::size_t block_rows, std::size_t resamples) {
+  const std::size_t n = meas.size();
+  if (a.size() != n || b.size() != n)
+    throw ConfigError(fmt::format("paired comparison: {} measured rows against {} and {} modelled", n, a.size(),
+                                  b.size()));
+  if (block_rows == 0 || n < 2 * block_rows)
+    throw ConfigError(fmt::format("paired comparison: {} rows are fewer than two blocks of {}", n, block_rows));
+  // Per block: the sums of meas^2, (meas - a)^2, (meas - b)^2.
+  std::vector<std::array<double, 3>> sums;
+  for (std::size_t k = 0; k < n; k += block_rows) {
+    std::array<double, 3> s{0.0, 0.0, 0.0};
+    for (std::size_t j = k; j < std::min(n, k + block_rows); ++j) {
+      s[0] += meas[j] * meas[j];
+      s[1] += (meas[j] - a[j]) * (meas[j] - a[j]);
+      s[2] += (meas[j] - b[j]) * (meas[j] - b[j]);
+    }
+    sums.push_back(s);
+  }
+  const auto difference = [](const std::array<double, 3>& t) {
+    return t[0] > 0.0 ? std::sqrt(t[1] / t[0]) - std::sqrt(t[2] / t[0]) : 0.0;
+  };
+  std::array<double, 3> all{0.0, 0.0, 0.0};
+  for (const auto& s : sums)
+    for (int c = 0; c < 3; ++c) all[c] += s[c];
+  if (!(all[0] > 0.0)) throw ConfigError("paired comparison: the measured signal is zero on the rows compared");
+  PairedDifference out;
+  out.difference = difference(all);
+  out.blocks = sums.size();
+  std::mt19937_64 gen(20261127);
+  std::uniform_int_distribution<std::size_t> pick(0, sums.size() - 1);
+  std::vector<double> d(std::max<std::size_t>(resamples, 1));
+  for (double& x : d) {
+    std::array<double, 3> t{0.0, 0.0, 0.0};
+    for (std::size_t i = 0; i < sums.size(); ++i) {
+      const auto& s = sums[pick(gen)];
+      for (int c = 0; c < 3; ++c) t[c] += s[c];
+    }
+    x = difference(t);
+  }
+  std::sort(d.begin(), d.end());
+  const auto at = [&](double q) { return d[static_cast<std::size_t>(q * static_cast<double>(d.size() - 1) + 0.5)]; };
+  out.lo = at(0.05);
+  out.hi = at(0.95);
+  return out;
 }
 
 }  // namespace twin::analysis

@@ -1,7 +1,8 @@
 #pragma once
 /// Signal processing for calibration: zero-phase Butterworth low-pass,
 /// derivatives, normalised RMS, linear least squares with standard errors,
-/// an amplitude spectrum and binning statistics.
+/// an amplitude spectrum, binning statistics and a block-resampled
+/// comparison of two models' errors.
 #include <cstddef>
 #include <span>
 #include <vector>
@@ -72,5 +73,25 @@ struct Bins {
 };
 Bins bin_means(const std::vector<double>& x, const std::vector<double>& y, const std::vector<std::size_t>& rows,
                double lo, double hi, std::size_t num_bins);
+
+/// Two models compared on the same rows: NRMS(a) - NRMS(b), both normalised
+/// by the measured signal, and its 90 % interval from resampling blocks of
+/// consecutive rows with replacement (the 5th and 95th percentiles of the
+/// difference over `resamples` draws, a fixed seed: the same rows give the
+/// same interval). Blocks are taken so that a row's error and its
+/// neighbours' (correlated over the drive's and the logger's time constants)
+/// stay together; the interval is then the scatter of the rows themselves,
+/// not of an assumed independent noise.
+struct PairedDifference {
+  double difference{0.0};      ///< NRMS(a) - NRMS(b) on all rows
+  double lo{0.0}, hi{0.0};     ///< its 90 % interval
+  std::size_t blocks{0};       ///< blocks resampled
+};
+/// `meas`, `a`, `b`: one value per row, in order; `block_rows`: rows per
+/// block (the last block may be shorter). Throws ConfigError where the rows
+/// are fewer than two blocks or the measured signal is zero.
+PairedDifference paired_nrms_difference(std::span<const double> meas, std::span<const double> a,
+                                        std::span<const double> b, std::size_t block_rows,
+                                        std::size_t resamples = 2000);
 
 }  // namespace twin::analysis

@@ -306,6 +306,10 @@ TEST(RealLogs, CascadeAtOneKilohertzWithRawTorque) {
 // two recordings: the calibration finishes, finds the stitch and the
 // rounding, reports the lag of the position (1 - kff) / Kv within 25 % (the
 // rounded positions carry it statistically), and reports both baselines.
+// The twin against the regression with the scatter of the rows: the paired
+// difference must be the two NRMS of the table subtracted (the same rows;
+// 1e-3 covers their rounding to 4 significant digits), inside its own
+// interval, and said in report.md.
 TEST(RealLogs, CoarseRoundedStitchedCurrentLog) {
   const double Ts = 1e-3;
   truth::RunSpec sp = cascade_spec(Ts);
@@ -351,6 +355,15 @@ TEST(RealLogs, CoarseRoundedStitchedCurrentLog) {
   const auto j = data_calibration_report_json(r);
   EXPECT_TRUE(j.contains("baseline"));
   EXPECT_TRUE(j["effects_skipped"].contains("cogging"));
+  ASSERT_TRUE(r.fit_runs[0].twin_minus_regression.count("x_i_A"));
+  const PairedDifference& p = r.fit_runs[0].twin_minus_regression.at("x_i_A");
+  EXPECT_NEAR(p.difference, r.fit_runs[0].calibrated.nrms.at("x_i_A") - r.fit_runs[0].regression.nrms.at("x_i_A"),
+              1e-3);
+  EXPECT_LE(p.lo, p.difference);
+  EXPECT_GE(p.hi, p.difference);
+  EXPECT_GE(p.blocks, 2u);
+  EXPECT_TRUE(j["fit_runs"][0]["twin_minus_regression"].contains("x_i_A"));
+  EXPECT_THAT(data_calibration_report_markdown(r, "coarse_stitched"), HasSubstr("The twin against the regression, with the scatter"));
 }
 
 // Logs without the position loop's output: the 1 kHz runs of
