@@ -46,7 +46,6 @@ std::vector<double> program(double Ts_s, const std::vector<double>& speeds, doub
 // program: other speeds, another order.
 const std::vector<double> kFitSpeeds{20.0, -35.0, 3.0, -12.0, 50.0, -30.0, 8.0, -4.0, 25.0, -25.0};
 const std::vector<double> kValSpeeds{30.0, -45.0, 5.0, -15.0, 40.0, -6.0, 12.0, -20.0};
-
 truth::RunSpec cascade_spec() { return truth::cascade_run_spec(kRawPerNm, 0.001); }
 
 struct Outcome {
