@@ -2082,12 +2082,37 @@ void screw_pitch_error_from_law(DataSearch& s) {
 
 }  // namespace
 
-// screw_pitch_error: the encoder reads x + A sin(2 pi x / P + phase)
-// while the motor moves x; the logged motor speed then differs from the
-// speed of the logged position by A (2 pi / P) v cos(2 pi x / P + phase).
-// Regressed on that with the speed, the acceleration and a constant as
-// nuisances (a logged speed filtered or late). Where the speed is the
-// encoder's own, screw_pitch_error_from_law.
+// The motor's travel (the logged speed integrated, trapezoids, from the
+// logged position at each segment's start) less the logged position, over
+// the run's first `rows` rows: what lies between the motor and the encoder
+// (a gap, a lead error, a stretch), with the integration's drift.
+std::vector<double> motor_travel_less_position(const RunData& rd, Axis a, double dt, std::size_t rows) {
+  const auto& xm = rd.run->trace.at(col(a, "_mm"));
+  const auto& vm = rd.run->trace.at(col(a, "_v_mm_s"));
+  std::vector<double> d(rows, 0.0);
+  for (const Segment& sg : rd.segments) {
+    double travel = 0.0;
+    for (std::size_t k = sg.begin; k < std::min(sg.end, rows); ++k) {
+      travel = k == sg.begin ? xm[k] : travel + 0.5 * (vm[k] + vm[k - 1]) * dt;
+      d[k] = travel - xm[k];
+    }
+  }
+  return d;
+}
+
+// screw_pitch_error, where a fast log has the motor's speed beside the
+// encoder's position: the encoder reads x + A sin(2 pi x / P + phase) while
+// the motor moves x, so the motor's travel less the logged position is
+// -A sin(2 pi x / P + phase) plus what else lies between them. Regressed on
+// that, with as nuisances a constant per second of each segment (the
+// integration's drift and the segment's start; taken out as the block's
+// mean), the logged speed (a speed logged late), the position (a speed
+// scaled off the encoder's), the torque (a stretch under load) and the
+// direction the axis last moved (a gap). Integrated, the position's
+// rounding stays one quantum where the speed of the differenced position
+// would carry it divided by the sample period. The standard errors count
+// the residual's correlation from its lag-one autocorrelation. Where the
+// speed is the encoder's own, screw_pitch_error_from_law.
 void detect_screw_pitch_error_in_data(DataSearch& s) {
   if (s.fast && s.fine && s.logs_position() &&
       has_lowpassed_twin(s.runs.front().run->trace, s.ax.channel.column)) {
@@ -2096,36 +2121,94 @@ void detect_screw_pitch_error_in_data(DataSearch& s) {
   }
   if (!(s.fast && s.fine && s.rows.measured_speed && s.logs_position())) return;
   const AxisRows& rows = s.rows;
-  std::vector<double> r(rows.all.size()), vd(rows.all.size()), ad(rows.all.size(), 0.0);
+  const std::size_t n = rows.all.size();
+  // Per run: the travel less the position, the direction last moved, and
+  // each row's block (segment and whole seconds from its start).
+  std::vector<std::vector<double>> travel(s.runs.size());
+  std::vector<std::vector<double>> last_dir(s.runs.size());
+  std::vector<std::vector<std::size_t>> block_of(s.runs.size());
+  std::size_t blocks = 0;
+  const auto rows_per_block = std::max<std::size_t>(1, static_cast<std::size_t>(std::lround(1.0 / s.dt)));
+  for (std::size_t run = 0; run < s.runs.size(); ++run) {
+    const RunData& rd = s.runs[run];
+    travel[run] = motor_travel_less_position(rd, s.axis(), s.dt, rd.n_fit);
+    last_dir[run].assign(rd.n_fit, 0.0);
+    block_of[run].assign(rd.n_fit, 0);
+    const auto& vm = rd.run->trace.at(col(s.axis(), "_v_mm_s"));
+    for (const Segment& sg : rd.segments) {
+      int last = 0;
+      for (std::size_t k = sg.begin; k < std::min(sg.end, rd.n_fit); ++k) {
+        if (const int dr = direction(vm[k], rd.v_move[s.ai()]); dr != 0) last = dr;
+        last_dir[run][k] = last;
+        block_of[run][k] = blocks + (k - sg.begin) / rows_per_block;
+      }
+      if (sg.begin < std::min(sg.end, rd.n_fit)) blocks += (std::min(sg.end, rd.n_fit) - 1 - sg.begin) / rows_per_block + 1;
+    }
+  }
+  std::vector<std::size_t> block(n);
+  std::vector<double> d(n), dir(n);
   for (std::size_t k : rows.all) {
     const auto [run, row] = rows.at[k];
-    const auto& xm = s.runs[run].run->trace.at(col(s.axis(), "_mm"));
-    vd[k] = (xm[row + 1] - xm[row - 1]) / (2.0 * s.dt);
-    r[k] = rows.vel_m[k] - vd[k];
-    ad[k] = rows.acc[k];
+    d[k] = travel[run][row];
+    dir[k] = last_dir[run][row];
+    block[k] = block_of[run][row];
   }
-  std::vector<double> c1(rows.all.size()), c2(rows.all.size());
+  // A column less its mean over each block (the block's constant taken out).
+  std::vector<double> sum(blocks), count(blocks, 0.0);
+  for (std::size_t k : rows.all) count[block[k]] += 1.0;
+  auto demeaned = [&](const std::vector<double>& c) {
+    std::fill(sum.begin(), sum.end(), 0.0);
+    for (std::size_t k : rows.all) sum[block[k]] += c[k];
+    std::vector<double> out(n);
+    for (std::size_t k : rows.all) out[k] = c[k] - sum[block[k]] / count[block[k]];
+    return out;
+  };
+  const std::vector<double> d_b = demeaned(d), v_b = demeaned(rows.vel_m), x_b = demeaned(rows.x),
+                            T_b = demeaned(rows.T), dir_b = demeaned(dir);
+  std::vector<double> c1(n), c2(n), c1_b, c2_b;
+  double corr = 1.0;
   auto fit = [&](double P) {
     const double w = 2.0 * M_PI / P;
     for (std::size_t k : rows.all) {
-      c1[k] = -w * vd[k] * std::cos(w * rows.x[k]);
-      c2[k] = w * vd[k] * std::sin(w * rows.x[k]);
+      c1[k] = -std::sin(w * rows.x[k]);
+      c2[k] = -std::cos(w * rows.x[k]);
     }
-    return least_squares({&rows.one, &vd, &ad, &c1, &c2}, r, rows.moving, s.corr);
+    c1_b = demeaned(c1);
+    c2_b = demeaned(c2);
+    return least_squares({&v_b, &x_b, &T_b, &dir_b, &c1_b, &c2_b}, d_b, rows.all, corr);
   };
   const double P_min = std::max(0.5, 8.0 * s.dt * rows.v_high), P_max = (rows.x_hi - rows.x_lo) / 2.0;
   if (!(P_max > P_min)) return;
-  const auto [P, ls] = scan_period(P_min, P_max, fit);
-  const double A = P > 0.0 ? std::hypot(ls.theta[3], ls.theta[4]) : 0.0;
-  if (!(P > 0.0 && t_pair(ls, 3) >= kMinT && A >= 0.5 * s.q)) return;
+  auto [P, ls] = scan_period(P_min, P_max, fit);
+  if (!(P > 0.0)) return;
+  // The residual's lag-one autocorrelation rho at the best period, within
+  // blocks: (1 + rho) / (1 - rho) rows count as one (an AR(1) residual),
+  // at most a block's rows.
+  ls = fit(P);
+  double r0 = 0.0, r1 = 0.0, prev = 0.0;
+  std::size_t prev_k = n;
+  for (std::size_t k : rows.all) {
+    const double e = d_b[k] - ls.theta[0] * v_b[k] - ls.theta[1] * x_b[k] - ls.theta[2] * T_b[k] -
+                     ls.theta[3] * dir_b[k] - ls.theta[4] * c1_b[k] - ls.theta[5] * c2_b[k];
+    r0 += e * e;
+    if (prev_k != n && k == prev_k + 1 && block[k] == block[prev_k]) r1 += e * prev;
+    prev = e;
+    prev_k = k;
+  }
+  const double rho = r0 > 0.0 ? std::clamp(r1 / r0, 0.0, 0.999) : 0.0;
+  corr = std::min((1.0 + rho) / (1.0 - rho), static_cast<double>(rows_per_block));
+  ls = fit(P);
+  const double A = std::hypot(ls.theta[4], ls.theta[5]);
+  if (!(t_pair(ls, 4) >= kMinT && A >= 0.5 * s.q)) return;
   Trial t;
   t.kind = EffectKind::kScrewPitchError;
   t.sets = {{{EffectParam::screw_pitch_error_amplitude_mm, A},
              {EffectParam::screw_pitch_error_period_mm, P},
-             {EffectParam::screw_pitch_error_phase_rad, std::atan2(ls.theta[4], ls.theta[3])}}};
-  t.evidence = fmt::format("the logged speed differs from the speed of the logged position as a lead error "
-                           "of {:.4g} mm with a period of {:.4g} mm would make it (t = {:.1f})",
-                           A, P, t_pair(ls, 3));
+             {EffectParam::screw_pitch_error_phase_rad, std::atan2(ls.theta[5], ls.theta[4])}}};
+  t.evidence = fmt::format("the motor's travel (the logged speed integrated) less the logged position runs as a "
+                           "lead error of {:.4g} mm with a period of {:.4g} mm would make it (t = {:.1f}, "
+                           "residual {:.2g} mm)",
+                           A, P, t_pair(ls, 4), ls.residual_rms);
   s.attempt(t);
 }
 
@@ -2140,17 +2223,11 @@ void travel_steps_at_reversals(const RunData& rd, Axis a, double dt, std::vector
   const std::size_t ai = index(a);
   const auto w = std::max<std::size_t>(2, static_cast<std::size_t>(std::lround(0.05 / dt)));
   const auto skip = static_cast<std::size_t>(std::lround(0.03 / dt));
-  const auto& xm = rd.run->trace.at(col(a, "_mm"));
   const auto& vm = rd.run->trace.at(col(a, "_v_mm_s"));
-  std::vector<double> d(rd.n_fit, 0.0);
+  const std::vector<double> d = motor_travel_less_position(rd, a, dt, rd.n_fit);
   std::vector<std::size_t> seg(rd.n_fit, 0);
-  double travel = 0.0;
   for (std::size_t s = 0; s < rd.segments.size(); ++s)
-    for (std::size_t k = rd.segments[s].begin; k < std::min(rd.segments[s].end, rd.n_fit); ++k) {
-      travel = k == rd.segments[s].begin ? xm[k] : travel + 0.5 * (vm[k] + vm[k - 1]) * dt;
-      d[k] = travel - xm[k];
-      seg[k] = s;
-    }
+    for (std::size_t k = rd.segments[s].begin; k < std::min(rd.segments[s].end, rd.n_fit); ++k) seg[k] = s;
   // Mean of d over rows [b, e) whose logged speed has direction `dir`.
   auto mean_d = [&](std::size_t b, std::size_t e, int dir, std::size_t s) {
     double sum = 0.0;
