@@ -3786,6 +3786,10 @@ void rechoose_velocity_loops(DataCalibration& out, const std::vector<RunData>& r
 /// axis's command has stood still for 0.2 s (interior rows only). `last` is
 /// the direction the command last moved in within the segment, 0 before it
 /// has moved there (a stitched segment starts from an unseen approach).
+/// Still is a command at a thousandth of the moving threshold or less, not
+/// under the threshold: a contour reverses through zero speed, and on a slow
+/// arc its command stays under the threshold for longer than 0.2 s while
+/// the axis slides through the reversal.
 template <class F>
 void for_settled_rest_rows(const std::vector<RunData>& runs, Axis a, F&& f) {
   const std::size_t i = index(a);
@@ -3795,10 +3799,11 @@ void for_settled_rest_rows(const std::vector<RunData>& runs, Axis a, F&& f) {
     std::size_t still = 0;
     int last = 0;
     for (std::size_t k = 0; k < rd.n_fit; ++k) {
-      const int d = direction(rd.kin[i].v_mm_per_s[k], rd.v_move[i]);
+      const double v = rd.kin[i].v_mm_per_s[k];
+      const int d = direction(v, rd.v_move[i]);
       if (d != 0) last = d;
       if (k > 0 && !rd.interior[k - 1]) last = 0;
-      still = d == 0 ? still + 1 : 0;
+      still = std::abs(v) <= 1e-3 * rd.v_move[i] ? still + 1 : 0;
       if (still >= settle && rd.interior[k]) f(r, k, last);
     }
   }

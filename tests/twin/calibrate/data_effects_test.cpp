@@ -328,6 +328,33 @@ TEST(DataEffects, SmoothFrictionIsKeptOnlyWhereTheHeldTorqueRelaxes) {
   }
 }
 
+// The creeping friction of SmoothFrictionIsKeptOnlyWhereTheHeldTorqueRelaxes
+// on the two contour programs, and the breakaway of
+// RisingFrictionIsKeptWhereBreakawayIsBelowCoulomb beside it: each named
+// alone, the other program improved, and the held-out machine's check. A
+// contour reverses through zero speed; on its slow arcs the command stays
+// under the moving threshold for longer than the 0.2 s that counted as
+// standing still, so the axis sliding through a reversal was read as a
+// stopped axis that holds its torque, and creep was not tried (rising
+// friction was kept in its place on both programs).
+TEST(DataEffects, SmoothAndRisingFrictionAreToldApartOnContours) {
+  truth::RunSpec creep = cascade_spec();
+  creep.effects.creep_w = 0.2;
+  on_contours("creep_contour", creep, [&](const Outcome& o) {
+    expect_only(o, "smooth_friction");
+    expect_validation_improves(o);
+    expect_held_out_machine_check(o);
+  });
+  truth::RunSpec rising = cascade_spec();
+  rising.effects.stribeck_Ts = 0.12;
+  rising.effects.stribeck_ws = 1.0;
+  on_contours("rising_contour", rising, [&](const Outcome& o) {
+    expect_only(o, "rising_friction");
+    expect_validation_improves(o);
+    expect_held_out_machine_check(o);
+  });
+}
+
 // Friction that rises with speed from a breakaway of 0.12 N m (the truth's
 // own Stribeck law with its static level below both Coulomb levels, 0.25 /
 // 0.15 N m, breakaway at that level): the axis breaks away and creeps under
