@@ -122,6 +122,13 @@ struct AxisFromData {
   } one_level;
   bool one_coulomb_level{false};  ///< the one-level drive was taken
   std::string coulomb_choice;     ///< how the Coulomb levels were chosen, for the report
+  /// Where the drive is fitted on the logged speed: the logged torque holds
+  /// over the row it is logged at (a digital drive's sample and hold), so
+  /// the acceleration it gives is the speed's forward difference over that
+  /// row, not the central difference about it. Taken where the drive fitted
+  /// so leaves the smaller residual (choose_torque_timing).
+  bool torque_held_over_row{false};
+  std::string torque_timing;  ///< how that was chosen, for the report
   /// Where the velocity loop is fitted from data: the lag (in samples of the
   /// log) at which the logged torque follows the PI law on the speed error
   /// best, and the gains fitted at that lag. A lag beyond 0 is a delay
