@@ -2798,8 +2798,12 @@ bool fit_drive(const AxisFit& f, AxisFromData& ax, const DriveRowsOptions& o, st
 /// against the central one, on the same rows with the same columns, where a
 /// fast log has the motor's speed (not one taken from the position, whose
 /// central difference and low-pass already spread each row over its
-/// neighbours: there the central one stays). The one with the smaller residual is
-/// taken (the same number of parameters either way). A digital drive holds
+/// neighbours: there the central one stays). The forward one is taken where
+/// its residual is the smaller by more than the rows' scatter,
+/// n (r_c^2 - r_f^2) / (r_f^2 corr) of at least kMinT^2 with the residual
+/// counted correlated over 10 ms of rows (the same number of parameters
+/// either way; under 0.2 N m of torque noise the two residuals differ by
+/// 0.6 % and the choice would follow the noise). A digital drive holds
 /// its torque command over the loop period, and the speed's change over the
 /// row answers to it alone; the central difference spans two rows' torques.
 /// Under a loop that rings (a dead time behind a current loop's lag) the
@@ -2809,14 +2813,19 @@ bool fit_drive(const AxisFit& f, AxisFromData& ax, const DriveRowsOptions& o, st
 void choose_torque_timing(const AxisFit& f, AxisFromData& ax) {
   const bool own_speed = f.r0.sample_period_s <= 5e-3 + 1e-12 && all_runs_log(f.runs, col(ax.axis, "_v_mm_s"));
   if (!own_speed || has_lowpassed_twin(f.r0.trace, ax.channel.column)) return;
+  std::size_t n = 0;
   const auto residual = [&](bool forward) {
     const DriveRows d = drive_rows(f, ax, {.forward = forward});
     const LsqResult ls = least_squares(drive_columns(d).X, d.T, d.rows);
+    n = d.rows.size();
     return ls.ok ? ls.residual_rms : 1e300;
   };
   const double central = residual(false), forward = residual(true);
   if (!(forward < 1e300 && central < 1e300)) return;
-  ax.torque_held_over_row = forward < central;
+  const double corr = std::max(1.0, 0.01 / f.r0.sample_period_s);
+  ax.torque_held_over_row =
+      forward < central &&
+      static_cast<double>(n) * (central * central - forward * forward) >= kMinT * kMinT * corr * forward * forward;
   ax.torque_timing = fmt::format(
       "the drive fitted on the speed's {} difference over the row (residual {:.3g}, against {:.3g} on the {} one): "
       "{}",
