@@ -2812,6 +2812,8 @@ bool fit_drive(const AxisFit& f, AxisFromData& ax, const DriveRowsOptions& o, st
 /// program tracked at 0.0125 against 0.0076 with the truth's drive.
 void choose_torque_timing(const AxisFit& f, AxisFromData& ax) {
   const bool own_speed = f.r0.sample_period_s <= 5e-3 + 1e-12 && all_runs_log(f.runs, col(ax.axis, "_v_mm_s"));
+  ax.torque_held_over_row = false;
+  ax.torque_timing.clear();
   if (!own_speed || has_lowpassed_twin(f.r0.trace, ax.channel.column)) return;
   std::size_t n = 0;
   const auto residual = [&](bool forward) {
@@ -2826,13 +2828,13 @@ void choose_torque_timing(const AxisFit& f, AxisFromData& ax) {
   ax.torque_held_over_row =
       forward < central &&
       static_cast<double>(n) * (central * central - forward * forward) >= kMinT * kMinT * corr * forward * forward;
+  const char* why = ax.torque_held_over_row ? "the logged torque holds over the row it is logged at"
+                    : forward < central      ? "the two do not differ beyond the rows' scatter"
+                                             : "the logged torque is a sample of a torque that changes within the row";
   ax.torque_timing = fmt::format(
-      "the drive fitted on the speed's {} difference over the row (residual {:.3g}, against {:.3g} on the {} one): "
-      "{}",
-      ax.torque_held_over_row ? "forward" : "central", std::min(forward, central), std::max(forward, central),
-      ax.torque_held_over_row ? "central" : "forward",
-      ax.torque_held_over_row ? "the logged torque holds over the row it is logged at"
-                              : "the logged torque is a sample of a torque that changes within the row");
+      "the drive fitted on the speed's {} difference over the row (residual {:.3g}; on the {} one {:.3g}): {}",
+      ax.torque_held_over_row ? "forward" : "central", ax.torque_held_over_row ? forward : central,
+      ax.torque_held_over_row ? "central" : "forward", ax.torque_held_over_row ? central : forward, why);
 }
 
 /// The drive in the channel's unit; false (said in the axis's note) where it

@@ -126,7 +126,8 @@ struct AxisFromData {
   /// over the row it is logged at (a digital drive's sample and hold), so
   /// the acceleration it gives is the speed's forward difference over that
   /// row, not the central difference about it. Taken where the drive fitted
-  /// so leaves the smaller residual (choose_torque_timing).
+  /// so leaves the smaller residual beyond the rows' scatter
+  /// (choose_torque_timing).
   bool torque_held_over_row{false};
   std::string torque_timing;  ///< how that was chosen, for the report
   /// Where the velocity loop is fitted from data: the lag (in samples of the
