@@ -2616,12 +2616,18 @@ struct DriveRowsOptions {
   bool moving_only{false};
 };
 
+/// Whether the drive of axis `a` is fitted on its logged speed: a log at
+/// 5 ms or faster whose every fitting run has `<a>_v_mm_s`.
+bool drive_on_logged_speed(const AxisFit& f, Axis a) {
+  return f.r0.sample_period_s <= 5e-3 + 1e-12 && all_runs_log(f.runs, col(a, "_v_mm_s"));
+}
+
 DriveRows drive_rows(const AxisFit& f, const AxisFromData& ax, const DriveRowsOptions& o = {}) {
   const std::size_t ahead = o.ahead;
   const double a_lag = o.a_lag;
   const Axis a = ax.axis;
   const std::size_t i = index(a);
-  const bool own_speed = f.r0.sample_period_s <= 5e-3 + 1e-12 && all_runs_log(f.runs, col(a, "_v_mm_s"));
+  const bool own_speed = drive_on_logged_speed(f, a);
   struct Motion {
     double acc{0.0}, vel{0.0}, pos{0.0}, neg{0.0};
   };
@@ -2811,10 +2817,9 @@ bool fit_drive(const AxisFit& f, AxisFromData& ax, const DriveRowsOptions& o, st
 /// delay it took B 6 % low and the Coulomb levels 5 % high, and the other
 /// program tracked at 0.0125 against 0.0076 with the truth's drive.
 void choose_torque_timing(const AxisFit& f, AxisFromData& ax) {
-  const bool own_speed = f.r0.sample_period_s <= 5e-3 + 1e-12 && all_runs_log(f.runs, col(ax.axis, "_v_mm_s"));
   ax.torque_held_over_row = false;
   ax.torque_timing.clear();
-  if (!own_speed || has_lowpassed_twin(f.r0.trace, ax.channel.column)) return;
+  if (!drive_on_logged_speed(f, ax.axis) || has_lowpassed_twin(f.r0.trace, ax.channel.column)) return;
   std::size_t n = 0;
   const auto residual = [&](bool forward) {
     const DriveRows d = drive_rows(f, ax, {.forward = forward});
