@@ -9,7 +9,7 @@
 //   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed]
 //                            [--encoder-mm Q] [--current-lag S] [--torque-command] [--torque-step R]
 //                            [--kff K] [--jff J] [--friction load|sqrt|dahl] [--limit-on-command]
-//                            [--anti-windup] [--contour | --contour2] [--keep DIR]
+//                            [--anti-windup] [--contour | --contour2] [--log-every M] [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
 // measured run, each on the truth's X plant, and its y reference on the Y
@@ -187,6 +187,7 @@ struct CascadeOptions {
   bool limit_on_command{false};    ///< the limit cases clamp the velocity loop's command, not the current
   bool anti_windup{false};         ///< with limit_on_command: the integral frozen while the limit clamps
   int contour{0};                  ///< both programs of circular contours (contour_program): 1 or 2; 0: moves
+  int log_every{1};                ///< every log_every-th loop period logged (a log slower than the loop)
 };
 
 // A friction law added to every run of the sweep (--friction): the truth's
@@ -233,6 +234,7 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     sp.cascade.Jff = loop.Jff;
     sp.cascade.log_torque_command = loop.log_torque_command;
     sp.cascade.raw_step = loop.raw_step;
+    sp.log_every = loop.log_every;
     const double load = sp.effects.load_Nm;
     c.set(sp.effects);
     sp.effects.load_Nm = load;
@@ -392,6 +394,7 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
+  loop.log_every = static_cast<int>(log_every);
   if (cascade) return cascade_sweep(magnitudes, filter, noise_Nm, log_motor_speed, encoder_mm, loop, keep);
   // A program: a reference and the drive that follows it (the X plant, or
   // the Y plant written as axis y).
