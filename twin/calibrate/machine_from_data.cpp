@@ -59,6 +59,21 @@ std::string velocity_command_column(const io::TraceTable& t, Axis a) {
   return t.find(for_identification(logged)) != nullptr ? for_identification(logged) : logged;
 }
 
+/// A log at 5 ms or faster resolves the velocity loop: its PI law is fitted
+/// from the log where the speed and the velocity command are logged
+/// (identify_velocity_loop), the drive on the logged speed, and the
+/// detectors that read the torque row by row (delay, cogging, load
+/// friction, lead error) run on it. Held at 2 ms for the detectors, a 1 ms
+/// loop logged every 4 ms was named wrong on 9 of the cascade sweep's 14
+/// runs of one magnitude (2 since).
+bool resolves_velocity_loop(double dt_s) { return dt_s <= 5e-3 + 1e-12; }
+
+/// The cubic through p0..p3 at equal spacing (Catmull-Rom) at u in [0, 1]
+/// of the way from p1 to p2: a log's value between two rows.
+double catmull_rom(double p0, double p1, double p2, double p3, double u) {
+  return p1 + 0.5 * u * (p2 - p0 + u * (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3 + u * (3.0 * (p1 - p2) + p3 - p0)));
+}
+
 /// The command's speed as the position loop takes it at each row: the
 /// backward difference over one controller period Ts of the reference as the
 /// replay rebuilds it between the log's rows (upsample_reference's monotone
@@ -456,6 +471,7 @@ struct VelocityLoopFit {
 /// The columns and rows fit_velocity_loop fits with (see above).
 struct LawFitOptions {
   std::size_t lag{0};
+  double lag_fraction{0.0};  ///< a part of a row beyond `lag` (0 to 1): the columns taken between two rows
   const TorqueClip* clip{nullptr};
   bool current_lag{false};
   double lag_a{0.0};
@@ -478,8 +494,19 @@ LawFitOptions law_options(const AxisFromData& ax, LawFitOptions o) {
 }
 VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, const std::string& channel,
                                   const LawFitOptions& o = {}) {
-  const auto [lag, clip, current_lag, lag_a, torque_ff, lead_period_mm, by_table_motion, limit_rows,
+  const auto [lag, lag_fraction, clip, current_lag, lag_a, torque_ff, lead_period_mm, by_table_motion, limit_rows,
               constant_after_limit] = o;
+  // A column `lag` (and lag_fraction) rows back, from row j of its segment;
+  // 0 before its first row. Between two rows a cubic through the four
+  // about (Catmull-Rom), linear where the outer two are not in the segment.
+  const std::size_t back = lag + (lag_fraction > 0.0 ? 1 : 0);
+  const auto lagged = [&](const std::vector<double>& c, std::size_t j) {
+    if (j < back) return 0.0;
+    if (lag_fraction == 0.0) return c[j - lag];
+    const double u = lag_fraction, p1 = c[j - lag], p2 = c[j - lag - 1];
+    if (j < lag + 2 || j - lag + 1 >= c.size()) return (1.0 - u) * p1 + u * p2;
+    return catmull_rom(c[j - lag + 1], p1, p2, c[j - lag - 2], u);
+  };
   const bool lead = lead_period_mm > 0.0;
   const double w = lead ? 2.0 * M_PI / lead_period_mm : 0.0;
   std::vector<double> ev, iev, Tm, Tp, aff;
@@ -555,16 +582,16 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
         }
       for (std::size_t k = s.begin; k < end; ++k) {
         const std::size_t j = k - s.begin;
-        ev.push_back(j >= lag ? e[j - lag] : 0.0);
-        iev.push_back(j >= lag ? ie[j - lag] : 0.0);
-        if (torque_ff) aff.push_back(j >= lag ? ar[j - lag] : 0.0);
+        ev.push_back(lagged(e, j));
+        iev.push_back(lagged(ie, j));
+        if (torque_ff) aff.push_back(lagged(ar, j));
         if (lead)
-          for (std::size_t c = 0; c < 4; ++c) ld[c].push_back(j >= lag ? l[c][j - lag] : 0.0);
+          for (std::size_t c = 0; c < 4; ++c) ld[c].push_back(lagged(l[c], j));
         Tm.push_back(ch[k]);
         Tp.push_back(j >= 1 ? ch[k - 1] : 0.0);
         const std::size_t grp = group[j];
         seg_of_row.push_back(grp);
-        if (k < s.begin + 2 + lag || (by_table_motion && grp == seg_group) || (at_limit && (*at_limit)[k])) continue;
+        if (k < s.begin + 2 + back || (by_table_motion && grp == seg_group) || (at_limit && (*at_limit)[k])) continue;
         if (clip && clip->holds(clip->theta[0] * ev.back() + clip->theta[1] * iev.back() + clip->c_seg[grp], ch[k]))
           continue;
         vrows.push_back(ev.size() - 1);
@@ -1427,7 +1454,7 @@ struct DataSearch {
   double q{0.0};     ///< the logged positions' step
   double corr{1.0};  ///< rows over which the residual is correlated
   double noise_rms{0.0};  ///< the white noise on the logged channel (fast logs; else 0)
-  bool fast{false};  ///< samples every 2 ms or faster
+  bool fast{false};  ///< the log resolves the velocity loop (resolves_velocity_loop)
   bool fine{false};  ///< positions to 5 um or finer
 
   Axis axis() const { return ax.axis; }
@@ -1579,19 +1606,20 @@ void detect_delay_in_data(DataSearch& s) {
   const AxisFromData& ax = s.ax;
   const AxisRows& rows = s.rows;
   const double dt = s.dt;
-  std::size_t lag = 0;
+  double lag = 0.0;  // rows of the log, whole or part (AxisFromData::torque_lag_fraction)
   std::optional<controller::CascadeGains> gains;
   std::string why;
   if (ax.velocity_loop_from_data) {
-    lag = ax.torque_lag_samples;
+    lag = ax.torque_lag_rows();
     gains = ax.gains_at_lag;
+    const std::string late = fmt::format("{:.3g} ms ({:g} samples) late", 1e3 * lag * dt, lag);
     why = ax.torque_command_logged
-              ? fmt::format("the motion answers to the logged torque command {} samples late beyond the current "
-                            "loop's lag (the drive fitted so)",
-                            lag)
-              : fmt::format("the logged torque follows the PI law on the logged speed error best {} samples late "
-                            "(the law refitted at that lag: Kvp {:.4g}, Tn {:.4g} s)",
-                            lag, ax.gains_at_lag.Kvp_torque_s_per_rad, ax.gains_at_lag.Tn_s);
+              ? fmt::format("the motion answers to the logged torque command {} beyond the current loop's lag (the "
+                            "drive fitted so)",
+                            late)
+              : fmt::format("the logged torque follows the PI law on the logged speed error best {} (the law "
+                            "refitted at that lag: Kvp {:.4g}, Tn {:.4g} s)",
+                            late, ax.gains_at_lag.Kvp_torque_s_per_rad, ax.gains_at_lag.Tn_s);
   } else {
     const auto max_lag = static_cast<std::size_t>(std::clamp(std::lround(0.01 / dt), 1L, 10L));
     std::vector<double> mse(max_lag + 1, 0.0);
@@ -1604,18 +1632,18 @@ void detect_delay_in_data(DataSearch& s) {
         mse[L] += d * d;
       }
     const auto it = std::min_element(mse.begin(), mse.end());
-    lag = static_cast<std::size_t>(it - mse.begin());
-    if (lag > 0 && *it < 0.8 * mse[0])
+    const auto L = static_cast<std::size_t>(it - mse.begin());
+    if (L > 0 && *it < 0.8 * mse[0]) {
+      lag = static_cast<double>(L);
       why = fmt::format("the logged torque matches the replay's {} samples later (mean square {:.3g} of {:.3g} "
                         "at no lag)",
-                        lag, *it / static_cast<double>(rows.all.size()), mse[0] / static_cast<double>(rows.all.size()));
-    else
-      lag = 0;
+                        L, *it / static_cast<double>(rows.all.size()), mse[0] / static_cast<double>(rows.all.size()));
+    }
   }
-  if (lag == 0) return;
+  if (lag == 0.0) return;
   Trial t;
   t.kind = EffectKind::kDelay;
-  t.sets = {{{EffectParam::delay_delay_s, static_cast<double>(lag) * dt}}};
+  t.sets = {{{EffectParam::delay_delay_s, lag * dt}}};
   t.gains = gains;
   t.evidence = why;
   s.attempt(t);
@@ -2058,6 +2086,7 @@ void screw_pitch_error_from_law(DataSearch& s) {
   const AxisFromData& ax = s.ax;
   if (!(ax.velocity_loop_from_data && ax.law_lead_period_mm > 0.0)) return;
   LawFitOptions o = law_options(ax, {.lag = ax.torque_lag_samples,
+                                     .lag_fraction = ax.torque_lag_fraction,
                                      .lag_a = ax.gains.tau_i_s > 0.0 ? std::exp(-s.dt / ax.gains.tau_i_s) : 0.0,
                                      .torque_ff = ax.torque_feedforward});
   o.lead_period_mm = 0.0;
@@ -2378,9 +2407,11 @@ FitRunErrors search_catalogue_effects(DataCalibration& out, const std::vector<Ru
     s.base_cols = s.rows.drive_columns();
     s.dt = dt;
     s.q = q;
-    s.fast = dt <= 2e-3 + 1e-12;
-    // The second difference shows the noise only where the torque is smooth
-    // from sample to sample: at the loop's rate, not every 100 ms.
+    s.fast = resolves_velocity_loop(dt);
+    // The second difference shows the noise only where the torque changes
+    // little from row to row: on a log that resolves the loop, not every
+    // 100 ms (at 4 ms a smooth torque's own second difference adds to it,
+    // which makes the rules that take the noise off stricter, not looser).
     s.noise_rms = s.fast ? channel_noise_rms(s.rows, runs, ax.channel.column) : 0.0;
     // Where the speed is taken from the position the detectors fit the
     // torque low-passed alike (axis_rows), whose noise is correlated over
@@ -2602,8 +2633,11 @@ struct DriveRows {
 /// The options give the motion as a torque logged ahead of it needs
 /// (motion_behind_torque).
 struct DriveRowsOptions {
-  /// The speed's forward difference over the row (the acceleration the
-  /// torque held from that row on gives) in place of the central one.
+  /// The speed's change over the loop period from the row on (the
+  /// acceleration the torque held over that period gives: the forward
+  /// difference where the log samples every period, else the speed one
+  /// period on from the cubic through the rows about) in place of the
+  /// central difference.
   bool forward{false};
   /// Each motion column M taken as (M[k + ahead] - a M[k + ahead - 1]) / (1 - a)
   /// with a = a_lag: the torque a loop commands at row k where the motion
@@ -2619,7 +2653,7 @@ struct DriveRowsOptions {
 /// Whether the drive of axis `a` is fitted on its logged speed: a log at
 /// 5 ms or faster whose every fitting run has `<a>_v_mm_s`.
 bool drive_on_logged_speed(const AxisFit& f, Axis a) {
-  return f.r0.sample_period_s <= 5e-3 + 1e-12 && all_runs_log(f.runs, col(a, "_v_mm_s"));
+  return resolves_velocity_loop(f.r0.sample_period_s) && all_runs_log(f.runs, col(a, "_v_mm_s"));
 }
 
 DriveRows drive_rows(const AxisFit& f, const AxisFromData& ax, const DriveRowsOptions& o = {}) {
@@ -2647,8 +2681,14 @@ DriveRows drive_rows(const AxisFit& f, const AxisFromData& ax, const DriveRowsOp
     const double v = vm ? (*vm)[k] : rd.kin[i].v_mm_per_s[k];
     const int dir = direction(v, rd.v_move[i]);
     const double dt = rd.run->sample_period_s;
+    const auto held = [&] {
+      const std::vector<double>& w = *vm;
+      const double u = std::clamp(f.Ts / dt, 0.0, 1.0);
+      if (u > 1.0 - 1e-9 || !(k + 2 < rd.n && rd.interior[k + 1])) return (w[k + 1] - w[k]) / dt;
+      return (catmull_rom(w[k - 1], w[k], w[k + 1], w[k + 2], u) - w[k]) / (u * dt);
+    };
     const double acc = vm == nullptr                            ? rd.kin[i].a_mm_per_s2[k]
-                       : o.forward || ax.torque_held_over_row ? ((*vm)[k + 1] - (*vm)[k]) / dt
+                       : o.forward || ax.torque_held_over_row ? held()
                                                               : ((*vm)[k + 1] - (*vm)[k - 1]) / (2.0 * dt);
     return Motion{acc, v, dir > 0 ? 1.0 : 0.0, dir < 0 ? -1.0 : 0.0};
   };
@@ -2799,6 +2839,12 @@ bool fit_drive(const AxisFit& f, AxisFromData& ax, const DriveRowsOptions& o, st
   return true;
 }
 
+/// Whether the log samples every loop period (the loop's own rows: a lag of
+/// a row is one of the loop's, and the command's acceleration is the loop's).
+bool samples_every_loop_period(const AxisFit& f) {
+  return std::abs(f.r0.sample_period_s - f.Ts) <= 1e-9 + 1e-6 * f.Ts;
+}
+
 /// Whether the logged torque holds over its row (AxisFromData::
 /// torque_held_over_row): the drive fitted on the speed's forward difference
 /// against the central one, on the same rows with the same columns, where a
@@ -2833,13 +2879,23 @@ void choose_torque_timing(const AxisFit& f, AxisFromData& ax) {
   ax.torque_held_over_row =
       forward < central &&
       static_cast<double>(n) * (central * central - forward * forward) >= kMinT * kMinT * corr * forward * forward;
-  const char* why = ax.torque_held_over_row ? "the logged torque holds over the row it is logged at"
-                    : forward < central      ? "the two do not differ beyond the rows' scatter"
-                                             : "the logged torque is a sample of a torque that changes within the row";
-  ax.torque_timing = fmt::format(
-      "the drive fitted on the speed's {} difference over the row (residual {:.3g}; on the {} one {:.3g}): {}",
-      ax.torque_held_over_row ? "forward" : "central", ax.torque_held_over_row ? forward : central,
-      ax.torque_held_over_row ? "central" : "forward", ax.torque_held_over_row ? central : forward, why);
+  // Where the log is slower than the loop, the torque holds over the loop's
+  // period, not the row: the speed one period on is read off the cubic
+  // through the rows (drive_rows).
+  const bool every_period = samples_every_loop_period(f);
+  const std::string held = every_period ? "forward difference over the row"
+                                        : fmt::format("change over the loop's {:g} s from the row on", f.Ts);
+  const std::string why = ax.torque_held_over_row
+                              ? fmt::format("the logged torque holds over the {} it is logged at",
+                                            every_period ? "row" : "loop period")
+                          : forward < central ? "the two do not differ beyond the rows' scatter"
+                                              : "the logged torque is a sample of a torque that changes within the row";
+  const std::string central_name = "central difference over the row";
+  ax.torque_timing = fmt::format("the drive fitted on the speed's {} (residual {:.3g}; on the {}, {:.3g}): {}",
+                                 ax.torque_held_over_row ? held : central_name,
+                                 ax.torque_held_over_row ? forward : central,
+                                 ax.torque_held_over_row ? central_name : held,
+                                 ax.torque_held_over_row ? central : forward, why);
 }
 
 /// The drive in the channel's unit; false (said in the axis's note) where it
@@ -2880,12 +2936,6 @@ void set_velocity_loop(const VelocityLoopFit& vl, const AxisFit& f, controller::
   g.Jff_torque_s2_per_rad = vl.torque_ff ? vl.ls.theta.back() : 0.0;
 }
 
-/// Whether the log samples every loop period (the loop's own rows: a lag of
-/// a row is one of the loop's, and the command's acceleration is the loop's).
-bool samples_every_loop_period(const AxisFit& f) {
-  return std::abs(f.r0.sample_period_s - f.Ts) <= 1e-9 + 1e-6 * f.Ts;
-}
-
 /// The rows a torque may follow its law late: up to 10 ms, 1 to 10 rows.
 std::size_t max_torque_lag_rows(const AxisFit& f) {
   return static_cast<std::size_t>(std::clamp(std::lround(0.01 / f.r0.sample_period_s), 1L, 10L));
@@ -2896,20 +2946,32 @@ std::size_t max_torque_lag_rows(const AxisFit& f) {
 /// residual by less than a fifth is the law's own noise: the residual less
 /// the white noise on the logged torque (which no lag fits), so that noise
 /// on the log does not hide a lag the law shows.
+///
+/// On a log slower than the loop the lags are whole loop periods, a row's
+/// part taken between two rows (LawFitOptions::lag_fraction): in whole rows
+/// a 2 ms delay of a 1 ms loop logged every 4 ms was not seen (the other
+/// program tracked at 0.040 NRMS). At most ten steps a row.
 void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const TorqueClip* clip, AxisFromData& ax) {
   ax.gains_at_lag = ax.gains;
+  ax.torque_lag_samples = 0;
+  ax.torque_lag_fraction = 0.0;
+  const long per_row = std::clamp(std::lround(f.r0.sample_period_s / f.Ts), 1L, 10L);
   double best = vl.ls.residual_rms;
-  for (std::size_t lag = 1; lag <= max_torque_lag_rows(f); ++lag) {
-    const VelocityLoopFit vlag =
-        fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
-                          law_options(ax, {.lag = lag, .clip = clip, .torque_ff = ax.torque_feedforward}));
+  for (std::size_t step = 1; step <= max_torque_lag_rows(f) * static_cast<std::size_t>(per_row); ++step) {
+    const std::size_t lag = step / static_cast<std::size_t>(per_row);
+    const double part = static_cast<double>(step % static_cast<std::size_t>(per_row)) / static_cast<double>(per_row);
+    const VelocityLoopFit vlag = fit_velocity_loop(
+        f.runs, ax.axis, ax.channel.column,
+        law_options(ax, {.lag = lag, .lag_fraction = part, .clip = clip, .torque_ff = ax.torque_feedforward}));
     if (!(vlag.gains_physical() && vlag.ls.residual_rms < best)) continue;
     best = vlag.ls.residual_rms;
     ax.torque_lag_samples = lag;
+    ax.torque_lag_fraction = part;
     set_velocity_loop(vlag, f, ax.gains_at_lag);
   }
-  if (ax.torque_lag_samples > 0 && vl.less_noise(best) > 0.8 * vl.less_noise(vl.ls.residual_rms)) {
+  if (ax.torque_lag_rows() > 0.0 && vl.less_noise(best) > 0.8 * vl.less_noise(vl.ls.residual_rms)) {
     ax.torque_lag_samples = 0;
+    ax.torque_lag_fraction = 0.0;
     ax.gains_at_lag = ax.gains;
   }
 }
@@ -2919,10 +2981,12 @@ void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const Torque
 double plain_law_residual(const AxisFit& f, const VelocityLoopFit& vl, const TorqueClip* clip,
                           const AxisFromData& ax) {
   double plain = vl.ls.residual_rms;
-  if (ax.torque_lag_samples > 0) {
-    const VelocityLoopFit d = fit_velocity_loop(
-        f.runs, ax.axis, ax.channel.column,
-        law_options(ax, {.lag = ax.torque_lag_samples, .clip = clip, .torque_ff = ax.torque_feedforward}));
+  if (ax.torque_lag_rows() > 0.0) {
+    const VelocityLoopFit d = fit_velocity_loop(f.runs, ax.axis, ax.channel.column,
+                                                law_options(ax, {.lag = ax.torque_lag_samples,
+                                                                 .lag_fraction = ax.torque_lag_fraction,
+                                                                 .clip = clip,
+                                                                 .torque_ff = ax.torque_feedforward}));
     if (d.ls.ok) plain = std::min(plain, d.ls.residual_rms);
   }
   return plain;
@@ -3142,7 +3206,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
   ax.gains.Tn_s = 4.0 / wv;
   ax.gains.tau_i_s = 0.0;
   ax.gains.T_max = 1e9;
-  if (have_vcmd && f.r0.sample_period_s <= 5e-3 + 1e-12 && all_runs_log(f.runs, col(ax.axis, "_v_mm_s"))) {
+  if (have_vcmd && resolves_velocity_loop(f.r0.sample_period_s) && all_runs_log(f.runs, col(ax.axis, "_v_mm_s"))) {
     VelocityLoopFit vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column);
     // A limit that holds the integral while it clamps (anti-windup): after
     // each stretch at the limit the law resumes short of its running sum, so
@@ -3369,7 +3433,7 @@ void skip_unseen_effects(const std::vector<MeasuredRun>& fit, DataCalibration& o
   auto skip = [&](EffectKind k, std::string why) {
     out.skipped.emplace_back(feeddrive::effect_name(k), std::move(why));
   };
-  if (dt > 2e-3) {
+  if (!resolves_velocity_loop(dt)) {
     skip(EffectKind::kDelay, fmt::format("a delay of a few loop periods is far below the {:g} s sample "
                                          "period: it cannot be told from the loop's lag",
                                          dt));
@@ -3384,11 +3448,11 @@ void skip_unseen_effects(const std::vector<MeasuredRun>& fit, DataCalibration& o
                      "is not resolved to the share of it friction takes",
                      dt));
   }
-  if (dt <= 2e-3 + 1e-12)
+  else
     skip(EffectKind::kCompliance, "not searched on a machine identified from data: its drive is one inertia "
                                   "in the log's unit, and a two-mass resonance needs the split of that "
                                   "inertia and a stiffness the replay of a cascade loop does not resolve");
-  if (dt <= 2e-3 + 1e-12 && q <= 0.005) {
+  if (resolves_velocity_loop(dt) && q <= 0.005) {
     // Told from the logged motor speed against the position's, or without
     // it from the velocity loop's law (screw_pitch_error_from_law).
     bool seen = true;
@@ -3608,6 +3672,7 @@ void choose_torque_command(DataCalibration& out, const std::vector<RunData>& run
     c.gains.tau_i_s = m.tau_s;
     c.gains_at_lag = c.gains;
     c.torque_lag_samples = m.rows;
+    c.torque_lag_fraction = 0.0;
     c.torque_command_logged = true;
     sim::AxisDefinition& def = trial.axes[index(ax.axis)];
     set_identified_axis(def, c);

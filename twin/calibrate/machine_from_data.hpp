@@ -135,6 +135,13 @@ struct AxisFromData {
   /// best, and the gains fitted at that lag. A lag beyond 0 is a delay
   /// candidate (the gains above stay the lag-0 fit).
   std::size_t torque_lag_samples{0};
+  /// Where the log is slower than the loop: the part of a row the lag runs
+  /// beyond torque_lag_samples, in whole loop periods (0.5 for a 2 ms lag
+  /// past the rows of a 4 ms log of a 1 ms loop); the law's columns are
+  /// then taken between two rows, linearly.
+  double torque_lag_fraction{0.0};
+  /// The lag in rows of the log, whole and part.
+  double torque_lag_rows() const { return static_cast<double>(torque_lag_samples) + torque_lag_fraction; }
   controller::CascadeGains gains_at_lag;
   /// The law fitted with the command's acceleration as a column too: the
   /// loop feeds a torque forward (gains.Jff_torque_s2_per_rad).
