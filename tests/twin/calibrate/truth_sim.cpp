@@ -98,7 +98,8 @@ std::vector<double> contour_program(double Ts_s, const std::vector<std::pair<dou
   return r;
 }
 
-std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec& sp) {
+std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec& sp, TruthRunStats* stats) {
+  TruthRunStats st;
   const Plant& p = sp.plant;
   const Effects& e = sp.effects;
   const double Ts = sp.Ts_s;
@@ -183,7 +184,10 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
       const double Iv_next = Iv + Ts * ev;
       Tcmd = cl.Kvp * (ev + (cl.Tn > 0.0 ? Iv_next / cl.Tn : 0.0)) + cl.Jff * aref / p.rg;
       const bool clamped = cl.T_max_Nm > 0.0 && std::abs(Tcmd) > cl.T_max_Nm;
-      if (clamped) Tcmd = std::clamp(Tcmd, -cl.T_max_Nm, cl.T_max_Nm);
+      if (clamped) {
+        Tcmd = std::clamp(Tcmd, -cl.T_max_Nm, cl.T_max_Nm);
+        ++st.ticks_at_limit;
+      }
       if (!(clamped && cl.anti_windup)) Iv = Iv_next;
       Tf = lag_a * Tf + (1.0 - lag_a) * Tcmd;
       u = Tf / (p.Ka * p.Kt);
@@ -197,7 +201,10 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
       head = (head + 1) % ring.size();
     }
     double i = p.Ka * u_app;
-    if (e.i_max_A > 0.0) i = std::clamp(i, -e.i_max_A, e.i_max_A);
+    if (e.i_max_A > 0.0 && std::abs(i) > e.i_max_A) {
+      i = std::clamp(i, -e.i_max_A, e.i_max_A);
+      ++st.ticks_at_limit;
+    }
     const double Tm = p.Kt * i;
     Tm_now = Tm;
     const double i_logged = e.delay_after_current ? p.Ka * u : i;
@@ -330,6 +337,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
        << ", \"sample_period_s\": " << Ts * static_cast<double>(every)
        << ", \"encoder_resolution_mm\": " << sp.resolution_mm
        << ", \"description\": \"truth simulator of the calibration tests\"}\n";
+  if (stats != nullptr) *stats = st;
   return ref.size();
 }
 

@@ -188,8 +188,17 @@ inline RunSpec cascade_run_spec(double raw_per_Nm, double resolution_mm, double 
   return sp;
 }
 
+/// What the truth did that its log may not show.
+struct TruthRunStats {
+  /// Loop periods at which its current limit (effects.i_max_A) or its
+  /// loop's torque limit (cascade.T_max_Nm) clamped: 0 where the program
+  /// never reaches the limit, which then is not in the run.
+  std::size_t ticks_at_limit{0};
+};
+
 /// Simulates and writes dir/trace.csv and dir/meta.json for one axis (spec.axis) of the
-/// shipped fadal2216 machine. Returns the number of rows.
-std::size_t write_truth_run(const std::filesystem::path& dir, const RunSpec& spec);
+/// shipped fadal2216 machine. Returns the number of rows; `stats`, where
+/// given, gets what the truth did.
+std::size_t write_truth_run(const std::filesystem::path& dir, const RunSpec& spec, TruthRunStats* stats = nullptr);
 
 }  // namespace twin::truth
