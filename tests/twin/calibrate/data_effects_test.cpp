@@ -293,7 +293,23 @@ TEST(DataEffects, ScrewPitchErrorIsFoundWithoutTheMotorSpeed) {
 // command's acceleration (Jff 0.01 N m s^2/rad, chosen after the gap): the
 // gap is looked for with and without that column, as a law without it
 // missed the gap there.
+//
+// The drive, fitted on the encoder's acceleration, which the motor's
+// crossing of the gap does not have, came out with the Coulomb levels up to
+// 18 % low on the sweep's 40 um gap (the other program then tracked at
+// 0.0106). The motor's speed is now read from the velocity law found on the
+// encoder's speed (motor_speed_from_law) and the runs calibrated again on
+// it, which is kept as it replays the fitting runs' held-out rows better:
+// the gap is then the motor's travel against the encoder, as where the
+// speed is logged. Oracles besides: the truth's drive in the log's unit (B
+// and the levels of TheDriveIsFittedOnTheTorqueTimingTheLogShows) within
+// 2 % (0.05 to 1.8 % here; on the encoder's speed B came out 3.5 and 4.7 %
+// high and the levels 5 to 19 % low), and the truth's gap within 5 % (the
+// motor's travel against the encoder gives 19.95 and 19.83 um; the law
+// gave 19.9, and the replay chose 22.9 with the feedforward).
 TEST(DataEffects, BacklashIsFoundWithoutTheMotorSpeed) {
+  const double B_raw = 0.016 * kRawPerNm / kRg;
+  const double up_raw = (0.25 + 0.05) * kRawPerNm, down_raw = (-0.15 + 0.05) * kRawPerNm;
   for (const double Jff : {0.0, 0.01}) {
     SCOPED_TRACE(Jff > 0.0 ? "torque fed forward" : "no feedforward");
     truth::RunSpec sp = cascade_spec();
@@ -303,11 +319,16 @@ TEST(DataEffects, BacklashIsFoundWithoutTheMotorSpeed) {
     const Outcome o = calibrate_spec(Jff > 0.0 ? "backlash_ff_no_speed" : "backlash_no_speed", sp);
     expect_only(o, "backlash");
     ASSERT_EQ(o.r.axis.size(), 1u);
-    EXPECT_NEAR(o.r.axis[0].law_gap_mm, 0.02, 0.05 * 0.02) << o.r.axis[0].loop_source;
-    // The size replayed is chosen among 0.85, 1 and 1.15 times the law's on
-    // the fitting rows' tracking; with the feedforward the drive, fitted on
-    // the encoder's acceleration, favours 1.15.
-    EXPECT_NEAR(kept_effect(o, "backlash").params.at("gap_mm"), 0.02, 0.16 * 0.02) << describe(o);
+    const auto law_speed = std::find_if(o.r.notes.begin(), o.r.notes.end(), [](const std::string& n) {
+      return n.find("the motor's speed read from the velocity law") != std::string::npos;
+    });
+    ASSERT_NE(law_speed, o.r.notes.end());
+    EXPECT_THAT(*law_speed, ::testing::HasSubstr(": kept,"));
+    const AxisFromData& ax = o.r.axis[0];
+    EXPECT_NEAR(ax.B, B_raw, 0.02 * B_raw);
+    EXPECT_NEAR(ax.Tc_pos + ax.c, up_raw, 0.02 * up_raw);
+    EXPECT_NEAR(ax.c - ax.Tc_neg, down_raw, 0.02 * std::abs(down_raw));
+    EXPECT_NEAR(kept_effect(o, "backlash").params.at("gap_mm"), 0.02, 0.05 * 0.02) << describe(o);
     expect_validation_improves(o, {"x_err_mm"});
     expect_held_out_machine_check(o);
   }
