@@ -61,12 +61,19 @@ std::string velocity_command_column(const io::TraceTable& t, Axis a) {
 
 /// A log at 5 ms or faster resolves the velocity loop: its PI law is fitted
 /// from the log where the speed and the velocity command are logged
-/// (identify_velocity_loop), the drive on the logged speed, and the
+/// (identify_velocity_loop; up to kLawFitMaxPeriod_s, judged row to row
+/// beyond 5 ms), the drive on the logged speed, and the
 /// detectors that read the torque row by row (delay, cogging, load
 /// friction, lead error) run on it. Held at 2 ms for the detectors, a 1 ms
 /// loop logged every 4 ms was named wrong on 9 of the cascade sweep's 14
 /// runs of one magnitude (2 since).
 bool resolves_velocity_loop(double dt_s) { return dt_s <= 5e-3 + 1e-12; }
+
+/// The slowest log the velocity loop's PI law is fitted from: a loop of
+/// 10 Hz (the cascade sweep's 59 rad/s, its integral's zero at 125 rad/s)
+/// sampled at 50 Hz. At 50 ms the law's misfit from row to row is near the
+/// torque's own change, and the loop is chosen on the replay instead.
+constexpr double kLawFitMaxPeriod_s = 20e-3;
 
 /// The cubic through p0..p3 at equal spacing (Catmull-Rom) at u in [0, 1]
 /// of the way from p1 to p2: a log's value between two rows.
@@ -460,12 +467,23 @@ struct VelocityLoopFit {
   /// difference| within segments (6 sigma^2 for white noise; a smooth torque
   /// adds little at the loop's rate, a filtered noise shows less).
   double noise_rms{0.0};
+  /// The RMS of the residual's change from one fitted row to the next, and
+  /// of the torque's (rows of the same constant).
+  double step_residual_rms{0.0}, step_T_rms{0.0};
   /// An RMS of the logged torque (or of a residual of it) less the white
   /// noise, which no law fits.
   double less_noise(double rms) const { return std::sqrt(std::max(rms * rms - noise_rms * noise_rms, 0.0)); }
+  /// The same of a change from row to row, which carries twice the noise's variance.
+  double step_less_noise(double rms) const {
+    return std::sqrt(std::max(rms * rms - 2.0 * noise_rms * noise_rms, 0.0));
+  }
   /// Gains a loop can have: Kvp > 0, Kvp / Tn >= 0, and Jff >= 0 where fitted.
-  bool gains_physical() const {
-    return ls.ok && ls.theta[0] > 0.0 && ls.theta[1] >= 0.0 && (!torque_ff || ls.theta.back() >= 0.0);
+  /// On a log slower than the loop by `excess_s` a row, the law's integral
+  /// summed once a row is short by half that excess of the speed error,
+  /// which the first coefficient takes off Kvp (set_velocity_loop).
+  bool gains_physical(double excess_s = 0.0) const {
+    return ls.ok && ls.theta[0] + 0.5 * ls.theta[1] * excess_s > 0.0 && ls.theta[1] >= 0.0 &&
+           (!torque_ff || ls.theta.back() >= 0.0);
   }
 };
 /// The columns and rows fit_velocity_loop fits with (see above).
@@ -666,6 +684,35 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
   // exceeded the filtered law's residual, and every rule that asks a
   // residual less the noise to fall compared zero with zero).
   f.noise_rms = noise_as_fitted(runs, channel);
+  // The law's misfit from one fitted row to the next (of the same
+  // constant), against the torque's own change: where the integral is
+  // summed between the rows of a log slower than the loop, its small error
+  // each row adds up over a segment to a drift the constant does not take,
+  // and the misfit in levels tells that drift, not the law.
+  if (f.ls.ok) {
+    std::vector<double> r(ev.size(), 0.0);
+    std::vector<char> fitted(ev.size(), 0);
+    for (std::size_t k : vrows) {
+      double pred = f.ls.theta[0] * ev[k] + f.ls.theta[1] * iev[k] + f.c_seg[seg_of_row[k]];
+      if (current_lag) pred += f.ls.theta[2] * Tp[k];
+      if (lead)
+        for (std::size_t c = 0; c < 4; ++c) pred += f.ls.theta[lead_column(o) + c] * ld[c][k];
+      if (torque_ff) pred += f.ls.theta.back() * aff[k];
+      r[k] = Tm[k] - pred;
+      fitted[k] = 1;
+    }
+    double sr = 0.0, sT = 0.0, n = 0.0;
+    for (std::size_t k : vrows)
+      if (k > 0 && fitted[k - 1] && seg_of_row[k - 1] == seg_of_row[k]) {
+        sr += (r[k] - r[k - 1]) * (r[k] - r[k - 1]);
+        sT += (Tm[k] - Tm[k - 1]) * (Tm[k] - Tm[k - 1]);
+        n += 1.0;
+      }
+    if (n > 0.0) {
+      f.step_residual_rms = std::sqrt(sr / n);
+      f.step_T_rms = std::sqrt(sT / n);
+    }
+  }
   if (f.ls.ok && !current_lag) {
     const TorqueClip c{f.ls.theta, f.c_seg, f.T_abs_max, f.noise_rms};
     for (std::size_t k : vrows)
@@ -3199,14 +3246,16 @@ AxisFromData::MotionBehindTorque motion_behind_torque(const AxisFit& f, const Ax
 }
 
 /// The velocity loop: from the logged torque against the speed error where
-/// both speeds are logged at the loop's rate, else well above the position loop.
+/// both speeds are logged every kLawFitMaxPeriod_s or faster, else well
+/// above the position loop.
 void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) {
   const double wv = std::min(std::max(5.0 * ax.gains.Kv_per_s, 2.0 * M_PI * 20.0), 0.3 / f.Ts);
   ax.gains.Kvp_torque_s_per_rad = ax.J * wv;
   ax.gains.Tn_s = 4.0 / wv;
   ax.gains.tau_i_s = 0.0;
   ax.gains.T_max = 1e9;
-  if (have_vcmd && resolves_velocity_loop(f.r0.sample_period_s) && all_runs_log(f.runs, col(ax.axis, "_v_mm_s"))) {
+  if (have_vcmd && f.r0.sample_period_s <= kLawFitMaxPeriod_s + 1e-12 &&
+      all_runs_log(f.runs, col(ax.axis, "_v_mm_s"))) {
     VelocityLoopFit vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column);
     // A limit that holds the integral while it clamps (anti-windup): after
     // each stretch at the limit the law resumes short of its running sum, so
@@ -3325,13 +3374,26 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
     // The law must explain most of the torque: its residual under 0.3 of
     // the torque's RMS, both less the white noise on the log (which no law
     // fits; at 0.2 N m of noise on a torque of 0.75 N m RMS the residual is
-    // mostly the noise).
-    if (vl.gains_physical() && vl.less_noise(vl.ls.residual_rms) < 0.3 * vl.less_noise(vl.T_rms)) {
+    // mostly the noise). On a log slower than 5 ms the law's integral,
+    // summed once a row, drifts over a segment (at 20 ms of a 1 ms loop the
+    // residual in levels was 0.41 of the torque); there the law is also
+    // taken where its misfit from row to row is under 0.3 of the torque's
+    // change (0.2 there).
+    const bool explains = vl.less_noise(vl.ls.residual_rms) < 0.3 * vl.less_noise(vl.T_rms);
+    const bool explains_steps = !resolves_velocity_loop(f.r0.sample_period_s) &&
+                                vl.step_less_noise(vl.step_residual_rms) < 0.3 * vl.step_less_noise(vl.step_T_rms);
+    if (vl.gains_physical(std::max(0.0, f.r0.sample_period_s - f.Ts)) && (explains || explains_steps)) {
       set_velocity_loop(vl, f, ax.gains);
       ax.velocity_loop_from_data = true;
+      const std::string by_steps =
+          explains ? std::string()
+                   : fmt::format(", {:.3g} of an RMS {:.3g} from row to row: the law's integral, summed between "
+                                 "rows {:g} s apart, drifts over a segment",
+                                 vl.step_residual_rms, vl.step_T_rms, f.r0.sample_period_s);
       ax.loop_source += fmt::format("; velocity loop from the logged torque against the speed error (residual "
-                                    "{:.3g} of an RMS {:.3g}){}",
-                                    vl.ls.residual_rms, vl.T_rms, held_integral + lead + clipped + fed_forward);
+                                    "{:.3g} of an RMS {:.3g}{}){}",
+                                    vl.ls.residual_rms, vl.T_rms, by_steps,
+                                    held_integral + lead + clipped + fed_forward);
       velocity_loop_lag(f, vl, clip ? &*clip : nullptr, ax);
       // Where the speed is taken from the position the law is fitted through
       // the low-pass, whose own lag the previous row's torque would fit.
