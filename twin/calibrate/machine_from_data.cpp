@@ -3254,6 +3254,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
   ax.gains.Tn_s = 4.0 / wv;
   ax.gains.tau_i_s = 0.0;
   ax.gains.T_max = 1e9;
+  ax.blind_velocity_loop = ax.gains;
   if (have_vcmd && f.r0.sample_period_s <= kLawFitMaxPeriod_s + 1e-12 &&
       all_runs_log(f.runs, col(ax.axis, "_v_mm_s"))) {
     VelocityLoopFit vl = fit_velocity_loop(f.runs, ax.axis, ax.channel.column);
@@ -3620,15 +3621,54 @@ AxisArray<LoopChoice> best_velocity_loops(DataCalibration& out, const std::vecto
 /// show. A small grid around the default, chosen per axis on the fitting
 /// rows of the fitting runs; the held-out rows judge it like everything else.
 void choose_velocity_loops(DataCalibration& out, const std::vector<RunData>& runs) {
-  AxisArray<bool> on{};
+  // On a log slower than 5 ms the law read from it stands against the 16
+  // (a logger that averages its torque over the sample period makes the
+  // law's integral time a third of the loop's, and that loop's replay runs
+  // away): its fitting rows' error against theirs, around the default.
+  const bool contest_law = !resolves_velocity_loop(runs.front().run->sample_period_s);
+  AxisArray<bool> on{}, contest{};
+  sim::MachineDefinition base = out.identified;
   for (AxisFromData& ax : out.axis) {
-    ax.default_velocity_loop = ax.gains;
-    on[index(ax.axis)] = ax.identified && !ax.velocity_loop_from_data;
+    contest[index(ax.axis)] = contest_law && ax.identified && ax.velocity_loop_from_data;
+    ax.default_velocity_loop = contest[index(ax.axis)] ? ax.blind_velocity_loop : ax.gains;
+    on[index(ax.axis)] = ax.identified && (!ax.velocity_loop_from_data || contest[index(ax.axis)]);
+    if (contest[index(ax.axis)]) base.axes[index(ax.axis)].loop.cascade = ax.blind_velocity_loop;
   }
-  const AxisArray<LoopChoice> best = best_velocity_loops(out, runs, out.identified, on);
+  ChannelErrors with_law;
+  if (std::any_of(contest.begin(), contest.end(), [](bool b) { return b; }))
+    with_law = pooled_on_fit_runs(out, runs, out.identified, false);
+  const AxisArray<LoopChoice> best = best_velocity_loops(out, runs, base, on);
   for (AxisFromData& ax : out.axis) {
     const LoopChoice& c = best[index(ax.axis)];
-    if (!on[index(ax.axis)] || c.score >= 1e300) continue;
+    if (!contest[index(ax.axis)]) continue;
+    const auto it = with_law.nrms.find(ax.channel.column);
+    const double law = it == with_law.nrms.end() ? 1e300 : it->second;
+    const std::string law_text = law < 1e300 ? fmt::format("{:.4g}", law) : std::string("no figure (its replay fails)");
+    if (!(c.score < law)) {
+      ax.loop_source += fmt::format("; it replays the fitting rows' {} to {} against {:.4g} for the best of 16 "
+                                    "velocity loops chosen without it",
+                                    ax.channel.column, law_text, c.score);
+      continue;
+    }
+    // The 16's: the loop as where the log does not show it.
+    ax.velocity_loop_from_data = false;
+    ax.gains = ax.blind_velocity_loop;
+    ax.gains_at_lag = ax.gains;
+    ax.torque_lag_samples = 0;
+    ax.torque_lag_fraction = 0.0;
+    ax.torque_feedforward = false;
+    ax.law_lead_period_mm = 0.0;
+    ax.law_gap_mm = 0.0;
+    ax.law_limit_rows.clear();
+    ax.law_limit_level = 0.0;
+    ax.loop_source += fmt::format("; not kept: it replays the fitting rows' {} to {}, the best of 16 velocity "
+                                  "loops chosen without it to {:.4g}",
+                                  ax.channel.column, law_text, c.score);
+    set_identified_axis(out.identified.axes[index(ax.axis)], ax);
+  }
+  for (AxisFromData& ax : out.axis) {
+    const LoopChoice& c = best[index(ax.axis)];
+    if (!on[index(ax.axis)] || ax.velocity_loop_from_data || c.score >= 1e300) continue;
     ax.gains.Kvp_torque_s_per_rad = c.Kvp;
     ax.gains.Tn_s = c.Tn;
     out.identified.axes[index(ax.axis)].loop.cascade = ax.gains;

@@ -108,6 +108,10 @@ struct AxisFromData {
   double lag_s{0.0};             ///< lag of the position behind the command
   controller::CascadeGains gains;
   controller::CascadeGains default_velocity_loop;  ///< the gains before the velocity loop was chosen
+  /// The velocity loop taken where the log does not show it (identify_velocity_loop's
+  /// default), kept where the law read from a log slower than 5 ms must
+  /// replay better than the best choice around it (choose_velocity_loops).
+  controller::CascadeGains blind_velocity_loop;
   double J{0.0}, B{0.0}, Tc_pos{0.0}, Tc_neg{0.0}, c{0.0};  ///< channel unit, rg = 1 mm/rad
   double J_se{0.0}, B_se{0.0}, Tc_pos_se{0.0}, Tc_neg_se{0.0}, c_se{0.0};
   std::size_t fit_rows{0};
