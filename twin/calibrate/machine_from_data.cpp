@@ -4491,9 +4491,10 @@ void errors_on_validation_runs(DataCalibration& out, const std::vector<MeasuredR
 namespace {
 
 
-/// A log that resolves the velocity loop (resolves_velocity_loop: 5 ms or
-/// faster; at 2 ms or faster only, a 4 ms log missed the cascade sweep's
-/// tracking check on all 14 runs) with positions to 5 um or finer but no speed
+/// A log at kLawFitMaxPeriod_s or faster (at 2 ms or faster only, a 4 ms
+/// log missed the cascade sweep's tracking check on all 14 runs; at 5 ms
+/// or faster only, a 10 ms log on all 14 too, 0.025 to 0.12; the drive is
+/// fitted on this speed at 5 ms or faster) with positions to 5 um or finer but no speed
 /// column (a CNC that traces its position loop's command and output, and not
 /// the speed it feeds back): the axis's speed is the central difference of
 /// its logged position within each segment (one-sided at a segment's ends,
@@ -4517,24 +4518,31 @@ void add_speed_from_position(std::vector<MeasuredRun>& own, const std::vector<Ru
     MeasuredRun& r = own[i];
     const std::vector<Segment>& segs = runs[i].segments;
     const double dt = r.sample_period_s;
-    if (!(resolves_velocity_loop(dt) && q <= 0.005)) continue;
+    if (!(dt <= kLawFitMaxPeriod_s + 1e-12 && q <= 0.005)) continue;
+    // Slower than 6.7 ms the low-pass would stand near the log's Nyquist
+    // rate: the speed is the five-point difference there, whose gain at a
+    // fifth of the sample rate is 0.93 (the central difference's 0.76: at
+    // 10 ms of the cascade sweep's loop, ringing at 20 Hz, the law read on
+    // it came out at Kvp 16.3 for 12.6; on the five-point difference 13.1).
+    const bool filter = 0.5 / dt > 1.5 * kSpeedCutoff_Hz;
     std::vector<std::string> derived;
     for (Axis a : out.axes) {
       const auto* x = r.trace.find(col(a, "_mm"));
       if (x == nullptr || r.trace.find(col(a, "_v_mm_s")) != nullptr) continue;
-      const auto filtered = [&](const std::vector<double>& c) { return lowpass_in_segments(c, segs, dt); };
+      const auto filtered = [&](const std::vector<double>& c) { return filter ? lowpass_in_segments(c, segs, dt) : c; };
       const std::vector<double> xf = filtered(*x);
       std::vector<double> v(x->size(), 0.0);
       for (const Segment& sg : segs) {
         if (sg.end < sg.begin + 2) continue;
         const std::vector<double> vs =
-            derivative(std::span<const double>(xf.data() + sg.begin, sg.end - sg.begin), dt);
+            filter ? derivative(std::span<const double>(xf.data() + sg.begin, sg.end - sg.begin), dt)
+                   : derivative_five_point(std::span<const double>(xf.data() + sg.begin, sg.end - sg.begin), dt);
         std::copy(vs.begin(), vs.end(), v.begin() + static_cast<std::ptrdiff_t>(sg.begin));
       }
       // The channels a law on this speed is fitted with, through the same filter.
       std::vector<std::pair<std::string, std::vector<double>>> alike;
       for (const std::string& c : {col(a, "_vcmd_mm_s"), torque_channel(r, a).column})
-        if (const auto* y = c.empty() ? nullptr : r.trace.find(c)) alike.emplace_back(lowpassed(c), filtered(*y));
+        if (const auto* y = c.empty() || !filter ? nullptr : r.trace.find(c)) alike.emplace_back(lowpassed(c), filtered(*y));
       r.trace.names.push_back(col(a, "_v_mm_s"));
       r.trace.columns.push_back(std::move(v));
       for (auto& [name, y] : alike) {
@@ -4543,9 +4551,15 @@ void add_speed_from_position(std::vector<MeasuredRun>& own, const std::vector<Ru
       }
       derived.push_back(std::string(axis_name(a)));
     }
-    if (!derived.empty())
+    if (!derived.empty() && filter)
       out.notes.push_back(fmt::format("{}: no speed logged for {}: taken as the central difference of the logged "
                                       "position (every {:g} s, to {:g} mm), low-passed at {:g} Hz without phase",
+                                      r.dir.string(), fmt::join(derived, ", "), dt, q > 0.0 ? q : 1e-6,
+                                      kSpeedCutoff_Hz));
+    else if (!derived.empty())
+      out.notes.push_back(fmt::format("{}: no speed logged for {}: taken as the five-point difference of the logged "
+                                      "position (every {:g} s, to {:g} mm), not low-passed (the log's Nyquist rate "
+                                      "is under 1.5 times the {:g} Hz of the low-pass)",
                                       r.dir.string(), fmt::join(derived, ", "), dt, q > 0.0 ? q : 1e-6,
                                       kSpeedCutoff_Hz));
   }

@@ -89,6 +89,13 @@ std::vector<double> derivative(std::span<const double> x, double dt_s) {
   return d;
 }
 
+std::vector<double> derivative_five_point(std::span<const double> x, double dt_s) {
+  std::vector<double> d = derivative(x, dt_s);
+  for (std::size_t i = 2; i + 2 < x.size(); ++i)
+    d[i] = (x[i - 2] - 8.0 * x[i - 1] + 8.0 * x[i + 1] - x[i + 2]) / (12.0 * dt_s);
+  return d;
+}
+
 double rms(std::span<const double> a, std::size_t from, std::size_t to) {
   to = std::min(to, a.size());
   if (from >= to) return 0.0;

@@ -29,6 +29,13 @@ std::vector<double> lowpass(std::span<const double> x, double fc_Hz, double fs_H
 /// Central differences (one-sided at the ends) of x sampled every dt_s.
 std::vector<double> derivative(std::span<const double> x, double dt_s);
 
+/// The five-point central difference (x[i-2] - 8 x[i-1] + 8 x[i+1] - x[i+2])
+/// / (12 dt), exact through quartics; central differences at the two rows
+/// of each end. Its gain at a frequency f is (8 sin w - sin 2w) / (6 w),
+/// w = 2 pi f dt: 0.93 at a fifth of the sample rate, where the central
+/// difference's sin(w) / w is 0.76.
+std::vector<double> derivative_five_point(std::span<const double> x, double dt_s);
+
 /// rms(a - b) / rms(a) over rows [from, to); 0 when both are zero, and
 /// rms(a - b) when rms(a) is zero.
 double nrms(std::span<const double> a, std::span<const double> b, std::size_t from, std::size_t to);

@@ -66,6 +66,37 @@ TEST(Signal, DerivativeOfQuadraticIsExact) {
   for (std::size_t k = 1; k + 1 < x.size(); ++k) EXPECT_NEAR(d[k], 4.0 * static_cast<double>(k) * dt, 1e-9);
 }
 
+// The five-point difference is exact on a quartic inside (its truncation
+// error is dt^4 x^(5) / 30), and on a sine its gain is the closed form
+// (8 sin w - sin 2w) / (6 w), w = 2 pi f dt, with no phase: 0.93 at a fifth
+// of the sample rate. Tolerances: rounding of a 1e2-sized polynomial, and the
+// double-precision sine.
+TEST(Signal, FivePointDerivativeIsExactOnAQuarticAndHasItsClosedFormGain) {
+  const double dt = 0.01;
+  std::vector<double> x(60);
+  for (std::size_t k = 0; k < x.size(); ++k) {
+    const double t = static_cast<double>(k) * dt;
+    x[k] = 3.0 * std::pow(t, 4) - t * t + 0.5 * t;
+  }
+  const auto d = derivative_five_point(x, dt);
+  for (std::size_t k = 2; k + 2 < x.size(); ++k) {
+    const double t = static_cast<double>(k) * dt;
+    EXPECT_NEAR(d[k], 12.0 * std::pow(t, 3) - 2.0 * t + 0.5, 1e-9) << k;
+  }
+  const double fs = 1.0 / dt;
+  for (double f : {5.0, 20.0, 40.0}) {
+    const auto s = sine(f, fs, 200);
+    const auto ds = derivative_five_point(s, dt);
+    const double w = 2 * kPi * f * dt;
+    const double g = (8.0 * std::sin(w) - std::sin(2.0 * w)) / (6.0 * w);
+    for (std::size_t k = 2; k + 2 < s.size(); ++k)
+      EXPECT_NEAR(ds[k], g * 2 * kPi * f * std::cos(2 * kPi * f * static_cast<double>(k) * dt), 1e-9 * 2 * kPi * f)
+          << f << " Hz, row " << k;
+  }
+  const double w5 = 2 * kPi / 5.0;
+  EXPECT_NEAR((8.0 * std::sin(w5) - std::sin(2.0 * w5)) / (6.0 * w5), 0.93, 0.005);
+}
+
 // y = 2 a - 0.5 b + 0.1 + noise (sigma 0.01): the estimate must lie within
 // 4 of its own standard errors and the standard errors must match the
 // textbook sigma / sqrt(n var) within 20 %.
