@@ -1285,6 +1285,9 @@ struct Trial {
   std::string evidence;
   std::function<double(std::size_t row, const ParamSet& p, const DriveRefit* d)> torque;
   std::vector<std::string> set_notes;  ///< said of each set where it is the one chosen (or empty)
+  /// The log read as the loop's command, before the current loop
+  /// (AxisDefinition::torque_command_logged), from this effect on.
+  bool reads_command{false};
 };
 
 sim::MachineDefinition with_trial(const sim::MachineDefinition& base, Axis a, const Trial& t, std::size_t set) {
@@ -1292,6 +1295,7 @@ sim::MachineDefinition with_trial(const sim::MachineDefinition& base, Axis a, co
   sim::AxisDefinition& def = m.axes[index(a)];
   if (!t.drives.empty()) set_drive(def.drive, t.drives[set]);
   if (t.gains) def.loop.cascade = *t.gains;
+  if (t.reads_command) def.torque_command_logged = 1.0;
   // Two effects that describe the same thing: the drive holds one.
   for (const EffectKind replaced : replaced_by(t.kind))
     feeddrive::effect_def(replaced).enabled(def.drive.effects) = false;
@@ -1713,6 +1717,19 @@ namespace {
 // command the level comes out within 1 % at all three magnitudes, and the
 // residual falls by 1.7, 8.6 and 45 %: the smallest limit is touched by a
 // few rows, whose torque the replay without it already gets to 0.10.
+// Behind a current loop with no lag the command and the motor's torque are
+// the same channel but for the limit, so the log was read as the motor's
+// (choose_torque_command has no lag to find) and the limit never looked
+// for: the limit at twice the sweep's size was taken for load-dependent,
+// position-dependent and rising friction, tracking at 0.030 on the other
+// program. A log read as the motor's is therefore searched too, and the
+// trial reads it as the command (Trial::reads_command): a log of the
+// motor's own torque, which the motion cannot answer to clipped, replays
+// worse so and is refused. Only on logs that resolve the velocity loop
+// (DataSearch::fast), where a current loop's lag would have shown: on the
+// U-Mich runs (100 ms, the drive fitted on the commanded kinematics) the
+// scan found levels on x and y of umich05 whose replays were refused, at a
+// cost of minutes of replays a run.
 constexpr double kLimitGain = 0.98;
 struct LimitInMotion {
   double level{0.0};
@@ -1754,12 +1771,16 @@ void current_limit_from_motion(DataSearch& s) {
   if (!lim) return;
   Trial t;
   t.kind = EffectKind::kCurrentSaturation;
+  t.reads_command = !s.ax.torque_command_logged;
   offer_with_drive_refits(t, s, {{EffectParam::current_saturation_i_max_A, lim->level}}, lim->clipped, lim->plain);
   t.evidence = fmt::format(
-      "the log's {} is the loop's command, which a limit on the motor's current does not clip: the motion answers "
-      "to that command clipped at {:.4g} (in the channel's unit; {} of its rows beyond), which takes the drive's "
-      "residual from {:.4g} to {:.4g}",
-      s.ax.channel.column, lim->level, lim->beyond, lim->plain.residual_rms, lim->clipped.residual_rms);
+      "the log's {} is the loop's command, which a limit on the motor's current does not clip{}: the motion "
+      "answers to that command clipped at {:.4g} (in the channel's unit; {} of its rows beyond), which takes the "
+      "drive's residual from {:.4g} to {:.4g}",
+      s.ax.channel.column,
+      t.reads_command ? " (the motion behind it shows no current loop's lag, so only the limit tells the two apart)"
+                      : "",
+      lim->level, lim->beyond, lim->plain.residual_rms, lim->clipped.residual_rms);
   const AxisRows& rows = s.rows;
   t.torque = [&rows](std::size_t k, const ParamSet& p, const DriveRefit*) {
     const double L = param_value(p, EffectParam::current_saturation_i_max_A);
@@ -1775,8 +1796,9 @@ void current_limit_from_motion(DataSearch& s) {
 // limit (the largest of some hundred held samples), so the band the held
 // samples are looked for in, and the level the replay must ask beyond, are
 // widened and lowered by the noise the channel shows.
-// Where the log is read as the command and shows no flat top, the limit is
-// looked for in the motion (current_limit_from_motion).
+// Where the log shows no flat top, the limit is looked for in the motion
+// (current_limit_from_motion): on a log read as the command, and on a fast
+// log read as the motor's, which the candidate then reads as the command.
 void detect_current_saturation_in_data(DataSearch& s) {
   const AxisFromData& ax = s.ax;
   const AxisRows& rows = s.rows;
@@ -1798,7 +1820,7 @@ void detect_current_saturation_in_data(DataSearch& s) {
     if (v >= log_max - band) top.push_back(v);
   }
   if (!(held_max > 0.0 && model_max > 1.05 * held_max && top.size() >= 10)) {
-    if (ax.torque_command_logged) current_limit_from_motion(s);
+    if (ax.torque_command_logged || s.fast) current_limit_from_motion(s);
     return;
   }
   auto median = [](std::vector<double> v) {
