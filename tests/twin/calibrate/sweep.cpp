@@ -8,6 +8,7 @@
 //                   [--log-every M] [--current-only] [--keep DIR] [--verbose]
 //   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed]
 //                            [--encoder-mm Q] [--current-lag S] [--torque-command] [--torque-step R]
+//                            [--torque-filter S]
 //                            [--kff K] [--jff J] [--friction load|sqrt|dahl] [--limit-on-command]
 //                            [--anti-windup] [--contour | --contour2] [--log-every M] [--keep DIR]
 //
@@ -39,7 +40,9 @@
 // --torque-command logs the velocity loop's torque command instead, the
 // current loop's input, before its lag and any dead time (as many drives
 // trace it); --torque-step rounds the logged raw torque to multiples of R
-// (a drive's integer counts or percent);
+// (a drive's integer counts or percent); --torque-filter passes the logged
+// torque through a first-order low-pass of S seconds (a drive's smoothed
+// actual-torque monitor, which the loop does not see);
 // --kff sets its velocity feedforward (0.6 unless given), --jff gives it a
 // torque feedforward of J N m s^2/rad on the command's acceleration;
 // --friction adds to every run a friction law of a real machine: friction
@@ -185,6 +188,7 @@ struct CascadeOptions {
   double Jff{0.0};            ///< the torque feedforward on the command's acceleration, N m s^2/rad
   bool log_torque_command{false};  ///< log the current loop's input, not the motor's torque
   double raw_step{0.0};            ///< the raw torque logged to multiples of this (0: as computed)
+  double torque_filter_s{0.0};     ///< the logged torque low-passed at this time constant (0: as computed)
   std::string friction;            ///< a friction law beside every run's effect (empty: none)
   bool limit_on_command{false};    ///< the limit cases clamp the velocity loop's command, not the current
   bool anti_windup{false};         ///< with limit_on_command: the integral frozen while the limit clamps
@@ -236,6 +240,7 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     sp.cascade.Jff = loop.Jff;
     sp.cascade.log_torque_command = loop.log_torque_command;
     sp.cascade.raw_step = loop.raw_step;
+    sp.cascade.log_torque_filter_s = loop.torque_filter_s;
     sp.log_every = loop.log_every;
     const double load = sp.effects.load_Nm;
     c.set(sp.effects);
@@ -375,6 +380,8 @@ int main(int argc, char** argv) {
       if (!number_at_least_0("--kff", argv[++i], loop.kff)) return 2;
     } else if (!std::strcmp(argv[i], "--torque-step") && has_value) {
       if (!number_at_least_0("--torque-step", argv[++i], loop.raw_step)) return 2;
+    } else if (!std::strcmp(argv[i], "--torque-filter") && has_value) {
+      if (!number_at_least_0("--torque-filter", argv[++i], loop.torque_filter_s)) return 2;
     } else if (!std::strcmp(argv[i], "--friction") && has_value) {
       loop.friction = argv[++i];
       Effects probe;

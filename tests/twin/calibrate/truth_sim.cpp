@@ -147,6 +147,9 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   const CascadeLaw& cl = sp.cascade;
   double Iv = 0.0, Tf = 0.0, Tcmd = 0.0;
   const double lag_a = cl.tau_i > 0.0 ? std::exp(-Ts / cl.tau_i) : 0.0;
+  const double monitor_a = cl.log_torque_filter_s > 0.0 ? std::exp(-Ts / cl.log_torque_filter_s) : 0.0;
+  double T_monitor = 0.0;
+  bool monitor_started = false;
   auto pos = [&](double x) {
     if (sp.log_significant_figures <= 0 || x == 0.0) return x;
     const double q = std::pow(10.0, std::floor(std::log10(std::abs(x))) - sp.log_significant_figures + 1);
@@ -207,13 +210,16 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     }
     const double Tm = p.Kt * i;
     Tm_now = Tm;
+    const double T_seen = cl.log_torque_command ? Tcmd : Tm;
+    T_monitor = monitor_started ? monitor_a * T_monitor + (1.0 - monitor_a) * T_seen : T_seen;
+    monitor_started = true;
     const double i_logged = e.delay_after_current ? p.Ka * u : i;
     const double i_measured = i_logged + noise(rng);
     if (k % every == 0 && cl.on) {
       std::fprintf(f, "%.4f,%.10g,%.10g", static_cast<double>(k) * Ts, pos(ref[k]), pos(x_meas));
       if (cl.log_velocities) std::fprintf(f, ",%.6f", vcmd);
       if (cl.log_velocities && cl.log_motor_speed) std::fprintf(f, ",%.6f", v_motor);
-      const double T_logged = cl.log_torque_command ? Tcmd : Tm;
+      const double T_logged = T_monitor;
       double raw = cl.raw_per_Nm * (T_logged + noise(rng));
       if (cl.raw_step > 0.0) raw = cl.raw_step * std::round(raw / cl.raw_step);
       std::fprintf(f, ",%.6f\n", cl.raw_per_Nm > 0.0 ? raw : i_measured);

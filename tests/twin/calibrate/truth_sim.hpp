@@ -108,6 +108,10 @@ struct CascadeLaw {
   /// torque the motor makes after the current loop's lag, any dead time and
   /// any current limit.
   bool log_torque_command{false};
+  /// > 0 (s): the logged torque passed through a first-order low-pass of
+  /// this time constant, as a drive's smoothed actual-torque monitor; the
+  /// loop and the motor do not see it.
+  double log_torque_filter_s{0.0};
 };
 
 struct RunSpec {
