@@ -148,6 +148,7 @@ TEST(CascadeLoop, MachineFileChoosesTheLawAndRefusesTheOtherLawsGains) {
   EXPECT_EQ(yaml.find("Kp:"), std::string::npos);
   EXPECT_NE(yaml.find("Kvp:"), std::string::npos);
   EXPECT_NE(yaml.find("torque_command_logged: 0"), std::string::npos);
+  EXPECT_NE(yaml.find("torque_log_filter: 0"), std::string::npos);
   const auto dir = std::filesystem::temp_directory_path() / "twin_cascade_machine_test";
   std::filesystem::create_directories(dir);
   io::write_file_atomic(dir / "m.yaml", yaml);
@@ -162,6 +163,12 @@ TEST(CascadeLoop, MachineFileChoosesTheLawAndRefusesTheOtherLawsGains) {
   EXPECT_DOUBLE_EQ(s.axes[0].torque_command_logged, 1.0);
   EXPECT_NO_THROW(s.validate());
   sim::apply_set(s, "x.torque_command_logged=0.5");
+  EXPECT_THROW(s.validate(), ConfigError);
+  sim::apply_set(s, "x.torque_command_logged=0");
+  EXPECT_NO_THROW(sim::apply_set(s, "x.torque_log_filter=0.002"));
+  EXPECT_DOUBLE_EQ(s.axes[0].logged_torque_filter_s, 0.002);
+  EXPECT_NO_THROW(s.validate());
+  sim::apply_set(s, "x.torque_log_filter=-0.001");
   EXPECT_THROW(s.validate(), ConfigError);
   io::write_file_atomic(dir / "bad.yaml", yaml + "    Kd: 0.1\n");
   EXPECT_THROW(io::load_machine(dir / "bad.yaml"), ConfigError);

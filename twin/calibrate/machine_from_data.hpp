@@ -185,6 +185,11 @@ struct AxisFromData {
   /// (torque_lag_samples): the drive is fitted so and replayed giving it.
   bool torque_command_logged{false};
   std::string torque_command_choice;  ///< how that was chosen, for the report
+  /// The lag the law shows between its output and the log (gains.tau_i_s)
+  /// is a smoothed torque monitor's, outside the loop: the twin runs the
+  /// loop without it and gives the logged channel through it
+  /// (AxisDefinition::logged_torque_filter_s; place_law_lag).
+  bool lag_in_monitor{false};
   std::string note;
 };
 

@@ -611,17 +611,45 @@ LoggedTorque logged_torque(const sim::AxisDefinition& def, const sim::AxisSnapsh
   return {x.Tcmd_Nm / def.drive.Kt_Nm_per_A, x.Tcmd_Nm};
 }
 
+// The logged torque through the monitor's first-order low-pass where the
+// machine has one (AxisDefinition::logged_torque_filter_s), from the first
+// tick's value (the monitor settled before the replayed part).
+class TorqueMonitor {
+ public:
+  TorqueMonitor(const sim::AxisDefinition& def, double Ts_s)
+      : a_(def.logged_torque_filter_s > 0.0 ? std::exp(-Ts_s / def.logged_torque_filter_s) : 0.0) {}
+  LoggedTorque operator()(const LoggedTorque& in) {
+    if (!started_) {
+      y_ = in;
+      started_ = true;
+    } else {
+      y_.i_A = a_ * y_.i_A + (1.0 - a_) * in.i_A;
+      y_.T = a_ * y_.T + (1.0 - a_) * in.T;
+    }
+    return y_;
+  }
+
+ private:
+  double a_;
+  bool started_{false};
+  LoggedTorque y_;
+};
+
 // Steps the co-simulation over every tick, keeping the outputs at the trace's
 // samples (and the running sums where `sums` is given).
 void run_ticks(sim::CoSimulation& cosim, const sim::MachineDefinition& machine, const MeasuredRun& run,
-               std::int64_t n_ticks, std::int64_t m, ReplayResult& res, TickSums* sums) {
+               std::int64_t n_ticks, std::int64_t m, double Ts_s, ReplayResult& res, TickSums* sums) {
   const auto& t = run.trace.at("t_s");
+  std::vector<TorqueMonitor> monitor;
+  for (Axis a : kAllAxes) monitor.emplace_back(machine.axes[index(a)], Ts_s);
+  AxisArray<LoggedTorque> seen{};
   for (std::int64_t k = 0; k < n_ticks; ++k) {
     const sim::Snapshot& s = cosim.step();
+    for (Axis a : run.axes) seen[index(a)] = monitor[index(a)](logged_torque(machine.axes[index(a)], s.axes[index(a)]));
     if (sums)
       for (Axis a : run.axes) {
         const auto& x = s.axes[index(a)];
-        const LoggedTorque lt = logged_torque(machine.axes[index(a)], x);
+        const LoggedTorque& lt = seen[index(a)];
         auto& S = (*sums)[index(a)];
         S[0].push_back(S[0].back() + x.u_V);
         S[1].push_back(S[1].back() + lt.i_A);
@@ -631,7 +659,7 @@ void run_ticks(sim::CoSimulation& cosim, const sim::MachineDefinition& machine, 
     res.t_s.push_back(t[static_cast<std::size_t>(k / m)]);
     for (Axis a : run.axes) {
       const auto& x = s.axes[index(a)];
-      const LoggedTorque lt = logged_torque(machine.axes[index(a)], x);
+      const LoggedTorque& lt = seen[index(a)];
       res.x_ref_mm[index(a)].push_back(x.x_ref_mm);
       res.x_mm[index(a)].push_back(x.x_mm);
       res.u_V[index(a)].push_back(x.u_V);
@@ -776,7 +804,7 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
         v.reserve(static_cast<std::size_t>(n_ticks) + 1);
         v.push_back(0.0);
       }
-  run_ticks(cosim, machine, run, n_ticks, m, res, window ? &sums : nullptr);
+  run_ticks(cosim, machine, run, n_ticks, m, Ts, res, window ? &sums : nullptr);
   if (window) mean_over_neighbours(sums, run, n_ticks, m, res);
   return res;
 }

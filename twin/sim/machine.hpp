@@ -42,6 +42,11 @@ struct AxisDefinition {
   /// many drives trace it), 0 where it logs the motor's. The replays of
   /// measured runs give that channel so; the simulation does not use it.
   double torque_command_logged{0.0};
+  /// Cascade: > 0 (s) where a measured run logs the torque (or current)
+  /// through a first-order low-pass of this time constant that the loop
+  /// does not see (a drive's smoothed torque monitor): the replays of
+  /// measured runs give that channel so; the simulation does not use it.
+  double logged_torque_filter_s{0.0};
 };
 
 /// The machine's structure (`structure:` in a machine file): masses, stacking,

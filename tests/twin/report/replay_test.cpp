@@ -318,6 +318,41 @@ TEST(Replay, ALogThatBeginsInMotionIsReplayedInMotion) {
   for (std::size_t k = 0; k < 200; ++k) ASSERT_NEAR(r.x_ref_mm[0][k] - r.x_mm[0][k], e_ss, 1.0e-3) << "row " << k;
 }
 
+// A logged torque through a drive's smoothed monitor
+// (AxisDefinition::logged_torque_filter_s): the loop does not see it, so the
+// positions replay as without it, bit for bit, and the torque channel is the
+// first-order low-pass of the one without it, checked against the discrete
+// recursion y[k] = a y[k-1] + (1 - a) T[k], a = exp(-Ts / tau), from the
+// first row's value, with the log at the loop's period (every tick a row).
+// Tolerance 1e-12 N m: the same arithmetic in another order.
+TEST(Replay, ATorqueMonitorsLowPassIsOutsideTheLoop) {
+  std::string csv = "t_s,x_ref_mm\n";
+  for (int i = 0; i < 3000; ++i) {
+    const double t = i * 1e-4;
+    csv += fmt::format("{:.4f},{:.9f}\n", t, t < 0.05 ? 0.0 : 10.0 * (1.0 - std::cos(20.0 * (t - 0.05))));
+  }
+  const auto meta = R"({"machine": "fadal2216_cascade", "controller_period_s": 0.0001, "encoder_resolution_mm": 0.001})";
+  const auto run = analysis::load_run(make_run("torque_monitor", meta, csv));
+  const sim::MachineDefinition plain = analysis::machine_for_run(run, "", nullptr);
+  sim::MachineDefinition smoothed = plain;
+  const double tau_s = 2e-3;
+  smoothed.axes[0].logged_torque_filter_s = tau_s;
+  const analysis::ReplayResult r0 = analysis::replay_run(run, plain);
+  const analysis::ReplayResult r1 = analysis::replay_run(run, smoothed);
+  ASSERT_EQ(r0.Tm[0].size(), 3000u);
+  ASSERT_EQ(r1.Tm[0].size(), 3000u);
+  const double a = std::exp(-1e-4 / tau_s);
+  double y = r0.Tm[0][0], peak = 0.0, apart = 0.0;
+  for (std::size_t k = 0; k < 3000; ++k) {
+    if (k > 0) y = a * y + (1.0 - a) * r0.Tm[0][k];
+    ASSERT_EQ(r1.x_mm[0][k], r0.x_mm[0][k]) << "row " << k;
+    ASSERT_NEAR(r1.Tm[0][k], y, 1e-12) << "row " << k;
+    peak = std::max(peak, std::abs(r0.Tm[0][k]));
+    apart = std::max(apart, std::abs(r1.Tm[0][k] - r0.Tm[0][k]));
+  }
+  EXPECT_GT(apart, 0.05 * peak);  // the filter is not a no-op on this move
+}
+
 // A log that begins while the axis accelerates from rest (a constant 500
 // mm/s^2 since 20 ms before its first row): replayed, it must give what the
 // whole move replayed from rest gives at the same times. The extension before
