@@ -17,6 +17,8 @@
 #include <string>
 #include <vector>
 
+#include <unistd.h>
+
 #include "fmu_importer.hpp"
 #include "tests/support/test_files.hpp"
 
@@ -30,7 +32,11 @@ using test_support::shipped_scenarios;
 class ShippedScenarioFmu : public ::testing::TestWithParam<std::string> {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / "twin_fmu_shipped_test" / GetParam();
+    // One folder per test and process: ctest runs this suite's tests of one
+    // scenario side by side, and one's SetUp must not remove the other's FMU.
+    const std::string test = ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    dir_ = fs::temp_directory_path() / "twin_fmu_shipped_test" /
+           (GetParam() + "_" + test.substr(0, test.find('/')) + "_" + std::to_string(::getpid()));
     fs::remove_all(dir_);
     fs::create_directories(dir_);
     fmu_path_ = (dir_ / (GetParam() + ".fmu")).string();
