@@ -3160,7 +3160,9 @@ LagFound search_lag(const std::function<double(double)>& residual) {
 /// dead time and no speed logged tracked the other program at 0.047 NRMS,
 /// and a 2 ms lag alone was read as a delay. Through the filter a lag and a
 /// dead time of about the same total look alike (a 1.7 ms lag fits no
-/// better than a 1 ms dead time, and is left as that delay).
+/// better than a 1 ms dead time, and is left as that delay). The law fitted
+/// on the first-order lag alone is kept for place_law_dead_time, which
+/// tries that lag as a smoothed torque monitor's.
 void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl, const TorqueClip* clip,
                                      AxisFromData& ax) {
   const double dt = f.r0.sample_period_s;
@@ -3170,7 +3172,7 @@ void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl
     std::size_t lag{0};
     double tau_s{0.0};
   };
-  std::optional<Best> best;
+  std::optional<Best> best, alone;
   const auto fit_at = [&](std::size_t lag, double tau_s) -> std::optional<VelocityLoopFit> {
     VelocityLoopFit v = fit_velocity_loop(
         f.runs, ax.axis, ax.channel.column,
@@ -3189,16 +3191,26 @@ void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl
     });
     if (l.residual >= 1e300) continue;
     std::optional<VelocityLoopFit> v = fit_at(lag, l.tau_s);
+    if (v && lag == 0) alone = Best{*v, lag, l.tau_s};
     if (v && (!best || v->ls.residual_rms < best->fit.ls.residual_rms)) best = Best{std::move(*v), lag, l.tau_s};
   }
   if (!best) return;
+  const auto gains_of = [&](const Best& b) {
+    controller::CascadeGains g = ax.gains;
+    const double Kvp = b.fit.ls.theta[0], Ki = b.fit.ls.theta[1];
+    g.Kvp_torque_s_per_rad = Kvp;
+    g.Tn_s = Ki > 0.0 ? Kvp / Ki : 0.0;
+    g.Jff_torque_s2_per_rad = b.fit.torque_ff ? b.fit.ls.theta.back() : 0.0;
+    g.tau_i_s = b.tau_s;
+    return g;
+  };
   const double plain = plain_law_residual(f, vl, clip, ax);
-  if (!(vl.less_noise(best->fit.ls.residual_rms) < 0.8 * vl.less_noise(plain))) return;
-  const double Kvp = best->fit.ls.theta[0], Ki = best->fit.ls.theta[1];
-  ax.gains.Kvp_torque_s_per_rad = Kvp;
-  ax.gains.Tn_s = Ki > 0.0 ? Kvp / Ki : 0.0;
-  ax.gains.Jff_torque_s2_per_rad = best->fit.torque_ff ? best->fit.ls.theta.back() : 0.0;
-  ax.gains.tau_i_s = best->tau_s;
+  if (!(vl.less_noise(best->fit.ls.residual_rms) < 0.8 * vl.less_noise(plain))) {
+    if (alone && ax.torque_lag_rows() > 0.0) ax.law_lag_alone = gains_of(*alone);
+    return;
+  }
+  ax.gains = gains_of(*best);
+  const double Kvp = ax.gains.Kvp_torque_s_per_rad;
   ax.torque_lag_samples = best->lag;
   ax.gains_at_lag = ax.gains;
   ax.loop_source += fmt::format("; a current loop lagging the law by {:.3g} ms{} (the law's columns through that "
@@ -3952,6 +3964,84 @@ void place_law_lag(DataCalibration& out, const std::vector<RunData>& runs, bool 
     if (again) move_lag(out.final_machine.axes[index(ax.axis)], in_monitor);
   }
   if (!again) out.final_machine = out.identified;
+}
+
+/// A dead time the law shows that is a smoothed monitor's lag. Where the
+/// speed is taken from the position, a first-order lag and a dead time of
+/// about the same total fit the law alike through the speed's low-pass
+/// (current_loop_lag_through_filter), so a monitor's lag is read as a dead
+/// time; the delay put in the loop is then refused by the replay, and the
+/// loop keeps the gains fitted without a lag, which the monitor's lag
+/// biases. So the machine with the law fitted on a first-order lag alone
+/// (AxisFromData::law_lag_alone) and that lag in the logged channel is
+/// replayed on the held-out rows of the fitting runs beside the machine as
+/// identified and the one with the dead time in the loop (the delay the
+/// catalogue would try, with the gains fitted at it), and taken where its
+/// tracking error is under (1 - kMotionShowsLag) of both and its low-passed
+/// torque rises by no more than kRiseAllowed on the machine as identified.
+/// The lag is then the monitor's (lag_in_monitor) and the catalogue tries
+/// no delay for it; place_law_lag may move it into the loop on the final
+/// machine.
+void place_law_dead_time(DataCalibration& out, const std::vector<RunData>& runs) {
+  if (runs.empty()) return;
+  const double dt = runs.front().run->sample_period_s;
+  sim::MachineDefinition in_loop = out.identified, in_monitor = out.identified;
+  AxisArray<bool> on{};
+  for (const AxisFromData& ax : out.axis) {
+    if (!ax.identified || !ax.velocity_loop_from_data || ax.torque_command_logged || ax.gains.tau_i_s > 0.0 ||
+        !ax.law_lag_alone || !(ax.torque_lag_rows() > 0.0))
+      continue;
+    Trial delay;
+    delay.kind = EffectKind::kDelay;
+    delay.sets = {{{EffectParam::delay_delay_s, ax.torque_lag_rows() * dt}}};
+    delay.gains = ax.gains_at_lag;
+    in_loop = with_trial(in_loop, ax.axis, delay, 0);
+    sim::AxisDefinition& def = in_monitor.axes[index(ax.axis)];
+    def.loop.cascade = *ax.law_lag_alone;
+    def.loop.cascade.tau_i_s = 0.0;
+    def.logged_torque_filter_s = ax.law_lag_alone->tau_i_s;
+    on[index(ax.axis)] = true;
+  }
+  if (std::none_of(on.begin(), on.end(), [](bool b) { return b; })) return;
+  const std::optional<ChannelErrors> now_e = held_out_lowpassed(out, runs, out.identified);
+  const std::optional<ChannelErrors> loop_e = held_out_lowpassed(out, runs, in_loop);
+  const std::optional<ChannelErrors> monitor_e = held_out_lowpassed(out, runs, in_monitor);
+  if (!monitor_e) return;
+  const auto figure = [](const std::optional<ChannelErrors>& e, const std::string& k) {
+    if (!e) return 1e300;
+    const auto it = e->nrms.find(k);
+    return it == e->nrms.end() ? 1e300 : it->second;
+  };
+  const auto text = [](double v) { return v < 1e300 ? fmt::format("{:.4g}", v) : std::string("no figure"); };
+  for (AxisFromData& ax : out.axis) {
+    if (!on[index(ax.axis)]) continue;
+    const std::string err = col(ax.axis, "_err_mm");
+    const double t0 = figure(now_e, err), tl = figure(loop_e, err), tm = figure(monitor_e, err);
+    const double q0 = figure(now_e, ax.channel.column), tq = figure(monitor_e, ax.channel.column);
+    if (!(tm < 1e300 && tq < 1e300)) continue;
+    const bool take = tq <= q0 * (1.0 + kRiseAllowed) && tm < (1.0 - kMotionShowsLag) * std::min(t0, tl);
+    const std::string figures = fmt::format(
+        "the held-out rows of the fitting runs replay the tracking error to {} with a first-order lag of {:.3g} ms "
+        "outside the loop ({} low-passed to {}), {} with the dead time in the loop, {} with neither ({} to {})",
+        text(tm), 1e3 * ax.law_lag_alone->tau_i_s, ax.channel.column, text(tq), text(tl), text(t0),
+        ax.channel.column, text(q0));
+    if (!take) {
+      ax.loop_source += fmt::format("; the law's lag is not a smoothed torque monitor's ({})", figures);
+      continue;
+    }
+    ax.loop_source += fmt::format("; the law's lag is outside the loop, in the logged {} (a smoothed torque "
+                                  "monitor: the motion does not show it; Kvp {:.4g}, Tn {:.3g} s fitted with it; {})",
+                                  ax.channel.column, ax.law_lag_alone->Kvp_torque_s_per_rad,
+                                  ax.law_lag_alone->Tn_s, figures);
+    ax.gains = *ax.law_lag_alone;
+    ax.gains_at_lag = ax.gains;
+    ax.torque_lag_samples = 0;
+    ax.torque_lag_fraction = 0.0;
+    ax.lag_in_monitor = true;
+    out.identified.axes[index(ax.axis)].loop = in_monitor.axes[index(ax.axis)].loop;
+    out.identified.axes[index(ax.axis)].logged_torque_filter_s = ax.gains.tau_i_s;
+  }
+  out.final_machine = out.identified;
 }
 
 /// One Coulomb level or two. The drive's two levels (one per direction) are
@@ -5231,6 +5321,7 @@ DataCalibration calibrate_from_data_pass(const std::vector<MeasuredRun>& fit, co
   choose_coulomb_levels(out, runs);
   choose_velocity_loops(out, runs);
   place_law_lag(out, runs, false);
+  place_law_dead_time(out, runs);
   try_smooth_friction(out, runs);
   rechoose_velocity_loops(out, runs);
   const FitRunErrors after_catalogue = search_catalogue_effects(out, runs);

@@ -749,25 +749,45 @@ TEST(RealLogs, ACurrentLoopLagIsIdentified) {
 // twin's loop, a 2 ms lag made the cascade sweep's run without an effect
 // track the other program at 0.026 (0.0028 without it) and its torque at
 // 0.41, and 13 of the sweep's 14 runs of one magnitude missed 0.01. Only the
-// motion tells the two apart. Oracles: the truth's filter as the law's lag
-// (5 %, as tau_i in ACurrentLoopLagIsIdentified, which checks the other
+// motion tells the two apart. Without the motor's speed (the speed taken
+// from the position through its low-pass) the lag is read through that
+// filter: with the Stribeck rise and a 0.5 um encoder as a first-order lag;
+// with no effect and a 1 um encoder (the sweep's) it fits the law no better
+// than a 1 ms dead time, so it was read as a delay, which the replay
+// refused, and the gains fitted without a lag stayed: the other program
+// tracked at 0.016 on the fitting runs' held-out rows (0.0027 now), and the
+// sweep's runs at 0.019 to 0.025. Oracles: the truth's filter as the law's
+// lag (5 %, as tau_i in ACurrentLoopLagIsIdentified, which checks the other
 // way round), the final machine's loop without it and its logged channel
-// through it, the truth's gains (expect_truth_gains), and the held-out
-// machine's check on the other program.
+// through it, the truth's gains (expect_truth_gains), no delay kept, and the
+// held-out machine's check on the other program.
 TEST(RealLogs, ATorqueMonitorsLagIsKeptOutOfTheLoop) {
-  truth::RunSpec sp = cascade_spec_with_stribeck(1e-3);
-  for (const double filter_s : {0.001, 0.002}) {
-    SCOPED_TRACE(fmt::format("monitor lag {} s", filter_s));
+  struct Case {
+    double filter_s;
+    bool motor_speed, stribeck;
+  };
+  for (const auto& [filter_s, motor_speed, stribeck] :
+       std::vector<Case>{{0.001, true, true}, {0.002, true, true}, {0.002, false, true}, {0.002, false, false}}) {
+    SCOPED_TRACE(fmt::format("monitor lag {} s, motor speed {}, {}", filter_s,
+                             motor_speed ? "logged" : "not logged", stribeck ? "a Stribeck rise" : "no effect"));
+    truth::RunSpec sp = stribeck ? cascade_spec_with_stribeck(1e-3) : cascade_spec(1e-3);
+    if (!stribeck) sp.resolution_mm = 0.001;  // the sweep's encoder
     sp.cascade.log_torque_filter_s = filter_s;
-    const DataCalibration r = calibrate_on_two_programs(sp, "monitor");
+    sp.cascade.log_motor_speed = motor_speed;
+    const DataCalibration r = calibrate_on_two_programs(sp, motor_speed ? "monitor" : "monitor_no_speed");
     ASSERT_EQ(r.axis.size(), 1u);
     const AxisFromData& ax = r.axis[0];
     EXPECT_TRUE(ax.lag_in_monitor) << ax.loop_source;
-    EXPECT_THAT(ax.loop_source, HasSubstr("the lag is outside the loop"));
+    EXPECT_THAT(ax.loop_source, HasSubstr("outside the loop, in the logged x_torque_raw"));
+    // Read as a dead time first, then placed in the monitor (place_law_dead_time).
+    if (!stribeck) {
+      EXPECT_THAT(ax.loop_source, HasSubstr("the law's lag is outside the loop"));
+    }
     EXPECT_NEAR(ax.gains.tau_i_s, filter_s, 0.05 * filter_s) << ax.loop_source;
     const sim::AxisDefinition& def = r.final_machine.axes[index(Axis::kX)];
     EXPECT_EQ(def.loop.cascade.tau_i_s, 0.0);
     EXPECT_NEAR(def.logged_torque_filter_s, filter_s, 0.05 * filter_s);
+    expect_delay_kept(r, 0.0);
     EXPECT_FALSE(ax.torque_command_logged) << ax.torque_command_choice;
     expect_truth_gains(ax, sp);
     expect_held_out_check(r);

@@ -30,7 +30,8 @@
 // gives what the twin is judged on there: the effects kept against the one
 // put in, the validation program's tracking-error NRMS (TRACK where above
 // 0.01) and its torque NRMS against the rigid-body regression fitted on the
-// same rows (TORQUE where not below it); a limit the fitting program never
+// same rows (TORQUE where not below it), and where the calibration put the
+// law's lag in the log's torque monitor, out of the loop; a limit the fitting program never
 // reaches (the truth clamps on no period) is not in the run, and is then
 // not expected (the line says so); ROSE where the sum of the two
 // NRMS is above the identified machine's without effects. --noise sets the
@@ -284,15 +285,18 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
       const double e_cal = at(v.calibrated, err), t_cal = at(v.calibrated, tq), t_id = at(v.identified, tq),
                    t_reg = at(v.regression, tq), e_id = at(v.identified, err);
       const bool bad_track = !(e_cal <= 0.01), bad_torque = !(t_cal < t_reg), up = !(t_cal + e_cal <= t_id + e_id);
+      const bool monitor = std::any_of(r.axis.begin(), r.axis.end(), [](const ta::AxisFromData& a) {
+        return a.lag_in_monitor;
+      });
       wrong += !ok;
       track += bad_track;
       torque += bad_torque;
       rose += up;
       ++total;
-      std::printf("%-40s %-44s err %.4f  torque %.4f (identified %.4f, regression %.4f)  %.1f s%s%s%s%s%s\n",
+      std::printf("%-40s %-44s err %.4f  torque %.4f (identified %.4f, regression %.4f)  %.1f s%s%s%s%s%s%s\n",
                   c.name.c_str(), kept.c_str(), e_cal, t_cal, t_id, t_reg, wall_s, ok ? "" : " WRONG",
                   bad_track ? " TRACK" : "", bad_torque ? " TORQUE" : "", up ? " ROSE" : "",
-                  unreached ? " (the limit is never reached)" : "");
+                  unreached ? " (the limit is never reached)" : "", monitor ? " (a lag in the torque monitor)" : "");
       std::fflush(stdout);
     } catch (const twin::Error& e) {
       std::printf("%-40s error: %s\n", c.name.c_str(), e.what());
