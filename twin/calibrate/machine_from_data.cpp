@@ -3206,7 +3206,7 @@ void current_loop_lag_through_filter(const AxisFit& f, const VelocityLoopFit& vl
   };
   const double plain = plain_law_residual(f, vl, clip, ax);
   if (!(vl.less_noise(best->fit.ls.residual_rms) < 0.8 * vl.less_noise(plain))) {
-    if (alone && ax.torque_lag_rows() > 0.0) ax.law_lag_alone = gains_of(*alone);
+    if (alone) ax.law_lag_alone = gains_of(*alone);
     return;
   }
   ax.gains = gains_of(*best);
@@ -3966,36 +3966,43 @@ void place_law_lag(DataCalibration& out, const std::vector<RunData>& runs, bool 
   if (!again) out.final_machine = out.identified;
 }
 
-/// A dead time the law shows that is a smoothed monitor's lag. Where the
-/// speed is taken from the position, a first-order lag and a dead time of
-/// about the same total fit the law alike through the speed's low-pass
-/// (current_loop_lag_through_filter), so a monitor's lag is read as a dead
-/// time; the delay put in the loop is then refused by the replay, and the
-/// loop keeps the gains fitted without a lag, which the monitor's lag
-/// biases. So the machine with the law fitted on a first-order lag alone
-/// (AxisFromData::law_lag_alone) and that lag in the logged channel is
-/// replayed on the held-out rows of the fitting runs beside the machine as
-/// identified and the one with the dead time in the loop (the delay the
-/// catalogue would try, with the gains fitted at it), and taken where its
-/// tracking error is under (1 - kMotionShowsLag) of both and its low-passed
-/// torque rises by no more than kRiseAllowed on the machine as identified.
-/// The lag is then the monitor's (lag_in_monitor) and the catalogue tries
-/// no delay for it; place_law_lag may move it into the loop on the final
-/// machine.
+/// A smoothed monitor's lag the law does not show as a lag. Where the speed
+/// is taken from the position, the law is fitted through the speed's
+/// low-pass (current_loop_lag_through_filter), and through it a 2 ms
+/// monitor's lag fits no better than a 1 ms dead time (proposed as a delay,
+/// which the replay refused) and a 1 ms monitor's not beyond the law's noise
+/// (the law taken as plain PI, Kvp 8 % and Tn 9 % low). Either way the loop
+/// kept the gains fitted without a lag, which the monitor's lag biases: the
+/// cascade sweep's runs without the motor's speed tracked the other program
+/// at 0.019 to 0.025 behind a 2 ms monitor, and 0.0065 behind a 1 ms one on
+/// the run without an effect. So the machine with the law fitted on a
+/// first-order lag alone (AxisFromData::law_lag_alone) and that lag in the
+/// logged channel is replayed on the held-out rows of the fitting runs beside
+/// the machine as identified and, where the law shows a dead time, the one
+/// with that dead time in the loop (the delay the catalogue would try, with
+/// the gains fitted at it), and taken where its tracking error is under
+/// (1 - kMotionShowsLag) of both and its low-passed torque rises by no more
+/// than kRiseAllowed on the machine as identified. The lag is then the
+/// monitor's (lag_in_monitor) and the catalogue tries no delay for it;
+/// place_law_lag may move it into the loop on the final machine.
 void place_law_dead_time(DataCalibration& out, const std::vector<RunData>& runs) {
   if (runs.empty()) return;
   const double dt = runs.front().run->sample_period_s;
   sim::MachineDefinition in_loop = out.identified, in_monitor = out.identified;
   AxisArray<bool> on{};
+  bool any_dead_time = false;
   for (const AxisFromData& ax : out.axis) {
     if (!ax.identified || !ax.velocity_loop_from_data || ax.torque_command_logged || ax.gains.tau_i_s > 0.0 ||
-        !ax.law_lag_alone || !(ax.torque_lag_rows() > 0.0))
+        !ax.law_lag_alone)
       continue;
-    Trial delay;
-    delay.kind = EffectKind::kDelay;
-    delay.sets = {{{EffectParam::delay_delay_s, ax.torque_lag_rows() * dt}}};
-    delay.gains = ax.gains_at_lag;
-    in_loop = with_trial(in_loop, ax.axis, delay, 0);
+    if (ax.torque_lag_rows() > 0.0) {
+      Trial delay;
+      delay.kind = EffectKind::kDelay;
+      delay.sets = {{{EffectParam::delay_delay_s, ax.torque_lag_rows() * dt}}};
+      delay.gains = ax.gains_at_lag;
+      in_loop = with_trial(in_loop, ax.axis, delay, 0);
+      any_dead_time = true;
+    }
     sim::AxisDefinition& def = in_monitor.axes[index(ax.axis)];
     def.loop.cascade = *ax.law_lag_alone;
     def.loop.cascade.tau_i_s = 0.0;
@@ -4004,7 +4011,7 @@ void place_law_dead_time(DataCalibration& out, const std::vector<RunData>& runs)
   }
   if (std::none_of(on.begin(), on.end(), [](bool b) { return b; })) return;
   const std::optional<ChannelErrors> now_e = held_out_lowpassed(out, runs, out.identified);
-  const std::optional<ChannelErrors> loop_e = held_out_lowpassed(out, runs, in_loop);
+  const std::optional<ChannelErrors> loop_e = any_dead_time ? held_out_lowpassed(out, runs, in_loop) : now_e;
   const std::optional<ChannelErrors> monitor_e = held_out_lowpassed(out, runs, in_monitor);
   if (!monitor_e) return;
   const auto figure = [](const std::optional<ChannelErrors>& e, const std::string& k) {
@@ -4022,11 +4029,13 @@ void place_law_dead_time(DataCalibration& out, const std::vector<RunData>& runs)
     const bool take = tq <= q0 * (1.0 + kRiseAllowed) && tm < (1.0 - kMotionShowsLag) * std::min(t0, tl);
     const std::string figures = fmt::format(
         "the held-out rows of the fitting runs replay the tracking error to {} with a first-order lag of {:.3g} ms "
-        "outside the loop ({} low-passed to {}), {} with the dead time in the loop, {} with neither ({} to {})",
-        text(tm), 1e3 * ax.law_lag_alone->tau_i_s, ax.channel.column, text(tq), text(tl), text(t0),
-        ax.channel.column, text(q0));
+        "outside the loop ({} low-passed to {}), {}{} without it ({} to {})",
+        text(tm), 1e3 * ax.law_lag_alone->tau_i_s, ax.channel.column, text(tq),
+        ax.torque_lag_rows() > 0.0 ? fmt::format("{} with the law's dead time in the loop, ", text(tl)) : "",
+        text(t0), ax.channel.column, text(q0));
     if (!take) {
-      ax.loop_source += fmt::format("; the law's lag is not a smoothed torque monitor's ({})", figures);
+      if (ax.torque_lag_rows() > 0.0)
+        ax.loop_source += fmt::format("; the law's lag is not a smoothed torque monitor's ({})", figures);
       continue;
     }
     ax.loop_source += fmt::format("; the law's lag is outside the loop, in the logged {} (a smoothed torque "

@@ -190,11 +190,11 @@ struct AxisFromData {
   /// loop without it and gives the logged channel through it
   /// (AxisDefinition::logged_torque_filter_s; place_law_lag).
   bool lag_in_monitor{false};
-  /// Where the speed is taken from the position and the law's lag is read
-  /// as a dead time (through the speed's low-pass a first-order lag and a
-  /// dead time of about the same total fit alike): the law fitted with a
+  /// Where the speed is taken from the position and no lag is read through
+  /// its low-pass (a first-order lag fits there as a dead time of about the
+  /// same total, or not beyond the law's noise): the law fitted with a
   /// first-order lag alone, its time constant in gains.tau_i_s, the
-  /// candidate for a smoothed torque monitor (place_law_lag).
+  /// candidate for a smoothed torque monitor (place_law_dead_time).
   std::optional<controller::CascadeGains> law_lag_alone;
   std::string note;
 };
