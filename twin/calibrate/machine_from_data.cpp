@@ -3887,6 +3887,17 @@ void choose_torque_command(DataCalibration& out, const std::vector<RunData>& run
   out.final_machine = out.identified;
 }
 
+/// The NRMS of channel `k` in `e`, 1e300 where there is no figure (a replay
+/// that failed, or a channel it does not give).
+double nrms_or_none(const std::optional<ChannelErrors>& e, const std::string& k) {
+  if (!e) return 1e300;
+  const auto it = e->nrms.find(k);
+  return it == e->nrms.end() ? 1e300 : it->second;
+}
+
+/// An NRMS of nrms_or_none as a report gives it.
+std::string figure_text(double v) { return v < 1e300 ? fmt::format("{:.4g}", v) : std::string("no figure"); }
+
 /// A lag the law shows outside the loop. The law fitted with a first-order
 /// lag between its output and the logged torque (fit as a current loop's)
 /// holds the same where the log is a drive's smoothed torque monitor and
@@ -3936,22 +3947,16 @@ void place_law_lag(DataCalibration& out, const std::vector<RunData>& runs, bool 
   for (AxisFromData& ax : out.axis) {
     if (!on[index(ax.axis)]) continue;
     const std::string err = col(ax.axis, "_err_mm");
-    const auto figure = [](const std::optional<ChannelErrors>& e, const std::string& k) {
-      if (!e) return 1e300;
-      const auto it = e->nrms.find(k);
-      return it == e->nrms.end() ? 1e300 : it->second;
-    };
-    const double t0 = figure(now_e, err), t1 = figure(moved_e, err);
-    const double q0 = figure(now_e, ax.channel.column), q1 = figure(moved_e, ax.channel.column);
+    const double t0 = nrms_or_none(now_e, err), t1 = nrms_or_none(moved_e, err);
+    const double q0 = nrms_or_none(now_e, ax.channel.column), q1 = nrms_or_none(moved_e, ax.channel.column);
     if (!(t1 < 1e300 && q1 < 1e300)) continue;
     const bool take = q1 <= q0 * (1.0 + kRiseAllowed) && t1 < (1.0 - kMotionShowsLag) * t0;
     const bool in_monitor = take != ax.lag_in_monitor;
-    const auto text = [](double v) { return v < 1e300 ? fmt::format("{:.4g}", v) : std::string("no figure"); };
     const std::string figures = fmt::format(
         "the held-out rows of the fitting runs replay the tracking error to {} and {} low-passed to {} with it "
         "outside the loop, {} and {} in it{}",
-        text(in_monitor == take ? t1 : t0), ax.channel.column, text(in_monitor == take ? q1 : q0),
-        text(in_monitor == take ? t0 : t1), text(in_monitor == take ? q0 : q1),
+        figure_text(in_monitor == take ? t1 : t0), ax.channel.column, figure_text(in_monitor == take ? q1 : q0),
+        figure_text(in_monitor == take ? t0 : t1), figure_text(in_monitor == take ? q0 : q1),
         again ? ", with the effects found" : "");
     if (again && !take) continue;
     ax.loop_source += in_monitor ? fmt::format("; the lag is outside the loop, in the logged {} (a smoothed torque "
@@ -4014,25 +4019,19 @@ void place_law_dead_time(DataCalibration& out, const std::vector<RunData>& runs)
   const std::optional<ChannelErrors> loop_e = any_dead_time ? held_out_lowpassed(out, runs, in_loop) : now_e;
   const std::optional<ChannelErrors> monitor_e = held_out_lowpassed(out, runs, in_monitor);
   if (!monitor_e) return;
-  const auto figure = [](const std::optional<ChannelErrors>& e, const std::string& k) {
-    if (!e) return 1e300;
-    const auto it = e->nrms.find(k);
-    return it == e->nrms.end() ? 1e300 : it->second;
-  };
-  const auto text = [](double v) { return v < 1e300 ? fmt::format("{:.4g}", v) : std::string("no figure"); };
   for (AxisFromData& ax : out.axis) {
     if (!on[index(ax.axis)]) continue;
     const std::string err = col(ax.axis, "_err_mm");
-    const double t0 = figure(now_e, err), tl = figure(loop_e, err), tm = figure(monitor_e, err);
-    const double q0 = figure(now_e, ax.channel.column), tq = figure(monitor_e, ax.channel.column);
+    const double t0 = nrms_or_none(now_e, err), tl = nrms_or_none(loop_e, err), tm = nrms_or_none(monitor_e, err);
+    const double q0 = nrms_or_none(now_e, ax.channel.column), tq = nrms_or_none(monitor_e, ax.channel.column);
     if (!(tm < 1e300 && tq < 1e300)) continue;
     const bool take = tq <= q0 * (1.0 + kRiseAllowed) && tm < (1.0 - kMotionShowsLag) * std::min(t0, tl);
     const std::string figures = fmt::format(
         "the held-out rows of the fitting runs replay the tracking error to {} with a first-order lag of {:.3g} ms "
         "outside the loop ({} low-passed to {}), {}{} without it ({} to {})",
-        text(tm), 1e3 * ax.law_lag_alone->tau_i_s, ax.channel.column, text(tq),
-        ax.torque_lag_rows() > 0.0 ? fmt::format("{} with the law's dead time in the loop, ", text(tl)) : "",
-        text(t0), ax.channel.column, text(q0));
+        figure_text(tm), 1e3 * ax.law_lag_alone->tau_i_s, ax.channel.column, figure_text(tq),
+        ax.torque_lag_rows() > 0.0 ? fmt::format("{} with the law's dead time in the loop, ", figure_text(tl)) : "",
+        figure_text(t0), ax.channel.column, figure_text(q0));
     if (!take) {
       if (ax.torque_lag_rows() > 0.0)
         ax.loop_source += fmt::format("; the law's lag is not a smoothed torque monitor's ({})", figures);
