@@ -50,7 +50,12 @@ void LinearPlant::validate(const std::string& where) const {
 }
 
 LawSetup Law::setup(const PositionLoopParams&, double Ts_s, const DriveScale& drive) const {
-  return LawSetup{Ts_s, drive, 0.0};
+  return LawSetup{Ts_s, drive, 0.0, 1, Ts_s};
+}
+
+void Law::inner_step(const PositionLoopParams&, const LawSetup&, double, PositionLoopState&,
+                     PositionLoopOutput&) const {
+  throw InternalError(fmt::format("the {} law has no inner ticks", name()));
 }
 
 PositionLoopParams Law::feedback_only(const PositionLoopParams& g) const {

@@ -91,6 +91,10 @@ class Law {
   /// and updates its own part of `s`.
   virtual void step(const PositionLoopParams& g, const LawSetup& setup, double x_meas_mm, double v_meas_mm_per_s,
                     PositionLoopState& s, PositionLoopOutput& out) const = 0;
+  /// An inner tick after the first of a period (setup.inner_ticks > 1 only):
+  /// the command again from the speed of that instant, the rest of `out` held.
+  virtual void inner_step(const PositionLoopParams& g, const LawSetup& setup, double v_meas_mm_per_s,
+                          PositionLoopState& s, PositionLoopOutput& out) const;
 
   /// The state that holds `m` with no transient at the reference x_ref_mm (the
   /// integrators giving what the feedforward does not); returns the position error

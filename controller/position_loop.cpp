@@ -49,4 +49,10 @@ PositionLoopOutput PositionLoop::step(std::int64_t k, double x_ref_mm, double x_
   return out;
 }
 
+void PositionLoop::inner_step(int q, double v_meas_mm_per_s, PositionLoopOutput& out) {
+  if (q < 1 || q >= setup_.inner_ticks)
+    throw InternalError(fmt::format("position loop: inner tick {} of {}", q, setup_.inner_ticks));
+  law_->inner_step(params_, setup_, v_meas_mm_per_s, state_, out);
+}
+
 }  // namespace twin::controller

@@ -31,6 +31,10 @@ struct CascadeGains {
   double tau_i_s{0.0};           ///< current-loop lag (0: ideal)
   double T_max{1e9};             ///< torque limit
   double Jff_torque_s2_per_rad{0.0};  ///< acceleration (torque) feedforward
+  /// The velocity and current loops' period where they run faster than the
+  /// position loop (most drives: 125 to 250 us under a 1 ms position loop),
+  /// Ts a whole multiple of it; 0: the position loop's Ts.
+  double Tv_s{0.0};
 };
 
 /// What the cascade needs of the drive it commands.
@@ -44,7 +48,10 @@ struct DriveScale {
 struct LawSetup {
   double Ts_s{1e-4};
   DriveScale drive;
-  double lag_a{0.0};  ///< cascade: exp(-Ts / tau_i) of the current loop (0: ideal)
+  double lag_a{0.0};  ///< cascade: exp(-Tv / tau_i) of the current loop (0: ideal)
+  /// The law's inner (velocity-loop) ticks per period, and their period Ts / inner_ticks.
+  int inner_ticks{1};
+  double Tv_s{1e-4};
 };
 
 /// The gains of every law; an axis uses those of its `law`.
@@ -105,6 +112,13 @@ class PositionLoop {
   /// encoder's backward difference).
   PositionLoopOutput step(std::int64_t k, double x_ref_mm, double x_meas_mm,
                           double v_meas_mm_per_s = std::numeric_limits<double>::quiet_NaN());
+  /// The law's inner ticks per period: 1, or Ts / Tv for a cascade whose
+  /// velocity loop runs faster than the position loop.
+  int inner_ticks() const noexcept { return setup_.inner_ticks; }
+  /// Inner tick q (1 to inner_ticks() - 1) of the period `step` began: the
+  /// velocity and current loops again on the speed of that instant, the
+  /// position loop's output in `out` held; updates the command in `out`.
+  void inner_step(int q, double v_meas_mm_per_s, PositionLoopOutput& out);
   const PositionLoopParams& params() const noexcept { return params_; }
   double Ts_s() const noexcept { return setup_.Ts_s; }
   const PositionLoopState& state() const noexcept { return state_; }

@@ -18,7 +18,8 @@ void CascadeLaw::validate(const PositionLoopParams& g, std::string_view where) c
                          {"Tn", c.Tn_s},
                          {"tau_i", c.tau_i_s},
                          {"T_max", c.T_max},
-                         {"Jff", c.Jff_torque_s2_per_rad}});
+                         {"Jff", c.Jff_torque_s2_per_rad},
+                         {"Tv", c.Tv_s}});
   if (!(c.Kv_per_s > 0.0)) throw ConfigError(fmt::format("{}: Kv = {} 1/s must be > 0", where, c.Kv_per_s));
   if (c.kff < 0.0 || c.kff > 1.5) throw ConfigError(fmt::format("{}: kff = {} must be in [0, 1.5]", where, c.kff));
   if (!(c.Kvp_torque_s_per_rad > 0.0))
@@ -27,14 +28,26 @@ void CascadeLaw::validate(const PositionLoopParams& g, std::string_view where) c
     throw ConfigError(fmt::format("{}: Tn, tau_i, Jff = {}, {}, {} must be >= 0", where, c.Tn_s, c.tau_i_s,
                                   c.Jff_torque_s2_per_rad));
   if (!(c.T_max > 0.0)) throw ConfigError(fmt::format("{}: T_max = {} must be > 0", where, c.T_max));
+  if (c.Tv_s < 0.0) throw ConfigError(fmt::format("{}: Tv = {} s must be >= 0 (0: the position loop's Ts)", where, c.Tv_s));
+}
+
+int CascadeLaw::inner_ticks(const CascadeGains& g, double Ts_s) {
+  if (g.Tv_s <= 0.0) return 1;
+  const double n = Ts_s / g.Tv_s;
+  if (!(n >= 1.0 - 1e-9 && n <= kMaxInnerTicks + 1e-9 && std::abs(n - std::round(n)) <= 1e-6 * n))
+    throw ConfigError(fmt::format("position loop: the velocity loop's period Tv = {} s must divide Ts = {} s into 1 "
+                                  "to {} ticks",
+                                  g.Tv_s, Ts_s, kMaxInnerTicks));
+  return static_cast<int>(std::lround(n));
 }
 
 LawSetup CascadeLaw::setup(const PositionLoopParams& g, double Ts_s, const DriveScale& drive) const {
   if (!(drive.rg_mm_per_rad > 0.0) || !(drive.Ka_A_per_V > 0.0) || !(drive.Kt_Nm_per_A > 0.0))
     throw ConfigError(fmt::format("position loop: the cascade needs rg, Ka, Kt > 0 (got {}, {}, {})",
                                   drive.rg_mm_per_rad, drive.Ka_A_per_V, drive.Kt_Nm_per_A));
-  LawSetup s{Ts_s, drive, 0.0};
-  s.lag_a = g.cascade.tau_i_s > 0.0 ? std::exp(-Ts_s / g.cascade.tau_i_s) : 0.0;
+  const int n = inner_ticks(g.cascade, Ts_s);
+  LawSetup s{Ts_s, drive, 0.0, n, Ts_s / n};
+  s.lag_a = g.cascade.tau_i_s > 0.0 ? std::exp(-s.Tv_s / g.cascade.tau_i_s) : 0.0;
   return s;
 }
 
@@ -42,11 +55,25 @@ void CascadeLaw::step(const PositionLoopParams& p, const LawSetup& setup, double
                       PositionLoopState& s, PositionLoopOutput& out) const {
   const CascadeGains& g = p.cascade;
   const double Ts = setup.Ts_s;
-  const double rg = setup.drive.rg_mm_per_rad;
   const double v_meas = std::isfinite(v_meas_mm_per_s) ? v_meas_mm_per_s : (x_meas_mm - s.x_meas_prev_mm) / Ts;
   out.vcmd_mm_per_s = g.Kv_per_s * out.e_mm + g.kff * out.v_ref_mm_per_s;
-  const double ev = (out.vcmd_mm_per_s - v_meas) / rg;
-  const double Iv = s.Iv_rad + Ts * ev;
+  velocity_tick(p, setup, v_meas, s, out);
+  s.x_meas_prev_mm = x_meas_mm;
+}
+
+void CascadeLaw::inner_step(const PositionLoopParams& p, const LawSetup& setup, double v_meas_mm_per_s,
+                            PositionLoopState& s, PositionLoopOutput& out) const {
+  if (!std::isfinite(v_meas_mm_per_s))
+    throw InternalError("cascade: an inner tick of the velocity loop needs the drive's speed");
+  velocity_tick(p, setup, v_meas_mm_per_s, s, out);
+}
+
+void CascadeLaw::velocity_tick(const PositionLoopParams& p, const LawSetup& setup, double v_meas_mm_per_s,
+                               PositionLoopState& s, PositionLoopOutput& out) {
+  const CascadeGains& g = p.cascade;
+  const double rg = setup.drive.rg_mm_per_rad;
+  const double ev = (out.vcmd_mm_per_s - v_meas_mm_per_s) / rg;
+  const double Iv = s.Iv_rad + setup.Tv_s * ev;
   const double integral = g.Tn_s > 0.0 ? Iv / g.Tn_s : 0.0;
   const double T_unclamped = g.Kvp_torque_s_per_rad * (ev + integral) + g.Jff_torque_s2_per_rad * out.a_ref_mm_per_s2 / rg;
   const double T = std::clamp(T_unclamped, -g.T_max, g.T_max);
@@ -59,7 +86,6 @@ void CascadeLaw::step(const PositionLoopParams& p, const LawSetup& setup, double
   const double per_V = setup.drive.Ka_A_per_V * setup.drive.Kt_Nm_per_A;
   out.u_V = s.T_filtered / per_V;
   out.u_unclamped_V = T_unclamped / per_V;
-  s.x_meas_prev_mm = x_meas_mm;
 }
 
 /// The P position loop lags by the error whose Kv e gives the speed the velocity
@@ -80,6 +106,10 @@ double CascadeLaw::steady_state(const PositionLoopParams& p, const SteadyMotion&
 
 ControllerRealisation CascadeLaw::realise(const PositionLoopParams& g, double Ts, const LinearPlant& p) const {
   const CascadeGains& c = g.cascade;
+  if (const int n = inner_ticks(c, Ts); n > 1)
+    throw ConfigError(fmt::format("the linear analysis holds the command over the position loop's period: a velocity "
+                                  "loop that runs {} times a period (Tv = {} s, Ts = {} s) is not analysed",
+                                  n, c.Tv_s, Ts));
   const double rg = p.rg_mm_per_rad;
   const bool integral = c.Tn_s > 0.0, lag = c.tau_i_s > 0.0;
   int n = 0;

@@ -1,10 +1,12 @@
 #include "twin/sim/cosimulation.hpp"
 
 #include <cmath>
+#include <numeric>
 
 #include <fmt/format.h>
 
 #include "controller/law.hpp"
+#include "controller/laws/cascade.hpp"
 #include "twin/core/check.hpp"
 #include "twin/core/error.hpp"
 #include "twin/core/units.hpp"
@@ -18,6 +20,21 @@ std::vector<feeddrive::DriveParams> drive_params_of(const MachineDefinition& m, 
   return out;
 }
 
+/// The least common multiple of the present axes' inner ticks per period.
+int inner_ticks_of(const MachineDefinition& m, const std::vector<Axis>& axes) {
+  int l = 1;
+  for (Axis a : axes) {
+    const controller::PositionLoopParams& g = m.axes[index(a)].loop;
+    if (g.law != controller::LoopLaw::kCascade) continue;
+    l = std::lcm(l, controller::laws::CascadeLaw::inner_ticks(g.cascade, m.Ts_s));
+    if (l > controller::laws::CascadeLaw::kMaxInnerTicks)
+      throw ConfigError(fmt::format("machine {}: the axes' velocity-loop periods Tv share no period of at least "
+                                    "Ts / {} (the least common multiple of their ticks is {})",
+                                    m.name, controller::laws::CascadeLaw::kMaxInnerTicks, l));
+  }
+  return l;
+}
+
 }  // namespace
 
 CoSimulation::CoSimulation(MachineDefinition machine, std::shared_ptr<const ReferenceSource> reference,
@@ -27,7 +44,8 @@ CoSimulation::CoSimulation(MachineDefinition machine, std::shared_ptr<const Refe
       axes_((machine_.validate(), machine_.present_axes())),
       reference_(std::move(reference)),
       process_(std::move(process)),
-      drives_(drive_params_of(machine_, axes_), machine_.Ts_s, options),
+      inner_ticks_(inner_ticks_of(machine_, axes_)),
+      drives_(drive_params_of(machine_, axes_), machine_.Ts_s / inner_ticks_, options),
       encoder_{machine_.encoder_resolution_mm} {
   TWIN_DEMAND(reference_ != nullptr);
   std::vector<double> x0;
@@ -82,20 +100,42 @@ const Snapshot& CoSimulation::step() {
   const std::array<double, 3> F_avg_N = run_process(row, p_mm, v_mm_per_s);
 
   // 4. Position loops; 5. drive inputs.
+  std::array<controller::PositionLoopOutput, 3> lo{};
   for (std::size_t i = 0; i < axes_.size(); ++i) {
     const std::size_t a = index(axes_[i]);
     AxisSnapshot& s = row.axes[a];
     s.x_ref_mm = ref.x_mm[a];
-    const controller::PositionLoopOutput lo = loops_[i].step(k_, s.x_ref_mm, s.x_mm, s.v_mm_per_s);
-    s.e_mm = lo.e_mm;
-    s.vcmd_mm_per_s = lo.vcmd_mm_per_s;
-    s.u_V = lo.u_V;
-    s.Tcmd_Nm = lo.torque_demand;
-    s.saturated = lo.saturated;
+    lo[i] = loops_[i].step(k_, s.x_ref_mm, s.x_mm, s.v_mm_per_s);
+    s.e_mm = lo[i].e_mm;
+    s.vcmd_mm_per_s = lo[i].vcmd_mm_per_s;
+    s.u_V = lo[i].u_V;
+    s.Tcmd_Nm = lo[i].torque_demand;
+    s.saturated = lo[i].saturated;
     s.Td_Nm = F_avg_N[a] * drives_.params(i).rg_mm_per_rad * kMPerMm;
-    inputs_[i] = feeddrive::DriveInput{lo.u_V, s.Td_Nm};
+    inputs_[i] = feeddrive::DriveInput{lo[i].u_V, s.Td_Nm};
   }
-  drives_.advance(t, t0_s_ + static_cast<double>(k_ + 1) * Ts, inputs_);
+  // The drives over the period in inner_ticks_ steps; a loop whose velocity
+  // loop runs n times a period acts again every inner_ticks_ / n of them, on
+  // the drive's speed of that instant. The row's current and torque are those
+  // the period starts with (a log samples them at the tick).
+  const double t_end = t0_s_ + static_cast<double>(k_ + 1) * Ts;
+  std::array<double, 3> i_first_A{}, Tm_first_Nm{};
+  for (int q = 0; q < inner_ticks_; ++q) {
+    for (std::size_t i = 0; q > 0 && i < axes_.size(); ++i) {
+      const int every = inner_ticks_ / loops_[i].inner_ticks();
+      if (q % every != 0) continue;
+      loops_[i].inner_step(q / every, drives_.output(i).v_mm_per_s, lo[i]);
+      inputs_[i].u_V = lo[i].u_V;
+    }
+    const double t_from = t + Ts * q / inner_ticks_;
+    drives_.advance(t_from, q + 1 == inner_ticks_ ? t_end : t + Ts * (q + 1) / inner_ticks_, inputs_);
+    if (q > 0) continue;
+    for (std::size_t i = 0; i < axes_.size(); ++i) {
+      const feeddrive::DriveOutput out = drives_.output(i);
+      i_first_A[i] = out.i_A;
+      Tm_first_Nm[i] = out.Tm_Nm;
+    }
+  }
 
   // 6. Row k: currents and torques held over the tick; health checks.
   double v_real2 = 0.0;
@@ -104,8 +144,8 @@ const Snapshot& CoSimulation::step() {
     const std::size_t a = index(axes_[i]);
     AxisSnapshot& s = row.axes[a];
     const feeddrive::DriveOutput out = drives_.output(i);
-    s.i_A = out.i_A;
-    s.Tm_Nm = out.Tm_Nm;
+    s.i_A = i_first_A[i];
+    s.Tm_Nm = Tm_first_Nm[i];
     check_axis(i, s, out, t);
     v_real2 += s.v_mm_per_s * s.v_mm_per_s;
     dev[a] = s.x_true_mm - s.x_ref_mm;

@@ -127,6 +127,9 @@ class CoSimulation {
   std::vector<Axis> axes_;
   std::shared_ptr<const ReferenceSource> reference_;
   std::unique_ptr<process::ProcessModel> process_;
+  /// The drives' ticks per period: the least common multiple of the axes'
+  /// inner (velocity-loop) ticks, 1 where every loop runs at Ts.
+  int inner_ticks_{1};
   feeddrive::DriveBank drives_;
   std::vector<controller::PositionLoop> loops_;
   controller::Encoder encoder_;

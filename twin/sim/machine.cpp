@@ -44,6 +44,10 @@ std::vector<AxisParamSpec> make_axis_specs() {
       TWIN_LAW_PARAM("tau_i", "s", "cascade: current-loop lag (0: ideal)", a.loop.cascade.tau_i_s, controller::LoopLaw::kCascade),
       TWIN_LAW_PARAM("T_max", "torque unit", "cascade: torque limit", a.loop.cascade.T_max, controller::LoopLaw::kCascade),
       TWIN_LAW_PARAM("Jff", "torque unit s^2/rad", "cascade: acceleration (torque) feedforward", a.loop.cascade.Jff_torque_s2_per_rad, controller::LoopLaw::kCascade),
+      TWIN_LAW_PARAM("Tv", "s",
+                     "cascade: the velocity and current loops' period where they run faster than the position "
+                     "loop, Ts a whole multiple of it (0: Ts)",
+                     a.loop.cascade.Tv_s, controller::LoopLaw::kCascade),
       TWIN_LAW_PARAM("torque_command_logged", "1",
                      "cascade: 1 where the log's torque or current is the velocity loop's command, before the "
                      "current loop and any delay; 0: the motor's",

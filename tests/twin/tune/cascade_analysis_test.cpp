@@ -211,5 +211,18 @@ TEST(CascadeLinear, PlantTakesTheTorque) {
   EXPECT_EQ(model.poles().size(), 4u);
 }
 
+// The analysis holds the command over Ts; a velocity loop that runs several
+// times a period is refused in words, not analysed as if it ran once.
+TEST(CascadeLinear, AVelocityLoopFasterThanThePositionLoopIsRefused) {
+  sim::MachineDefinition m = linear_cascade_machine();
+  m.axes[index(Axis::kX)].loop.cascade.Tv_s = m.Ts_s / 4.0;
+  try {
+    model_of(m);
+    FAIL() << "a velocity loop at Ts / 4 was analysed";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("runs 4 times a period"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace twin::analysis
