@@ -173,6 +173,9 @@ void expect_only(const Outcome& o, const std::string& name) {
 // identified one.
 TEST(DataEffects, NothingIsAddedWithoutAnEffect) {
   const Outcome o = calibrate_truth("none", {});
+  ASSERT_EQ(o.r.axis.size(), 1u);
+  EXPECT_EQ(o.r.axis[0].law_inner_ticks, 1) << "the truth's velocity loop runs at the position loop's tick";
+  EXPECT_EQ(o.r.final_machine.axes[index(Axis::kX)].loop.cascade.Tv_s, 0.0);
   EXPECT_TRUE(o.kept.empty()) << describe(o);
 }
 
@@ -906,6 +909,40 @@ TEST(DataEffects, ASmoothedTorqueMonitorIsFoundWithoutTheMotorSpeed) {
     const sim::AxisDefinition& def = o.r.final_machine.axes[index(Axis::kX)];
     EXPECT_EQ(def.loop.cascade.tau_i_s, 0.0);
     EXPECT_NEAR(def.logged_torque_filter_s, filter_s, 0.05 * filter_s) << ax.loop_source;
+    expect_truth_law(ax);
+    EXPECT_TRUE(o.kept.empty()) << describe(o);
+    expect_held_out_machine_check(o);
+  }
+}
+
+// A velocity loop that runs 8 times a 1 ms position-loop period (125 us, as
+// most drives run it), with the motor's speed logged and without it. Summed
+// once a row, the law's integral missed the loop's by half the speed's
+// change over each row: the law read a 10 ms current loop and a torque
+// feedforward the truth has not, and the other program tracked at 0.035.
+// Oracles: the truth's law (expect_truth_law: its Kvp and Tn), its
+// velocity loop's 8 ticks (the law's residual at 4 and 16 ticks is 10 and 5
+// times its residual at 8 on these runs, which is near the log's noise),
+// with the motor's speed the truth's inertia to 1 % (the drive fitted on the
+// ticks' mean torque: 2 % high on the row's own), nothing named, and the
+// held-out machine's check on the other program.
+TEST(DataEffects, AVelocityLoopFasterThanThePositionLoopIsFound) {
+  for (const bool speed : {true, false}) {
+    SCOPED_TRACE(speed ? "with the motor's speed" : "without the motor's speed");
+    truth::RunSpec sp = speed ? cascade_spec() : cascade_spec_without_speed();
+    sp.cascade.velocity_ticks = 8;
+    const Outcome o = calibrate_spec("fast_velocity_loop", sp);
+    ASSERT_EQ(o.r.axis.size(), 1u);
+    const AxisFromData& ax = o.r.axis[0];
+    ASSERT_TRUE(ax.velocity_loop_from_data) << ax.loop_source;
+    EXPECT_EQ(ax.law_inner_ticks, 8) << ax.loop_source;
+    const sim::AxisDefinition& def = o.r.final_machine.axes[index(Axis::kX)];
+    EXPECT_DOUBLE_EQ(def.loop.cascade.Tv_s, 1e-3 / 8);
+    const double J_raw = 0.0084 * kRawPerNm / kRg;  // perturbed_x_plant's J in the log's unit per mm/s^2
+    if (speed) {
+      EXPECT_NEAR(ax.J, J_raw, 0.01 * J_raw) << ax.torque_timing;
+    }
+    EXPECT_EQ(def.loop.cascade.tau_i_s, 0.0) << ax.loop_source;
     expect_truth_law(ax);
     EXPECT_TRUE(o.kept.empty()) << describe(o);
     expect_held_out_machine_check(o);

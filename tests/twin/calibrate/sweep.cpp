@@ -10,7 +10,8 @@
 //                            [--encoder-mm Q] [--current-lag S] [--torque-command] [--torque-step R]
 //                            [--torque-filter S]
 //                            [--kff K] [--jff J] [--friction load|sqrt|dahl] [--limit-on-command]
-//                            [--anti-windup] [--contour | --contour2] [--log-every M] [--keep DIR]
+//                            [--anti-windup] [--contour | --contour2] [--log-every M] [--velocity-ticks N]
+//                            [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
 // measured run, each on the truth's X plant, and its y reference on the Y
@@ -60,6 +61,9 @@
 // moves), the fitting program's arcs other than the validation's;
 // --contour2 takes other arcs, one turn each, so that the fitting part (the
 // program's first 60 %) holds five arcs where --contour's holds one.
+// --velocity-ticks N runs the truth's velocity and current loops N times a
+// position-loop period (a 1 ms position loop over a 125 us velocity loop:
+// 8), the log at the position loop's ticks.
 #include <unistd.h>
 
 #include <algorithm>
@@ -195,6 +199,7 @@ struct CascadeOptions {
   bool anti_windup{false};         ///< with limit_on_command: the integral frozen while the limit clamps
   int contour{0};                  ///< both programs of circular contours (contour_program): 1 or 2; 0: moves
   int log_every{1};                ///< every log_every-th loop period logged (a log slower than the loop)
+  int velocity_ticks{1};           ///< the velocity loop's ticks per position-loop period
 };
 
 // A friction law added to every run of the sweep (--friction): the truth's
@@ -243,6 +248,7 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     sp.cascade.raw_step = loop.raw_step;
     sp.cascade.log_torque_filter_s = loop.torque_filter_s;
     sp.log_every = loop.log_every;
+    sp.cascade.velocity_ticks = loop.velocity_ticks;
     const double load = sp.effects.load_Nm;
     c.set(sp.effects);
     sp.effects.load_Nm = load;
@@ -288,15 +294,19 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
       const bool monitor = std::any_of(r.axis.begin(), r.axis.end(), [](const ta::AxisFromData& a) {
         return a.lag_in_monitor;
       });
+      int inner = 1;
+      for (const ta::AxisFromData& a : r.axis) inner = std::max(inner, a.law_inner_ticks);
+      const std::string inner_text = inner > 1 ? " (velocity loop at Ts/" + std::to_string(inner) + ")" : "";
       wrong += !ok;
       track += bad_track;
       torque += bad_torque;
       rose += up;
       ++total;
-      std::printf("%-40s %-44s err %.4f  torque %.4f (identified %.4f, regression %.4f)  %.1f s%s%s%s%s%s%s\n",
+      std::printf("%-40s %-44s err %.4f  torque %.4f (identified %.4f, regression %.4f)  %.1f s%s%s%s%s%s%s%s\n",
                   c.name.c_str(), kept.c_str(), e_cal, t_cal, t_id, t_reg, wall_s, ok ? "" : " WRONG",
                   bad_track ? " TRACK" : "", bad_torque ? " TORQUE" : "", up ? " ROSE" : "",
-                  unreached ? " (the limit is never reached)" : "", monitor ? " (a lag in the torque monitor)" : "");
+                  unreached ? " (the limit is never reached)" : "", monitor ? " (a lag in the torque monitor)" : "",
+                  inner_text.c_str());
       std::fflush(stdout);
     } catch (const twin::Error& e) {
       std::printf("%-40s error: %s\n", c.name.c_str(), e.what());
@@ -352,6 +362,13 @@ int main(int argc, char** argv) {
         }
         magnitudes.push_back(m);
       }
+    } else if (!std::strcmp(argv[i], "--velocity-ticks") && has_value) {
+      const long n = std::strtol(argv[++i], nullptr, 10);
+      if (n < 1 || n > 64) {
+        std::fprintf(stderr, "calibrate_sweep: --velocity-ticks takes a whole number from 1 to 64\n");
+        return 2;
+      }
+      loop.velocity_ticks = static_cast<int>(n);
     } else if (!std::strcmp(argv[i], "--log-every") && has_value) {
       log_every = std::strtol(argv[++i], nullptr, 10);
       if (log_every < 1) {

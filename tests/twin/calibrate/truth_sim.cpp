@@ -118,7 +118,8 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   double table_mm = ref[0];           // backlash: table behind the play
   bool stuck = true;                  // friction side held (Karnopp)
   double I = 0.0, e_prev = 0.0, vref_prev = 0.0;
-  std::vector<double> ring(static_cast<std::size_t>(std::max(1, e.delay_ticks)), 0.0);
+  std::vector<double> ring(
+      static_cast<std::size_t>(std::max(1, e.delay_ticks * (sp.cascade.on ? std::max(1, sp.cascade.velocity_ticks) : 1))), 0.0);
   std::size_t head = 0;
 
   // Friction on the friction side (load side when two-mass) at speed w and position x.
@@ -146,8 +147,9 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   const auto every = static_cast<std::size_t>(std::max(1, sp.log_every));
   const CascadeLaw& cl = sp.cascade;
   double Iv = 0.0, Tf = 0.0, Tcmd = 0.0;
-  const double lag_a = cl.tau_i > 0.0 ? std::exp(-Ts / cl.tau_i) : 0.0;
-  const double monitor_a = cl.log_torque_filter_s > 0.0 ? std::exp(-Ts / cl.log_torque_filter_s) : 0.0;
+  const double lag_a = cl.tau_i > 0.0 ? std::exp(-Ts / std::max(1, cl.velocity_ticks) / cl.tau_i) : 0.0;
+  const double monitor_a =
+      cl.log_torque_filter_s > 0.0 ? std::exp(-Ts / std::max(1, cl.velocity_ticks) / cl.log_torque_filter_s) : 0.0;
   double T_monitor = 0.0;
   bool monitor_started = false;
   auto pos = [&](double x) {
@@ -164,9 +166,115 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     std::fprintf(f, "t_s,%s_ref_mm,%s_mm,%s_i_A\n", a, a, a);
   else
     std::fprintf(f, "t_s,%s_ref_mm,%s_mm,%s_u_V,%s_i_A\n", a, a, a, a);
-  const int sub = 20;
-  const double h = Ts / sub;
+  // The velocity loop's ticks per period (cascade only) and the RK4 steps
+  // per velocity tick: 20 a period or the next multiple of the ticks.
+  const int nv = cl.on ? std::max(1, cl.velocity_ticks) : 1;
+  const double Tv = Ts / nv;
+  const int steps_per_tick = (20 + nv - 1) / nv;
+  const double h = Tv / steps_per_tick;
   const double dv = 1e-4;  // Karnopp band, rad/s
+  // One integration step of h under the motor's torque Tm.
+  auto substep = [&](double Tm) {
+    // Friction side: the load (two-mass) or the motor.
+    const double x_f = (two_mass ? s.th_l : s.th_m) * p.rg;
+    const double cog_th = s.th_m;
+    const double T_cog = e.cogging_A * std::sin(e.cogging_n * cog_th + e.cogging_phase);
+    if (!two_mass && e.dahl_sigma > 0.0) {
+      // Dahl: RK4 on (w, th, F); the level g at w is the sliding law's
+      // (at w = 0 its limit in the direction F points).
+      struct D {
+        double w, th, F;
+      };
+      auto rate = [&](const D& z) {
+        const double tc = e.cogging_A * std::sin(e.cogging_n * z.th + e.cogging_phase);
+        const double w_dir = z.w != 0.0 ? z.w : (z.F >= 0.0 ? dv : -dv);
+        const double g = std::abs(sliding(w_dir, z.th * p.rg));
+        return D{(Tm - p.B * z.w - e.load_Nm - tc - z.F) / p.J, z.w,
+                 e.dahl_sigma * (z.w - std::abs(z.w) * z.F / g)};
+      };
+      const D z0{s.w_m, s.th_m, F_dahl};
+      auto step = [](const D& z, const D& r, double hh) { return D{z.w + hh * r.w, z.th + hh * r.th, z.F + hh * r.F}; };
+      const D k1 = rate(z0), k2 = rate(step(z0, k1, 0.5 * h)), k3 = rate(step(z0, k2, 0.5 * h)), k4 = rate(step(z0, k3, h));
+      s.w_m += h / 6 * (k1.w + 2 * k2.w + 2 * k3.w + k4.w);
+      s.th_m += h / 6 * (k1.th + 2 * k2.th + 2 * k3.th + k4.th);
+      F_dahl += h / 6 * (k1.F + 2 * k2.F + 2 * k3.F + k4.F);
+      s.th_l = s.th_m;
+      s.w_l = s.w_m;
+    } else if (!two_mass && e.creep_w > 0.0) {
+      // Creep below creep_w: friction linear in speed up to the Coulomb
+      // level, never sticking; RK4 on (w, th).
+      auto acc = [&](double w, double th) {
+        const double tc = e.cogging_A * std::sin(e.cogging_n * th + e.cogging_phase);
+        const double level = std::abs(sliding(w >= 0.0 ? std::max(w, dv) : std::min(w, -dv), th * p.rg));
+        const double Tfr = level * std::clamp(w / e.creep_w, -1.0, 1.0);
+        return (Tm - p.B * w - e.load_Nm - tc - Tfr) / p.J;
+      };
+      const double k1w = acc(s.w_m, s.th_m), k1t = s.w_m;
+      const double k2w = acc(s.w_m + 0.5 * h * k1w, s.th_m + 0.5 * h * k1t), k2t = s.w_m + 0.5 * h * k1w;
+      const double k3w = acc(s.w_m + 0.5 * h * k2w, s.th_m + 0.5 * h * k2t), k3t = s.w_m + 0.5 * h * k2w;
+      const double k4w = acc(s.w_m + h * k3w, s.th_m + h * k3t), k4t = s.w_m + h * k3w;
+      s.w_m += h / 6 * (k1w + 2 * k2w + 2 * k3w + k4w);
+      s.th_m += h / 6 * (k1t + 2 * k2t + 2 * k3t + k4t);
+      s.th_l = s.th_m;
+      s.w_l = s.w_m;
+    } else if (!two_mass) {
+      const double F = Tm - p.B * s.w_m - e.load_Nm - T_cog;
+      if (stuck) {
+        const int dir = F > 0 ? 1 : -1;
+        if (std::abs(F) <= breakaway(dir, x_f)) return;
+        stuck = false;
+        s.w_m = dir * 2 * dv;
+      }
+      // RK4 on w with the sliding friction of the current direction.
+      const int dir = s.w_m > 0 ? 1 : -1;
+      auto acc = [&](double w, double th) {
+        const double tc = e.cogging_A * std::sin(e.cogging_n * th + e.cogging_phase);
+        const double ww = dir * std::max(dir * w, 0.0);
+        return (Tm - p.B * w - e.load_Nm - tc - sliding(ww == 0 ? dir * dv : ww, th * p.rg)) / p.J;
+      };
+      const double k1w = acc(s.w_m, s.th_m), k1t = s.w_m;
+      const double k2w = acc(s.w_m + 0.5 * h * k1w, s.th_m + 0.5 * h * k1t), k2t = s.w_m + 0.5 * h * k1w;
+      const double k3w = acc(s.w_m + 0.5 * h * k2w, s.th_m + 0.5 * h * k2t), k3t = s.w_m + 0.5 * h * k2w;
+      const double k4w = acc(s.w_m + h * k3w, s.th_m + h * k3t), k4t = s.w_m + h * k3w;
+      const double w_new = s.w_m + h / 6 * (k1w + 2 * k2w + 2 * k3w + k4w);
+      s.th_m += h / 6 * (k1t + 2 * k2t + 2 * k3t + k4t);
+      s.w_m = w_new;
+      if (w_new * dir <= 0.0) {  // came to rest: Karnopp sticks it
+        s.w_m = 0.0;
+        stuck = true;
+      }
+      s.th_l = s.th_m;
+      s.w_l = s.w_m;
+    } else {
+      // Two-mass: semi-implicit Euler with the small step (spring at a few hundred Hz, h = 5 us).
+      // Spring (and its damping) only in contact: the deflection beyond the gap.
+      const double d = s.th_m - s.th_l;
+      const double defl = d > half_gap_rad ? d - half_gap_rad : (d < -half_gap_rad ? d + half_gap_rad : 0.0);
+      const double C_c = e.compliance_K > 0.0 ? e.compliance_C : 1.3;
+      const double Tsp = K_c * defl + (defl != 0.0 ? C_c * (s.w_m - s.w_l) : 0.0);
+      s.w_m += h * (Tm - p.B * s.w_m - Tsp - T_cog) / Jm;
+      s.th_m += h * s.w_m;
+      const double Fl = Tsp - e.load_Nm;
+      if (stuck) {
+        const int dir = Fl > 0 ? 1 : -1;
+        if (std::abs(Fl) <= breakaway(dir, x_f)) {
+          s.w_l = 0.0;
+          return;
+        }
+        stuck = false;
+        s.w_l = dir * 2 * dv;
+      }
+      const int dir = s.w_l > 0 ? 1 : -1;
+      const double wl = s.w_l + h * (Fl - sliding(s.w_l, x_f)) / Jl;
+      if (wl * dir <= 0.0) {
+        s.w_l = 0.0;
+        stuck = true;
+      } else {
+        s.w_l = wl;
+      }
+      s.th_l += h * s.w_l;
+    }
+  };
   for (std::size_t k = 0; k < ref.size(); ++k) {
     // Sensor: the encoder on the motor (two-mass) or the table (backlash), screw error, quantiser.
     const double x_mot = s.th_m * p.rg;
@@ -181,155 +289,58 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     double u = p.Kp * err + p.Ki * I + p.Kd * (err - e_prev) / Ts + p.K1 * aref + p.K2 * vref;
     u = std::clamp(u, -p.u_max, p.u_max);
     const double vcmd = cl.Kv * err + cl.kff * vref;
-    const double v_motor = s.w_m * p.rg;
-    if (cl.on) {
-      const double ev = (vcmd - v_motor) / p.rg;
-      const double Iv_next = Iv + Ts * ev;
-      Tcmd = cl.Kvp * (ev + (cl.Tn > 0.0 ? Iv_next / cl.Tn : 0.0)) + cl.Jff * aref / p.rg;
-      const bool clamped = cl.T_max_Nm > 0.0 && std::abs(Tcmd) > cl.T_max_Nm;
-      if (clamped) {
-        Tcmd = std::clamp(Tcmd, -cl.T_max_Nm, cl.T_max_Nm);
-        ++st.ticks_at_limit;
-      }
-      if (!(clamped && cl.anti_windup)) Iv = Iv_next;
-      Tf = lag_a * Tf + (1.0 - lag_a) * Tcmd;
-      u = Tf / (p.Ka * p.Kt);
-    }
     e_prev = err;
     vref_prev = vref;
-    double u_app = u;
-    if (e.delay_ticks > 0) {
-      u_app = ring[head];
-      ring[head] = u;
-      head = (head + 1) % ring.size();
-    }
-    double i = p.Ka * u_app;
-    if (e.i_max_A > 0.0 && std::abs(i) > e.i_max_A) {
-      i = std::clamp(i, -e.i_max_A, e.i_max_A);
-      ++st.ticks_at_limit;
-    }
-    const double Tm = p.Kt * i;
-    Tm_now = Tm;
-    const double T_seen = cl.log_torque_command ? Tcmd : Tm;
-    T_monitor = monitor_started ? monitor_a * T_monitor + (1.0 - monitor_a) * T_seen : T_seen;
-    monitor_started = true;
-    const double i_logged = e.delay_after_current ? p.Ka * u : i;
-    const double i_measured = i_logged + noise(rng);
-    if (k % every == 0 && cl.on) {
-      std::fprintf(f, "%.4f,%.10g,%.10g", static_cast<double>(k) * Ts, pos(ref[k]), pos(x_meas));
-      if (cl.log_velocities) std::fprintf(f, ",%.6f", vcmd);
-      if (cl.log_velocities && cl.log_motor_speed) std::fprintf(f, ",%.6f", v_motor);
-      const double T_logged = T_monitor;
-      double raw = cl.raw_per_Nm * (T_logged + noise(rng));
-      if (cl.raw_step > 0.0) raw = cl.raw_step * std::round(raw / cl.raw_step);
-      std::fprintf(f, ",%.6f\n", cl.raw_per_Nm > 0.0 ? raw : i_measured);
-    } else if (k % every == 0) {
-      if (sp.log_current_only)
-        std::fprintf(f, "%.4f,%.4f,%.3f,%.4f\n", static_cast<double>(k) * Ts, ref[k], x_meas, i_measured);
-      else
-        std::fprintf(f, "%.4f,%.4f,%.3f,%.5f,%.4f\n", static_cast<double>(k) * Ts, ref[k], x_meas, u, i_measured);
-    }
-
-    for (int j = 0; j < sub; ++j) {
-      // Friction side: the load (two-mass) or the motor.
-      const double x_f = (two_mass ? s.th_l : s.th_m) * p.rg;
-      const double cog_th = s.th_m;
-      const double T_cog = e.cogging_A * std::sin(e.cogging_n * cog_th + e.cogging_phase);
-      if (!two_mass && e.dahl_sigma > 0.0) {
-        // Dahl: RK4 on (w, th, F); the level g at w is the sliding law's
-        // (at w = 0 its limit in the direction F points).
-        struct D {
-          double w, th, F;
-        };
-        auto rate = [&](const D& z) {
-          const double tc = e.cogging_A * std::sin(e.cogging_n * z.th + e.cogging_phase);
-          const double w_dir = z.w != 0.0 ? z.w : (z.F >= 0.0 ? dv : -dv);
-          const double g = std::abs(sliding(w_dir, z.th * p.rg));
-          return D{(Tm - p.B * z.w - e.load_Nm - tc - z.F) / p.J, z.w,
-                   e.dahl_sigma * (z.w - std::abs(z.w) * z.F / g)};
-        };
-        const D z0{s.w_m, s.th_m, F_dahl};
-        auto step = [](const D& z, const D& r, double hh) { return D{z.w + hh * r.w, z.th + hh * r.th, z.F + hh * r.F}; };
-        const D k1 = rate(z0), k2 = rate(step(z0, k1, 0.5 * h)), k3 = rate(step(z0, k2, 0.5 * h)), k4 = rate(step(z0, k3, h));
-        s.w_m += h / 6 * (k1.w + 2 * k2.w + 2 * k3.w + k4.w);
-        s.th_m += h / 6 * (k1.th + 2 * k2.th + 2 * k3.th + k4.th);
-        F_dahl += h / 6 * (k1.F + 2 * k2.F + 2 * k3.F + k4.F);
-        s.th_l = s.th_m;
-        s.w_l = s.w_m;
-      } else if (!two_mass && e.creep_w > 0.0) {
-        // Creep below creep_w: friction linear in speed up to the Coulomb
-        // level, never sticking; RK4 on (w, th).
-        auto acc = [&](double w, double th) {
-          const double tc = e.cogging_A * std::sin(e.cogging_n * th + e.cogging_phase);
-          const double level = std::abs(sliding(w >= 0.0 ? std::max(w, dv) : std::min(w, -dv), th * p.rg));
-          const double Tfr = level * std::clamp(w / e.creep_w, -1.0, 1.0);
-          return (Tm - p.B * w - e.load_Nm - tc - Tfr) / p.J;
-        };
-        const double k1w = acc(s.w_m, s.th_m), k1t = s.w_m;
-        const double k2w = acc(s.w_m + 0.5 * h * k1w, s.th_m + 0.5 * h * k1t), k2t = s.w_m + 0.5 * h * k1w;
-        const double k3w = acc(s.w_m + 0.5 * h * k2w, s.th_m + 0.5 * h * k2t), k3t = s.w_m + 0.5 * h * k2w;
-        const double k4w = acc(s.w_m + h * k3w, s.th_m + h * k3t), k4t = s.w_m + h * k3w;
-        s.w_m += h / 6 * (k1w + 2 * k2w + 2 * k3w + k4w);
-        s.th_m += h / 6 * (k1t + 2 * k2t + 2 * k3t + k4t);
-        s.th_l = s.th_m;
-        s.w_l = s.w_m;
-      } else if (!two_mass) {
-        const double F = Tm - p.B * s.w_m - e.load_Nm - T_cog;
-        if (stuck) {
-          const int dir = F > 0 ? 1 : -1;
-          if (std::abs(F) <= breakaway(dir, x_f)) continue;
-          stuck = false;
-          s.w_m = dir * 2 * dv;
+    for (int q = 0; q < nv; ++q) {
+      const double v_motor = s.w_m * p.rg;
+      if (cl.on) {
+        const double ev = (vcmd - v_motor) / p.rg;
+        const double Iv_next = Iv + Tv * ev;
+        Tcmd = cl.Kvp * (ev + (cl.Tn > 0.0 ? Iv_next / cl.Tn : 0.0)) + cl.Jff * aref / p.rg;
+        const bool clamped = cl.T_max_Nm > 0.0 && std::abs(Tcmd) > cl.T_max_Nm;
+        if (clamped) {
+          Tcmd = std::clamp(Tcmd, -cl.T_max_Nm, cl.T_max_Nm);
+          ++st.ticks_at_limit;
         }
-        // RK4 on w with the sliding friction of the current direction.
-        const int dir = s.w_m > 0 ? 1 : -1;
-        auto acc = [&](double w, double th) {
-          const double tc = e.cogging_A * std::sin(e.cogging_n * th + e.cogging_phase);
-          const double ww = dir * std::max(dir * w, 0.0);
-          return (Tm - p.B * w - e.load_Nm - tc - sliding(ww == 0 ? dir * dv : ww, th * p.rg)) / p.J;
-        };
-        const double k1w = acc(s.w_m, s.th_m), k1t = s.w_m;
-        const double k2w = acc(s.w_m + 0.5 * h * k1w, s.th_m + 0.5 * h * k1t), k2t = s.w_m + 0.5 * h * k1w;
-        const double k3w = acc(s.w_m + 0.5 * h * k2w, s.th_m + 0.5 * h * k2t), k3t = s.w_m + 0.5 * h * k2w;
-        const double k4w = acc(s.w_m + h * k3w, s.th_m + h * k3t), k4t = s.w_m + h * k3w;
-        const double w_new = s.w_m + h / 6 * (k1w + 2 * k2w + 2 * k3w + k4w);
-        s.th_m += h / 6 * (k1t + 2 * k2t + 2 * k3t + k4t);
-        s.w_m = w_new;
-        if (w_new * dir <= 0.0) {  // came to rest: Karnopp sticks it
-          s.w_m = 0.0;
-          stuck = true;
-        }
-        s.th_l = s.th_m;
-        s.w_l = s.w_m;
-      } else {
-        // Two-mass: semi-implicit Euler with the small step (spring at a few hundred Hz, h = 5 us).
-        // Spring (and its damping) only in contact: the deflection beyond the gap.
-        const double d = s.th_m - s.th_l;
-        const double defl = d > half_gap_rad ? d - half_gap_rad : (d < -half_gap_rad ? d + half_gap_rad : 0.0);
-        const double C_c = e.compliance_K > 0.0 ? e.compliance_C : 1.3;
-        const double Tsp = K_c * defl + (defl != 0.0 ? C_c * (s.w_m - s.w_l) : 0.0);
-        s.w_m += h * (Tm - p.B * s.w_m - Tsp - T_cog) / Jm;
-        s.th_m += h * s.w_m;
-        const double Fl = Tsp - e.load_Nm;
-        if (stuck) {
-          const int dir = Fl > 0 ? 1 : -1;
-          if (std::abs(Fl) <= breakaway(dir, x_f)) {
-            s.w_l = 0.0;
-            continue;
-          }
-          stuck = false;
-          s.w_l = dir * 2 * dv;
-        }
-        const int dir = s.w_l > 0 ? 1 : -1;
-        const double wl = s.w_l + h * (Fl - sliding(s.w_l, x_f)) / Jl;
-        if (wl * dir <= 0.0) {
-          s.w_l = 0.0;
-          stuck = true;
-        } else {
-          s.w_l = wl;
-        }
-        s.th_l += h * s.w_l;
+        if (!(clamped && cl.anti_windup)) Iv = Iv_next;
+        Tf = lag_a * Tf + (1.0 - lag_a) * Tcmd;
+        u = Tf / (p.Ka * p.Kt);
       }
+      double u_app = u;
+      if (e.delay_ticks > 0) {
+        u_app = ring[head];
+        ring[head] = u;
+        head = (head + 1) % ring.size();
+      }
+      double i = p.Ka * u_app;
+      if (e.i_max_A > 0.0 && std::abs(i) > e.i_max_A) {
+        i = std::clamp(i, -e.i_max_A, e.i_max_A);
+        ++st.ticks_at_limit;
+      }
+      const double Tm = p.Kt * i;
+      Tm_now = Tm;
+      const double T_seen = cl.log_torque_command ? Tcmd : Tm;
+      T_monitor = monitor_started ? monitor_a * T_monitor + (1.0 - monitor_a) * T_seen : T_seen;
+      monitor_started = true;
+      if (q == 0) {
+        const double i_logged = e.delay_after_current ? p.Ka * u : i;
+        const double i_measured = i_logged + noise(rng);
+        if (k % every == 0 && cl.on) {
+          std::fprintf(f, "%.4f,%.10g,%.10g", static_cast<double>(k) * Ts, pos(ref[k]), pos(x_meas));
+          if (cl.log_velocities) std::fprintf(f, ",%.6f", vcmd);
+          if (cl.log_velocities && cl.log_motor_speed) std::fprintf(f, ",%.6f", v_motor);
+          const double T_logged = T_monitor;
+          double raw = cl.raw_per_Nm * (T_logged + noise(rng));
+          if (cl.raw_step > 0.0) raw = cl.raw_step * std::round(raw / cl.raw_step);
+          std::fprintf(f, ",%.6f\n", cl.raw_per_Nm > 0.0 ? raw : i_measured);
+        } else if (k % every == 0) {
+          if (sp.log_current_only)
+            std::fprintf(f, "%.4f,%.4f,%.3f,%.4f\n", static_cast<double>(k) * Ts, ref[k], x_meas, i_measured);
+          else
+            std::fprintf(f, "%.4f,%.4f,%.3f,%.5f,%.4f\n", static_cast<double>(k) * Ts, ref[k], x_meas, u, i_measured);
+        }
+      }
+      for (int j = 0; j < steps_per_tick; ++j) substep(Tm);
     }
     if (e.backlash_mm > 0.0 && !coupling_gap) {
       const double xm = s.th_m * p.rg, half = 0.5 * e.backlash_mm;

@@ -112,6 +112,12 @@ struct CascadeLaw {
   /// this time constant, as a drive's smoothed actual-torque monitor; the
   /// loop and the motor do not see it.
   double log_torque_filter_s{0.0};
+  /// The velocity loop's (and current loop's) ticks per position-loop
+  /// period: 1, or more as most drives run it (a 1 ms position loop over a
+  /// 250 or 125 us velocity loop). Each tick takes the motor's speed of its
+  /// instant; the log samples the torque at the position loop's ticks. A
+  /// dead time (effects.delay_ticks) stays that many position-loop periods.
+  int velocity_ticks{1};
 };
 
 struct RunSpec {
