@@ -44,12 +44,16 @@ struct DriveScale {
   double Kt_Nm_per_A{1.0};
 };
 
+/// The most inner (velocity-loop) ticks a law may run in one period.
+inline constexpr int kMaxInnerTicks = 64;
+
 /// What a loop computes once at construction for its law's step.
 struct LawSetup {
   double Ts_s{1e-4};
   DriveScale drive;
   double lag_a{0.0};  ///< cascade: exp(-Tv / tau_i) of the current loop (0: ideal)
-  /// The law's inner (velocity-loop) ticks per period, and their period Ts / inner_ticks.
+  /// The law's inner (velocity-loop) ticks per period, 1 to kMaxInnerTicks, and
+  /// their period Ts / inner_ticks.
   int inner_ticks{1};
   double Tv_s{1e-4};
 };

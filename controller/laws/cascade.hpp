@@ -29,7 +29,6 @@ class CascadeLaw final : public Law {
   void inner_step(const PositionLoopParams& g, const LawSetup& setup, double v_meas_mm_per_s, PositionLoopState& s,
                   PositionLoopOutput& out) const override;
   /// The most velocity-loop ticks a position-loop period may hold.
-  static constexpr int kMaxInnerTicks = 64;
   /// Ts / Tv (1 where Tv is 0); ConfigError where Tv does not divide Ts into 1 to kMaxInnerTicks.
   static int inner_ticks(const CascadeGains& g, double Ts_s);
   double steady_state(const PositionLoopParams& g, const SteadyMotion& m, double x_ref_mm,

@@ -6,7 +6,6 @@
 #include <fmt/format.h>
 
 #include "controller/law.hpp"
-#include "controller/laws/cascade.hpp"
 #include "twin/core/check.hpp"
 #include "twin/core/error.hpp"
 #include "twin/core/units.hpp"
@@ -20,17 +19,18 @@ std::vector<feeddrive::DriveParams> drive_params_of(const MachineDefinition& m, 
   return out;
 }
 
-/// The least common multiple of the present axes' inner ticks per period.
+/// The least common multiple of the present axes' inner ticks per period, as each
+/// axis's law sets up its step.
 int inner_ticks_of(const MachineDefinition& m, const std::vector<Axis>& axes) {
   int l = 1;
   for (Axis a : axes) {
-    const controller::PositionLoopParams& g = m.axes[index(a)].loop;
-    if (g.law != controller::LoopLaw::kCascade) continue;
-    l = std::lcm(l, controller::laws::CascadeLaw::inner_ticks(g.cascade, m.Ts_s));
-    if (l > controller::laws::CascadeLaw::kMaxInnerTicks)
+    const AxisDefinition& def = m.axes[index(a)];
+    const controller::DriveScale drive{def.drive.rg_mm_per_rad, def.drive.Ka_A_per_V, def.drive.Kt_Nm_per_A};
+    l = std::lcm(l, controller::law_of(def.loop.law).setup(def.loop, m.Ts_s, drive).inner_ticks);
+    if (l > controller::kMaxInnerTicks)
       throw ConfigError(fmt::format("machine {}: the axes' velocity-loop periods Tv share no period of at least "
                                     "Ts / {} (the least common multiple of their ticks is {})",
-                                    m.name, controller::laws::CascadeLaw::kMaxInnerTicks, l));
+                                    m.name, controller::kMaxInnerTicks, l));
   }
   return l;
 }

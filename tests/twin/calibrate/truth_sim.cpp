@@ -118,8 +118,10 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   double table_mm = ref[0];           // backlash: table behind the play
   bool stuck = true;                  // friction side held (Karnopp)
   double I = 0.0, e_prev = 0.0, vref_prev = 0.0;
-  std::vector<double> ring(
-      static_cast<std::size_t>(std::max(1, e.delay_ticks * (sp.cascade.on ? std::max(1, sp.cascade.velocity_ticks) : 1))), 0.0);
+  // The velocity loop's ticks per period (cascade only) and their period.
+  const int nv = sp.cascade.on ? std::max(1, sp.cascade.velocity_ticks) : 1;
+  const double Tv = Ts / nv;
+  std::vector<double> ring(static_cast<std::size_t>(std::max(1, e.delay_ticks * nv)), 0.0);
   std::size_t head = 0;
 
   // Friction on the friction side (load side when two-mass) at speed w and position x.
@@ -147,9 +149,8 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   const auto every = static_cast<std::size_t>(std::max(1, sp.log_every));
   const CascadeLaw& cl = sp.cascade;
   double Iv = 0.0, Tf = 0.0, Tcmd = 0.0;
-  const double lag_a = cl.tau_i > 0.0 ? std::exp(-Ts / std::max(1, cl.velocity_ticks) / cl.tau_i) : 0.0;
-  const double monitor_a =
-      cl.log_torque_filter_s > 0.0 ? std::exp(-Ts / std::max(1, cl.velocity_ticks) / cl.log_torque_filter_s) : 0.0;
+  const double lag_a = cl.tau_i > 0.0 ? std::exp(-Tv / cl.tau_i) : 0.0;
+  const double monitor_a = cl.log_torque_filter_s > 0.0 ? std::exp(-Tv / cl.log_torque_filter_s) : 0.0;
   double T_monitor = 0.0;
   bool monitor_started = false;
   auto pos = [&](double x) {
@@ -166,10 +167,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     std::fprintf(f, "t_s,%s_ref_mm,%s_mm,%s_i_A\n", a, a, a);
   else
     std::fprintf(f, "t_s,%s_ref_mm,%s_mm,%s_u_V,%s_i_A\n", a, a, a, a);
-  // The velocity loop's ticks per period (cascade only) and the RK4 steps
-  // per velocity tick: 20 a period or the next multiple of the ticks.
-  const int nv = cl.on ? std::max(1, cl.velocity_ticks) : 1;
-  const double Tv = Ts / nv;
+  // The RK4 steps per velocity tick: 20 a period or the next multiple of the ticks.
   const int steps_per_tick = (20 + nv - 1) / nv;
   const double h = Tv / steps_per_tick;
   const double dv = 1e-4;  // Karnopp band, rad/s
