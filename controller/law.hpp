@@ -56,6 +56,12 @@ struct LawGain {
 /// `reference_states` states (x_ref[k-1], v_ref[k-1]) are driven by r only: they
 /// are not modes of the loop. A start at rest at x = 0 with x_ref[0] = r0 has
 /// c[0] = start r0 (the law's start-up convention: v_ref, a_ref 0, e[-1] = e[0]).
+///
+/// A law whose inner loop runs inner_ticks > 1 times a period (the cascade's
+/// velocity loop at Tv = Ts / n) is periodic: the system above is then its first
+/// tick of a period, the command held over Tv, and `inner` its n - 1 ticks after
+/// it, in the same states, reading the plant at that tick and no reference
+/// (c[q+1] = inner.Ac c[q] + inner.By p[q], m[q] = inner.Cc c[q] + inner.Dy p[q]).
 struct ControllerRealisation {
   Eigen::MatrixXd Ac;
   Eigen::MatrixXd By;         ///< n x 2
@@ -65,6 +71,13 @@ struct ControllerRealisation {
   double Dr{0.0};
   Eigen::VectorXd start;
   int reference_states{0};
+  int inner_ticks{1};
+  struct InnerTick {
+    Eigen::MatrixXd Ac;
+    Eigen::MatrixXd By;  ///< n x 2
+    Eigen::RowVectorXd Cc;
+    Eigen::RowVector2d Dy;
+  } inner;
 };
 
 /// An axis in steady motion: the reference at v_ref, the motor at w, the drive needing
@@ -113,7 +126,8 @@ class Law {
   virtual double torque_per_command(const LinearPlant& plant) const = 0;
   /// The limit of the command (u_max, T_max).
   virtual double command_limit(const PositionLoopParams& g) const = 0;
-  /// Its controller at Ts from [w, x, x_ref] to the command.
+  /// Its controller at Ts from [w, x, x_ref] to the command (with its inner ticks
+  /// where it runs several a period).
   virtual ControllerRealisation realise(const PositionLoopParams& g, double Ts_s, const LinearPlant& plant) const = 0;
 
   /// The gains with every feedforward gain at 0.

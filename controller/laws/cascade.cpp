@@ -104,12 +104,63 @@ double CascadeLaw::steady_state(const PositionLoopParams& p, const SteadyMotion&
   return e;
 }
 
+namespace {
+
+/// The cascade whose velocity loop runs `ticks` > 1 times a period: at the
+/// first tick the position loop sets the velocity command, held with the
+/// reference's acceleration for the ticks after it; every tick the PI
+/// velocity loop and the current-loop filter act at Tv = Ts / ticks.
+ControllerRealisation realise_multirate(const CascadeGains& c, double Ts, int ticks, const LinearPlant& p) {
+  const double rg = p.rg_mm_per_rad, Tv = Ts / ticks;
+  const bool integral = c.Tn_s > 0.0, lag = c.tau_i_s > 0.0;
+  const double alpha = lag ? std::exp(-Tv / c.tau_i_s) : 0.0;
+  int n = 0;
+  const int iI = integral ? n++ : -1;
+  const int iT = lag ? n++ : -1;
+  const int ih = n++;                      // the velocity command held over the period (mm/s)
+  const int ir = n++, iv = n++, ia = n++;  // x_ref[k-1], v_ref[k-1], a_ref held (reference only)
+  auto velocity_tick = [&](RealisationBuilder& b, const Row& vcmd, const Row& a) {
+    const Row ev = vcmd / rg - b.w();
+    Row Tc = c.Kvp_torque_s_per_rad * ev + c.Jff_torque_s2_per_rad * a / rg;
+    if (integral) {
+      const Row Iv = b.state(iI) + Tv * ev;
+      Tc += c.Kvp_torque_s_per_rad / c.Tn_s * Iv;
+      b.set_next(iI, Iv);
+    }
+    if (!lag) return Tc;
+    const Row command = alpha * b.state(iT) + (1.0 - alpha) * Tc;
+    b.set_next(iT, command);
+    return command;
+  };
+  Eigen::VectorXd start = Eigen::VectorXd::Zero(n);
+  start(ir) = 1.0;
+
+  RealisationBuilder first(n);
+  const Row e = first.r() - first.x();
+  const Row v = (first.r() - first.state(ir)) / Ts;
+  const Row a = (v - first.state(iv)) / Ts;
+  const Row vcmd = c.Kv_per_s * e + c.kff * v;
+  const Row command = velocity_tick(first, vcmd, a);
+  first.set_next(ih, vcmd);
+  first.set_next(ir, first.r());
+  first.set_next(iv, v);
+  first.set_next(ia, a);
+  ControllerRealisation K = first.finish(command, start, 3);
+
+  RealisationBuilder later(n);
+  const Row command_later = velocity_tick(later, later.state(ih), later.state(ia));
+  for (int i : {ih, ir, iv, ia}) later.set_next(i, later.state(i));
+  const ControllerRealisation inner = later.finish(command_later, start, 3);
+  K.inner_ticks = ticks;
+  K.inner = {inner.Ac, inner.By, inner.Cc, inner.Dy};
+  return K;
+}
+
+}  // namespace
+
 ControllerRealisation CascadeLaw::realise(const PositionLoopParams& g, double Ts, const LinearPlant& p) const {
   const CascadeGains& c = g.cascade;
-  if (const int n = inner_ticks(c, Ts); n > 1)
-    throw ConfigError(fmt::format("the linear analysis holds the command over the position loop's period: a velocity "
-                                  "loop that runs {} times a period (Tv = {} s, Ts = {} s) is not analysed",
-                                  n, c.Tv_s, Ts));
+  if (const int ticks = inner_ticks(c, Ts); ticks > 1) return realise_multirate(c, Ts, ticks, p);
   const double rg = p.rg_mm_per_rad;
   const bool integral = c.Tn_s > 0.0, lag = c.tau_i_s > 0.0;
   int n = 0;

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <tuple>
+#include <vector>
 
 #include <Eigen/Eigenvalues>
 #include <fmt/format.h>
@@ -52,14 +54,68 @@ DiscreteLoopModel::DiscreteLoopModel(const LinearPlant& plant, const controller:
   K_ = law_->realise(gains_, Ts_s_, plant_);
   K_fb_ = law_->realise(law_->feedback_only(gains_), Ts_s_, plant_);
   same_states_ = K_fb_.Ac == K_.Ac;
+  const auto nl = static_cast<Eigen::Index>(K_.Ac.rows() - K_.reference_states);
+
+  if (K_.inner_ticks > 1) {
+    // The plant over one inner tick, the loop lifted over the period; its loop
+    // states are [w, x] and the controller's, less those no period reads (the
+    // velocity command held over the period, set anew at its first tick).
+    const Eigen::MatrixXd Ev = matrix_exponential(M * (Ts_s_ / K_.inner_ticks));
+    Phi_v_ = Ev.topLeftCorner<2, 2>();
+    Gamma_v_ = Ev.topRightCorner<2, 1>();
+    lifted_ = lift(K_, Phi_v_, Gamma_v_);
+    lifted_fb_ = lift(K_fb_, Phi_v_, Gamma_v_);
+    std::vector<Eigen::Index> keep;
+    for (Eigen::Index i = 0; i < 2 + nl; ++i)
+      if (i < 2 || !lifted_.A.col(i).isZero(0.0)) keep.push_back(i);
+    const auto nk = static_cast<Eigen::Index>(keep.size());
+    A_fb_.resize(nk, nk);
+    for (std::size_t i = 0; i < keep.size(); ++i)
+      for (std::size_t j = 0; j < keep.size(); ++j)
+        A_fb_(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) = lifted_.A(keep[i], keep[j]);
+    return;
+  }
 
   // The loop states of the controller with the plant, the reference held at 0.
-  const auto nl = static_cast<Eigen::Index>(K_.Ac.rows() - K_.reference_states);
   A_fb_.setZero(2 + nl, 2 + nl);
   A_fb_.topLeftCorner(2, 2) = Phi_ + Gamma_ * K_.Dy;
   A_fb_.topRightCorner(2, nl) = Gamma_ * K_.Cc.head(nl);
   A_fb_.bottomLeftCorner(nl, 2) = K_.By.topRows(nl);
   A_fb_.bottomRightCorner(nl, nl) = K_.Ac.topLeftCorner(nl, nl);
+}
+
+DiscreteLoopModel::Lifted DiscreteLoopModel::lift(const ControllerRealisation& K, const Eigen::Matrix2d& Phi,
+                                                   const Eigen::Vector2d& Gamma) {
+  const auto nc = K.Ac.rows(), N = 2 + nc;
+  // One tick of plant and controller, state [w, x, c].
+  auto tick = [&](const Eigen::MatrixXd& Ac, const Eigen::MatrixXd& By, const Eigen::RowVectorXd& Cc,
+                  const Eigen::RowVector2d& Dy) {
+    Eigen::MatrixXd T(N, N);
+    T.topLeftCorner(2, 2) = Phi + Gamma * Dy;
+    T.topRightCorner(2, nc) = Gamma * Cc;
+    T.bottomLeftCorner(nc, 2) = By;
+    T.bottomRightCorner(nc, nc) = Ac;
+    return T;
+  };
+  // The position feedback is cut at the period's first tick only.
+  if (!K.inner.By.col(1).isZero(0.0) || K.inner.Dy(1) != 0.0)
+    throw InternalError("linear analysis: a law's inner ticks read the position");
+  const Eigen::MatrixXd inner = tick(K.inner.Ac, K.inner.By, K.inner.Cc, K.inner.Dy);
+  Eigen::MatrixXd later = Eigen::MatrixXd::Identity(N, N);
+  for (int q = 1; q < K.inner_ticks; ++q) later = inner * later;
+  Eigen::MatrixXd By_open = K.By;
+  By_open.col(1).setZero();
+  Eigen::RowVector2d Dy_open = K.Dy;
+  Dy_open(1) = 0.0;
+  Eigen::VectorXd Nr(N), Nd(N);
+  Nr << Gamma * K.Dr, K.Br;
+  Nd << Gamma * K.Dy(1), K.By.col(1);
+  Lifted L;
+  L.A = later * tick(K.Ac, K.By, K.Cc, K.Dy);
+  L.A_open = later * tick(K.Ac, By_open, K.Cc, Dy_open);
+  L.Br = later * Nr;
+  L.Bd = later * Nd;
+  return L;
 }
 
 std::vector<std::complex<double>> DiscreteLoopModel::poles() const {
@@ -82,6 +138,20 @@ DiscreteLoopModel::Responses DiscreteLoopModel::responses(double f_Hz) const {
   const cd det = a * d - b * c;
   const cd Pw = (d * Gamma_(0) - b * Gamma_(1)) / det;
   const cd Px = (-c * Gamma_(0) + a * Gamma_(1)) / det;
+  if (K_.inner_ticks > 1) {
+    // The lifted loop: X/R from the reference, L from a disturbance on the measured position.
+    const auto N = lifted_.A.rows();
+    const Eigen::MatrixXcd zI = z * Eigen::MatrixXcd::Identity(N, N);
+    auto x_of = [&](const Eigen::MatrixXd& A, const Eigen::VectorXd& B) {
+      return (zI - A.cast<cd>()).partialPivLu().solve(B.cast<cd>().eval())(1);
+    };
+    Responses r;
+    r.Px = Px;
+    r.L = -x_of(lifted_.A_open, lifted_.Bd);
+    r.X = x_of(lifted_.A, lifted_.Br);
+    r.X_fb = x_of(lifted_fb_.A, lifted_fb_.Br);
+    return r;
+  }
   // The controller's responses from w, x and r share one factorisation; the law without
   // its feedforward shares it too where the feedforward changes only the command (FADAL),
   // not the states (the cascade's kff enters the speed integral).
@@ -99,8 +169,8 @@ DiscreteLoopModel::Responses DiscreteLoopModel::responses(double f_Hz) const {
   Responses r;
   r.Px = Px;
   r.L = -((KY(0) + K_.Dy(0)) * Pw + (KY(1) + K_.Dy(1)) * Px);
-  r.Kr = KY(2) + K_.Dr;
-  r.Kr_fb = Kr_fb;
+  r.X = Px * (KY(2) + K_.Dr) / (1.0 + r.L);
+  r.X_fb = Px * Kr_fb / (1.0 + r.L);
   return r;
 }
 
@@ -111,8 +181,8 @@ FrequencyPoint DiscreteLoopModel::at(double f_Hz) const {
   p.L = r.L;
   p.S = 1.0 / (1.0 + r.L);
   p.T = r.L * p.S;
-  p.X_over_R = r.Px * r.Kr * p.S;
-  p.X_over_R_feedback = r.Px * r.Kr_fb * p.S;
+  p.X_over_R = r.X;
+  p.X_over_R_feedback = r.X_fb;
   p.E_over_R = 1.0 - p.X_over_R;
   return p;
 }
@@ -124,20 +194,40 @@ cd DiscreteLoopModel::complementary(double f_Hz) const {
   const cd L = loop_response(f_Hz);
   return L / (1.0 + L);
 }
-cd DiscreteLoopModel::position_response(double f_Hz) const {
-  const Responses r = responses(f_Hz);
-  return r.Px * r.Kr / (1.0 + r.L);
-}
-cd DiscreteLoopModel::feedback_position_response(double f_Hz) const {
-  const Responses r = responses(f_Hz);
-  return r.Px * r.Kr_fb / (1.0 + r.L);
-}
+cd DiscreteLoopModel::position_response(double f_Hz) const { return responses(f_Hz).X; }
+cd DiscreteLoopModel::feedback_position_response(double f_Hz) const { return responses(f_Hz).X_fb; }
 cd DiscreteLoopModel::error_response(double f_Hz) const { return 1.0 - position_response(f_Hz); }
+
+cd DiscreteLoopModel::velocity_loop_response(double f_Hz) const {
+  if (K_.inner_ticks <= 1) return {std::numeric_limits<double>::quiet_NaN(), 0.0};
+  const cd z = std::polar(1.0, 2.0 * kPi * f_Hz * Ts_s_ / K_.inner_ticks);
+  // The inner ticks' controller from [w, x]; its held states (the velocity command and
+  // the reference's) are not driven by the plant, so with the position loop open they stay 0.
+  const auto& I = K_.inner;
+  const auto n = I.Ac.rows();
+  const Eigen::MatrixXcd Y =
+      (z * Eigen::MatrixXcd::Identity(n, n) - I.Ac.cast<cd>()).partialPivLu().solve(I.By.cast<cd>().eval());
+  const Eigen::RowVectorXcd K = I.Cc.cast<cd>() * Y + I.Dy.cast<cd>();
+  const cd a = z - Phi_v_(0, 0), b = -Phi_v_(0, 1), c = -Phi_v_(1, 0), d = z - Phi_v_(1, 1);
+  const cd det = a * d - b * c;
+  const cd Pw = (d * Gamma_v_(0) - b * Gamma_v_(1)) / det;
+  const cd Px = (-c * Gamma_v_(0) + a * Gamma_v_(1)) / det;
+  return -(K(0) * Pw + K(1) * Px);
+}
 
 std::vector<double> DiscreteLoopModel::simulate(const std::vector<double>& x_ref_mm) const {
   Eigen::Vector2d p = Eigen::Vector2d::Zero();
   Eigen::VectorXd c = K_.start * (x_ref_mm.empty() ? 0.0 : x_ref_mm.front());
   std::vector<double> x(x_ref_mm.size());
+  if (K_.inner_ticks > 1) {
+    Eigen::VectorXd s = Eigen::VectorXd::Zero(lifted_.A.rows());
+    s.tail(c.size()) = c;
+    for (std::size_t k = 0; k < x_ref_mm.size(); ++k) {
+      x[k] = s(1);
+      s = lifted_.A * s + lifted_.Br * x_ref_mm[k];
+    }
+    return x;
+  }
   for (std::size_t k = 0; k < x_ref_mm.size(); ++k) {
     const double r = x_ref_mm[k];
     x[k] = p(1);
@@ -201,44 +291,66 @@ namespace {
 
 using Grid = std::vector<FrequencyPoint>;
 
-/// Gain crossovers (|L| = 1): the smallest phase margin and its frequency.
-void gain_crossovers(const DiscreteLoopModel& m, const Grid& grid, LoopAnalysis& a) {
-  a.phase_margin_deg = std::numeric_limits<double>::infinity();
-  auto gain_fn = [&](double f) { return std::abs(m.loop_response(f)) - 1.0; };
-  for (std::size_t i = 1; i < grid.size(); ++i) {
-    const double g0 = std::abs(grid[i - 1].L) - 1.0, g1 = std::abs(grid[i].L) - 1.0;
+/// A loop's response L(f) on a log grid up to its Nyquist frequency.
+struct LoopGrid {
+  std::vector<double> f_Hz;
+  std::vector<cd> L;
+};
+template <class LoopFn>
+LoopGrid loop_grid(LoopFn&& loop, double f_min_Hz, double f_nyquist_Hz, int points) {
+  LoopGrid g;
+  const int n = std::max(points, 2);
+  for (int i = 0; i < n; ++i) {
+    const double f =
+        f_min_Hz * std::pow(f_nyquist_Hz / f_min_Hz, static_cast<double>(i) / static_cast<double>(n - 1));
+    g.f_Hz.push_back(f);
+    g.L.push_back(loop(f));
+  }
+  return g;
+}
+
+/// Gain crossovers (|L| = 1): the smallest phase margin (+inf when none) and its frequency.
+template <class LoopFn>
+std::pair<double, double> gain_crossovers(LoopFn&& loop, const LoopGrid& grid) {
+  double pm_min = std::numeric_limits<double>::infinity(), f_at = 0.0;
+  auto gain_fn = [&](double f) { return std::abs(loop(f)) - 1.0; };
+  for (std::size_t i = 1; i < grid.f_Hz.size(); ++i) {
+    const double g0 = std::abs(grid.L[i - 1]) - 1.0, g1 = std::abs(grid.L[i]) - 1.0;
     if ((g0 < 0.0) == (g1 < 0.0)) continue;
-    const double fc = bisect_log(gain_fn, grid[i - 1].f_Hz, grid[i].f_Hz);
-    const double pm = phase_margin_at(m.loop_response(fc));
-    if (pm < a.phase_margin_deg) {
-      a.phase_margin_deg = pm;
-      a.gain_crossover_Hz = fc;
+    const double fc = bisect_log(gain_fn, grid.f_Hz[i - 1], grid.f_Hz[i]);
+    const double pm = phase_margin_at(loop(fc));
+    if (pm < pm_min) {
+      pm_min = pm;
+      f_at = fc;
     }
   }
+  return {pm_min, f_at};
 }
 
 /// Phase crossovers (Im L = 0 with Re L < 0, counted where |L| < 1, and Nyquist,
-/// where L is real): the smallest gain margin and its frequency.
-void phase_crossovers(const DiscreteLoopModel& m, const Grid& grid, LoopAnalysis& a) {
-  a.gain_margin_dB = std::numeric_limits<double>::infinity();
+/// where L is real): the smallest gain margin (+inf when none) and its frequency.
+template <class LoopFn>
+std::pair<double, double> phase_crossovers(LoopFn&& loop, const LoopGrid& grid, double f_nyquist_Hz) {
+  double gm_min = std::numeric_limits<double>::infinity(), f_at = 0.0;
   auto consider_gm = [&](double f) {
-    const cd L = m.loop_response(f);
+    const cd L = loop(f);
     if (L.real() < 0.0 && std::abs(L) < 1.0) {
       const double gm = -20.0 * std::log10(std::abs(L));
-      if (gm < a.gain_margin_dB) {
-        a.gain_margin_dB = gm;
-        a.phase_crossover_Hz = f;
+      if (gm < gm_min) {
+        gm_min = gm;
+        f_at = f;
       }
     }
   };
-  auto imag_fn = [&](double f) { return m.loop_response(f).imag(); };
-  for (std::size_t i = 1; i < grid.size(); ++i) {
-    const double i0 = grid[i - 1].L.imag(), i1 = grid[i].L.imag();
-    if ((i0 < 0.0) == (i1 < 0.0) || i == grid.size() - 1) continue;
-    if (grid[i - 1].L.real() >= 0.0 && grid[i].L.real() >= 0.0) continue;
-    consider_gm(bisect_log(imag_fn, grid[i - 1].f_Hz, grid[i].f_Hz));
+  auto imag_fn = [&](double f) { return loop(f).imag(); };
+  for (std::size_t i = 1; i < grid.f_Hz.size(); ++i) {
+    const double i0 = grid.L[i - 1].imag(), i1 = grid.L[i].imag();
+    if ((i0 < 0.0) == (i1 < 0.0) || i == grid.f_Hz.size() - 1) continue;
+    if (grid.L[i - 1].real() >= 0.0 && grid.L[i].real() >= 0.0) continue;
+    consider_gm(bisect_log(imag_fn, grid.f_Hz[i - 1], grid.f_Hz[i]));
   }
-  consider_gm(m.nyquist_Hz());  // at Nyquist L is real
+  consider_gm(f_nyquist_Hz);  // at Nyquist L is real
+  return {gm_min, f_at};
 }
 
 /// Sensitivity peak (refined around the grid's largest |S|) and complementary peak.
@@ -296,8 +408,23 @@ LoopAnalysis analyse_loop(const DiscreteLoopModel& m, double f_min_Hz, int point
   a.max_pole_magnitude = std::abs(a.poles.front());
   a.stable = m.stable();
   const auto grid = frequency_response(m, f_min_Hz, points);
-  gain_crossovers(m, grid, a);
-  phase_crossovers(m, grid, a);
+  LoopGrid loop_points;
+  for (const FrequencyPoint& p : grid) {
+    loop_points.f_Hz.push_back(p.f_Hz);
+    loop_points.L.push_back(p.L);
+  }
+  auto loop = [&m](double f) { return m.loop_response(f); };
+  std::tie(a.phase_margin_deg, a.gain_crossover_Hz) = gain_crossovers(loop, loop_points);
+  std::tie(a.gain_margin_dB, a.phase_crossover_Hz) = phase_crossovers(loop, loop_points, m.nyquist_Hz());
+  if (m.inner_ticks() > 1) {
+    auto velocity_loop = [&m](double f) { return m.velocity_loop_response(f); };
+    const double f_nyquist_v = m.nyquist_Hz() * m.inner_ticks();
+    const LoopGrid v = loop_grid(velocity_loop, f_min_Hz, f_nyquist_v, points);
+    a.velocity_loop = true;
+    std::tie(a.velocity_loop_phase_margin_deg, a.velocity_loop_gain_crossover_Hz) = gain_crossovers(velocity_loop, v);
+    std::tie(a.velocity_loop_gain_margin_dB, a.velocity_loop_phase_crossover_Hz) =
+        phase_crossovers(velocity_loop, v, f_nyquist_v);
+  }
   sensitivity_peaks(m, grid, a);
   a.bandwidth_Hz = bandwidth_Hz(m, grid, &FrequencyPoint::X_over_R_feedback);
   a.bandwidth_with_feedforward_Hz = bandwidth_Hz(m, grid, &FrequencyPoint::X_over_R);
@@ -311,13 +438,23 @@ std::string format_analysis(const std::string& title, const DiscreteLoopModel& m
   std::string s = fmt::format("{}\n", title);
   s += fmt::format("  {} law, gains: {}\n", controller::loop_law_name(m.law().id()),
                    m.law().gains_text(m.gains(), true));
-  s += fmt::format("  loop broken at the command ({} in {})\n", m.law().command_name(), m.law().command_unit());
+  if (m.inner_ticks() > 1)
+    s += fmt::format("  loop broken at the position feedback, the velocity loop closed (it runs {} times a period, "
+                     "Tv {:g} s); poles of the whole loop over a period\n",
+                     m.inner_ticks(), m.Ts_s() / m.inner_ticks());
+  else
+    s += fmt::format("  loop broken at the command ({} in {})\n", m.law().command_name(), m.law().command_unit());
   s += fmt::format("  closed loop {} (largest pole |z| = {:.6f}); poles:", a.stable ? "stable" : "UNSTABLE",
                    a.max_pole_magnitude);
   for (const auto& p : a.poles) s += fmt::format(" {:.6f}{:+.6f}j", p.real(), p.imag());
   s += "\n";
   s += fmt::format("  phase margin {:.2f} deg at {:.2f} Hz, gain margin {:.2f} dB at {:.2f} Hz\n", a.phase_margin_deg,
                    a.gain_crossover_Hz, a.gain_margin_dB, a.phase_crossover_Hz);
+  if (a.velocity_loop)
+    s += fmt::format("  velocity loop alone (at Tv, position loop open): phase margin {:.2f} deg at {:.2f} Hz, gain "
+                     "margin {:.2f} dB at {:.2f} Hz\n",
+                     a.velocity_loop_phase_margin_deg, a.velocity_loop_gain_crossover_Hz,
+                     a.velocity_loop_gain_margin_dB, a.velocity_loop_phase_crossover_Hz);
   s += fmt::format("  sensitivity peak Ms {:.3f} ({:.2f} dB) at {:.2f} Hz, complementary peak Mt {:.3f}\n",
                    a.sensitivity_peak, a.sensitivity_peak_dB, a.sensitivity_peak_Hz, a.complementary_peak);
   s += fmt::format("  bandwidth (-3 dB) {:.2f} Hz feedback only, {:.2f} Hz with feedforward\n", a.bandwidth_Hz,

@@ -12,6 +12,14 @@
 /// differences, the integrator updated before it acts, the cascade's current loop as
 /// its first-order filter sampled at Ts), written by the law itself
 /// (controller::Law::realise) as a discrete state-space system from [p, x_ref] to m.
+/// A cascade whose velocity loop runs n > 1 times a period (Tv = Ts / n) is a
+/// periodic system at Tv; it is analysed lifted to Ts (the product of its n ticks'
+/// state maps, the plant discretised over Tv), which is exact at the position
+/// loop's samples. Its torque command changes within the period, so the loop is
+/// broken where it is held over the period instead: at the position feedback
+/// (L = -X/D for a disturbance d added to the measured position, the velocity
+/// loop closed); S, T and the margins are the position loop's, the poles those of
+/// the whole loop.
 /// Loop broken at the command m: L(z) = -K_p(z) P(z), P(z) = (zI - Phi)^-1 Gamma,
 /// K_p the controller from p to m (for the FADAL law L = C P with
 /// C(z) = Kp + Ki Ts z/(z-1) + Kd (z-1)/(Ts z); for the cascade the position and speed
@@ -64,13 +72,18 @@ class DiscreteLoopModel {
                     const std::string& where = "axis");
 
   const controller::Law& law() const noexcept { return *law_; }
+  /// The plant over one period Ts under a held command.
   const Eigen::Matrix2d& Phi() const noexcept { return Phi_; }
   /// Per unit of the law's command (mm/V, rad/s per V for the FADAL law).
   const Eigen::Vector2d& Gamma() const noexcept { return Gamma_; }
   const ControllerRealisation& controller() const noexcept { return K_; }
+  /// The law's inner ticks per period (1: the command is held over Ts).
+  int inner_ticks() const noexcept { return K_.inner_ticks; }
   /// Closed-loop matrix with the reference held at 0, state [w, x, loop states of
   /// the controller] (FADAL: I[k-1] when Ki > 0, e[k-1]; cascade: Iv[k-1] when Tn > 0,
-  /// Tf[k-1] when tau_i > 0): s[k+1] = A_feedback s[k].
+  /// Tf[k-1] when tau_i > 0): s[k+1] = A_feedback s[k]; over a whole period where the
+  /// law has inner ticks (the held velocity command, set anew at each period's first
+  /// tick, left out).
   const Eigen::MatrixXd& A_feedback() const noexcept { return A_fb_; }
   /// Poles of the feedback loop: the eigenvalues of A_feedback (the feedforward
   /// only adds poles at z = 0), largest magnitude first.
@@ -85,6 +98,10 @@ class DiscreteLoopModel {
   std::complex<double> position_response(double f_Hz) const;    ///< X/R with feedforward
   std::complex<double> feedback_position_response(double f_Hz) const;  ///< X/R, feedforward off
   std::complex<double> error_response(double f_Hz) const;       ///< E/R with feedforward
+  /// A law with inner ticks: the velocity loop alone at Tv = Ts / inner_ticks(),
+  /// broken at the torque command with the position loop open (the velocity command
+  /// held at 0): L_v = -K_w(z) P_w(z) at z = exp(j 2 pi f Tv). NaN for a law without.
+  std::complex<double> velocity_loop_response(double f_Hz) const;
 
   /// Response of the closed loop (friction and saturation out) to a reference
   /// sequence x_ref[k], k = 0..n-1, starting at rest at x = 0 with the law's
@@ -99,8 +116,16 @@ class DiscreteLoopModel {
 
  private:
   struct Responses {
-    std::complex<double> L, Px, Kr, Kr_fb;
+    std::complex<double> L, Px, X, X_fb;  ///< L, P_x, X/R and X/R with the feedforward off
   };
+  /// A law with inner ticks over one period Ts, state [w, x, c]: z[k+1] = A z[k] +
+  /// Br x_ref[k] (closed), and with the position feedback of the first tick cut,
+  /// z[k+1] = A_open z[k] + Bd d[k] for d fed where the measured position was.
+  struct Lifted {
+    Eigen::MatrixXd A, A_open;
+    Eigen::VectorXd Br, Bd;
+  };
+  static Lifted lift(const ControllerRealisation& K, const Eigen::Matrix2d& Phi, const Eigen::Vector2d& Gamma);
   Responses responses(double f_Hz) const;
   LinearPlant plant_;
   controller::PositionLoopParams gains_;
@@ -110,6 +135,9 @@ class DiscreteLoopModel {
   Eigen::Vector2d Gamma_;
   ControllerRealisation K_, K_fb_;  ///< the law, and the law with its feedforward at 0
   bool same_states_{false};          ///< K_fb_.Ac == K_.Ac
+  Lifted lifted_, lifted_fb_;        ///< inner_ticks() > 1 only
+  Eigen::Matrix2d Phi_v_;            ///< the plant over one inner tick (inner_ticks() > 1 only)
+  Eigen::Vector2d Gamma_v_;
   Eigen::MatrixXd A_fb_;
 };
 
@@ -141,6 +169,14 @@ struct LoopAnalysis {
   /// |E/R| at 1 Hz and 10 Hz: the tracking error per unit of reference at those frequencies.
   double error_gain_1Hz{0.0};
   double error_gain_10Hz{0.0};
+  /// A velocity loop faster than the position loop: its own margins at Tv, broken at
+  /// the torque command with the position loop open (the figures above are then the
+  /// position loop's, broken at the position feedback).
+  bool velocity_loop{false};
+  double velocity_loop_phase_margin_deg{0.0};
+  double velocity_loop_gain_crossover_Hz{0.0};
+  double velocity_loop_gain_margin_dB{0.0};
+  double velocity_loop_phase_crossover_Hz{0.0};
 };
 
 /// Runs the analysis. The frequency grid is logarithmic from f_min_Hz to Nyquist

@@ -46,8 +46,12 @@ ConstraintValues linear_constraints(const LinearPlant& plant, const controller::
   const DiscreteLoopModel model(plant, gains, Ts_s, where);
   const LoopAnalysis a = analyse_loop(model, 0.01, 1500);
   v.stable = a.stable;
-  v.phase_margin_deg = a.phase_margin_deg;
-  v.gain_margin_dB = a.gain_margin_dB;
+  // A velocity loop faster than the position loop has margins of its own: the
+  // constraints hold for the smaller of the two loops'.
+  const bool velocity_pm = a.velocity_loop && a.velocity_loop_phase_margin_deg < a.phase_margin_deg;
+  const bool velocity_gm = a.velocity_loop && a.velocity_loop_gain_margin_dB < a.gain_margin_dB;
+  v.phase_margin_deg = velocity_pm ? a.velocity_loop_phase_margin_deg : a.phase_margin_deg;
+  v.gain_margin_dB = velocity_gm ? a.velocity_loop_gain_margin_dB : a.gain_margin_dB;
   v.sensitivity_peak = a.sensitivity_peak;
   v.step_overshoot = a.step_overshoot;
   v.command_name = model.law().command_name();
@@ -55,11 +59,12 @@ ConstraintValues linear_constraints(const LinearPlant& plant, const controller::
   v.command_limit = c.u_fraction_max * model.law().command_limit(gains);
   if (!a.stable) {
     v.violation = fmt::format("{}: closed loop unstable (largest pole |z| = {:.6f})", where, a.max_pole_magnitude);
-  } else if (a.phase_margin_deg < c.phase_margin_min_deg) {
-    v.violation = fmt::format("{}: phase margin {:.2f} deg < {:.2f} deg", where, a.phase_margin_deg,
-                              c.phase_margin_min_deg);
-  } else if (a.gain_margin_dB < c.gain_margin_min_dB) {
-    v.violation = fmt::format("{}: gain margin {:.2f} dB < {:.2f} dB", where, a.gain_margin_dB, c.gain_margin_min_dB);
+  } else if (v.phase_margin_deg < c.phase_margin_min_deg) {
+    v.violation = fmt::format("{}: {}phase margin {:.2f} deg < {:.2f} deg", where, velocity_pm ? "velocity loop " : "",
+                              v.phase_margin_deg, c.phase_margin_min_deg);
+  } else if (v.gain_margin_dB < c.gain_margin_min_dB) {
+    v.violation = fmt::format("{}: {}gain margin {:.2f} dB < {:.2f} dB", where, velocity_gm ? "velocity loop " : "",
+                              v.gain_margin_dB, c.gain_margin_min_dB);
   } else if (a.sensitivity_peak > c.sensitivity_peak_max) {
     v.violation = fmt::format("{}: sensitivity peak {:.3f} > {:.3f}", where, a.sensitivity_peak, c.sensitivity_peak_max);
   } else if (a.step_overshoot > c.step_overshoot_max) {
@@ -905,7 +910,7 @@ nlohmann::json analysis_json(const LoopAnalysis& a) {
   for (const auto& p : a.poles) poles.push_back({p.real(), p.imag()});
   // JSON has no infinity: a margin that does not exist is written as null.
   auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
-  return {{"stable", a.stable},
+  nlohmann::json j = {{"stable", a.stable},
           {"poles_z", poles},
           {"gain_margin_dB", num(a.gain_margin_dB)},
           {"phase_crossover_Hz", a.phase_crossover_Hz},
@@ -919,6 +924,13 @@ nlohmann::json analysis_json(const LoopAnalysis& a) {
           {"step_settling_time_s", num(a.step_settling_time_s)},
           {"tracking_error_gain_1Hz", a.error_gain_1Hz},
           {"tracking_error_gain_10Hz", a.error_gain_10Hz}};
+  if (a.velocity_loop) {
+    j["velocity_loop_phase_margin_deg"] = num(a.velocity_loop_phase_margin_deg);
+    j["velocity_loop_gain_crossover_Hz"] = a.velocity_loop_gain_crossover_Hz;
+    j["velocity_loop_gain_margin_dB"] = num(a.velocity_loop_gain_margin_dB);
+    j["velocity_loop_phase_crossover_Hz"] = a.velocity_loop_phase_crossover_Hz;
+  }
+  return j;
 }
 
 nlohmann::json constraints_json(const ConstraintValues& v) {
