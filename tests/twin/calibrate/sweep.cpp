@@ -8,7 +8,7 @@
 //                   [--log-every M] [--current-only] [--keep DIR] [--verbose]
 //   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed]
 //                            [--encoder-mm Q] [--current-lag S] [--torque-command] [--torque-step R]
-//                            [--torque-filter S]
+//                            [--torque-filter S] [--torque-mean]
 //                            [--kff K] [--jff J] [--friction load|sqrt|dahl] [--limit-on-command]
 //                            [--anti-windup] [--contour | --contour2] [--log-every M] [--velocity-ticks N]
 //                            [--keep DIR]
@@ -44,7 +44,10 @@
 // trace it); --torque-step rounds the logged raw torque to multiples of R
 // (a drive's integer counts or percent); --torque-filter passes the logged
 // torque through a first-order low-pass of S seconds (a drive's smoothed
-// actual-torque monitor, which the loop does not see);
+// actual-torque monitor, which the loop does not see); --torque-mean logs
+// the torque's mean over the velocity ticks of the period ending at the row
+// (with --velocity-ticks: a drive averaging its faster loop over the trace's
+// sample period);
 // --kff sets its velocity feedforward (0.6 unless given), --jff gives it a
 // torque feedforward of J N m s^2/rad on the command's acceleration;
 // --friction adds to every run a friction law of a real machine: friction
@@ -194,6 +197,7 @@ struct CascadeOptions {
   bool log_torque_command{false};  ///< log the current loop's input, not the motor's torque
   double raw_step{0.0};            ///< the raw torque logged to multiples of this (0: as computed)
   double torque_filter_s{0.0};     ///< the logged torque low-passed at this time constant (0: as computed)
+  bool torque_mean{false};         ///< the logged torque the mean over the period's velocity ticks
   std::string friction;            ///< a friction law beside every run's effect (empty: none)
   bool limit_on_command{false};    ///< the limit cases clamp the velocity loop's command, not the current
   bool anti_windup{false};         ///< with limit_on_command: the integral frozen while the limit clamps
@@ -247,6 +251,7 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     sp.cascade.log_torque_command = loop.log_torque_command;
     sp.cascade.raw_step = loop.raw_step;
     sp.cascade.log_torque_filter_s = loop.torque_filter_s;
+    sp.cascade.log_torque_mean = loop.torque_mean;
     sp.log_every = loop.log_every;
     sp.cascade.velocity_ticks = loop.velocity_ticks;
     const double load = sp.effects.load_Nm;
@@ -418,6 +423,8 @@ int main(int argc, char** argv) {
       loop.contour = 2;
     } else if (!std::strcmp(argv[i], "--anti-windup")) {
       loop.limit_on_command = loop.anti_windup = true;
+    } else if (!std::strcmp(argv[i], "--torque-mean")) {
+      loop.torque_mean = true;
     } else if (!std::strcmp(argv[i], "--torque-command")) {
       loop.log_torque_command = true;
     } else if (!std::strcmp(argv[i], "--no-motor-speed")) {

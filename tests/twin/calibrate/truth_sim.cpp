@@ -153,6 +153,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   const double monitor_a = cl.log_torque_filter_s > 0.0 ? std::exp(-Tv / cl.log_torque_filter_s) : 0.0;
   double T_monitor = 0.0;
   bool monitor_started = false;
+  double T_period_sum = 0.0, T_period_mean = 0.0;  // log_torque_mean: over the ticks of the period
   auto pos = [&](double x) {
     if (sp.log_significant_figures <= 0 || x == 0.0) return x;
     const double q = std::pow(10.0, std::floor(std::log10(std::abs(x))) - sp.log_significant_figures + 1);
@@ -327,7 +328,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
           std::fprintf(f, "%.4f,%.10g,%.10g", static_cast<double>(k) * Ts, pos(ref[k]), pos(x_meas));
           if (cl.log_velocities) std::fprintf(f, ",%.6f", vcmd);
           if (cl.log_velocities && cl.log_motor_speed) std::fprintf(f, ",%.6f", v_motor);
-          const double T_logged = T_monitor;
+          const double T_logged = cl.log_torque_mean ? T_period_mean : T_monitor;
           double raw = cl.raw_per_Nm * (T_logged + noise(rng));
           if (cl.raw_step > 0.0) raw = cl.raw_step * std::round(raw / cl.raw_step);
           std::fprintf(f, ",%.6f\n", cl.raw_per_Nm > 0.0 ? raw : i_measured);
@@ -339,6 +340,11 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
         }
       }
       for (int j = 0; j < steps_per_tick; ++j) substep(Tm);
+      T_period_sum += T_seen;
+      if (q + 1 == nv) {
+        T_period_mean = T_period_sum / nv;
+        T_period_sum = 0.0;
+      }
     }
     if (e.backlash_mm > 0.0 && !coupling_gap) {
       const double xm = s.th_m * p.rg, half = 0.5 * e.backlash_mm;

@@ -112,6 +112,11 @@ struct CascadeLaw {
   /// this time constant, as a drive's smoothed actual-torque monitor; the
   /// loop and the motor do not see it.
   double log_torque_filter_s{0.0};
+  /// Log the torque as its mean over the velocity ticks of the period that
+  /// ends at the row (a drive that averages what its faster loop made over
+  /// the trace's sample period) in place of the tick's own value; with one
+  /// tick a period, the torque held over the period before the row.
+  bool log_torque_mean{false};
   /// The velocity loop's (and current loop's) ticks per position-loop
   /// period: 1, or more as most drives run it (a 1 ms position loop over a
   /// 250 or 125 us velocity loop). Each tick takes the motor's speed of its
