@@ -47,6 +47,9 @@ void LinearPlant::validate(const std::string& where) const {
   positive("rg", rg_mm_per_rad);
   if (!std::isfinite(B_kg_m2_per_s) || B_kg_m2_per_s < 0.0)
     throw ConfigError(fmt::format("{}: B = {} must be finite and >= 0 for the linear analysis", where, B_kg_m2_per_s));
+  if (!std::isfinite(command_delay_s) || command_delay_s < 0.0)
+    throw ConfigError(fmt::format("{}: the command's delay = {} s must be finite and >= 0 for the linear analysis",
+                                  where, command_delay_s));
 }
 
 LawSetup Law::setup(const PositionLoopParams&, double Ts_s, const DriveScale& drive) const {

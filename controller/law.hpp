@@ -20,13 +20,16 @@
 namespace twin::controller {
 
 /// The linearised drive a law's controller is analysed against: only the terms that
-/// survive linearisation (Ozcan 2017 Fig. 1: J dw/dt = Ka Kt u - B w, dx/dt = rg w).
+/// survive linearisation (Ozcan 2017 Fig. 1: J dw/dt = Ka Kt u - B w, dx/dt = rg w),
+/// and a dead time on the command where the drive has one.
 struct LinearPlant {
   double Ka_A_per_V{0.0};
   double Kt_Nm_per_A{0.0};
   double J_kg_m2{0.0};
   double B_kg_m2_per_s{0.0};
   double rg_mm_per_rad{0.0};
+  /// A dead time on the command (the drive's `delay` effect), whole drive steps.
+  double command_delay_s{0.0};
   /// Throws ConfigError naming `where` and the field when a value is not finite or not physical.
   void validate(const std::string& where) const;
 };

@@ -18,7 +18,8 @@ namespace twin::analysis {
 using cd = std::complex<double>;
 
 LinearPlant linear_plant(const feeddrive::DriveParams& d) {
-  return LinearPlant{d.Ka_A_per_V, d.Kt_Nm_per_A, d.J_kg_m2, d.B_kg_m2_per_s, d.rg_mm_per_rad};
+  return LinearPlant{d.Ka_A_per_V,    d.Kt_Nm_per_A, d.J_kg_m2, d.B_kg_m2_per_s, d.rg_mm_per_rad,
+                     d.effects.delay.enabled ? d.effects.delay.delay_s : 0.0};
 }
 
 Eigen::MatrixXd matrix_exponential(const Eigen::MatrixXd& M) {
@@ -56,17 +57,33 @@ DiscreteLoopModel::DiscreteLoopModel(const LinearPlant& plant, const controller:
   same_states_ = K_fb_.Ac == K_.Ac;
   const auto nl = static_cast<Eigen::Index>(K_.Ac.rows() - K_.reference_states);
 
-  if (K_.inner_ticks > 1) {
-    // The plant over one inner tick, the loop lifted over the period; its loop
-    // states are [w, x] and the controller's, less those no period reads (the
-    // velocity command held over the period, set anew at its first tick).
-    const Eigen::MatrixXd Ev = matrix_exponential(M * (Ts_s_ / K_.inner_ticks));
+  // The drive's step: the inner tick where the law has them, else Ts; a dead time on
+  // the command is whole steps of it, rounded as the drive rounds it.
+  const double h = Ts_s_ / K_.inner_ticks;
+  delay_ticks_ = static_cast<int>(std::llround(plant_.command_delay_s / h));
+  if (K_.inner_ticks > 1 || delay_ticks_ > 0) {
+    // The plant over one step with the commands in flight, the loop lifted over the
+    // period; its loop states are the plant's and the controller's, less those no
+    // period reads (the velocity command held over the period, set anew at its first tick).
+    const Eigen::MatrixXd Ev = K_.inner_ticks > 1 ? matrix_exponential(M * h) : E;
     Phi_v_ = Ev.topLeftCorner<2, 2>();
     Gamma_v_ = Ev.topRightCorner<2, 1>();
-    lifted_ = lift(K_, Phi_v_, Gamma_v_);
-    lifted_fb_ = lift(K_fb_, Phi_v_, Gamma_v_);
+    const auto np = static_cast<Eigen::Index>(2 + delay_ticks_);
+    Eigen::MatrixXd Phi_a = Eigen::MatrixXd::Zero(np, np);
+    Eigen::VectorXd Gamma_a = Eigen::VectorXd::Zero(np);
+    Phi_a.topLeftCorner(2, 2) = Phi_v_;
+    if (delay_ticks_ == 0) {
+      Gamma_a.head(2) = Gamma_v_;
+    } else {
+      // [w, x, m[k-1], ..., m[k-d]]: the oldest acts, each moves one place on.
+      Phi_a.block(0, np - 1, 2, 1) = Gamma_v_;
+      for (Eigen::Index i = 3; i < np; ++i) Phi_a(i, i - 1) = 1.0;
+      Gamma_a(2) = 1.0;
+    }
+    lifted_ = lift(K_, Phi_a, Gamma_a);
+    lifted_fb_ = lift(K_fb_, Phi_a, Gamma_a);
     std::vector<Eigen::Index> keep;
-    for (Eigen::Index i = 0; i < 2 + nl; ++i)
+    for (Eigen::Index i = 0; i < np + nl; ++i)
       if (i < 2 || !lifted_.A.col(i).isZero(0.0)) keep.push_back(i);
     const auto nk = static_cast<Eigen::Index>(keep.size());
     A_fb_.resize(nk, nk);
@@ -84,25 +101,29 @@ DiscreteLoopModel::DiscreteLoopModel(const LinearPlant& plant, const controller:
   A_fb_.bottomRightCorner(nl, nl) = K_.Ac.topLeftCorner(nl, nl);
 }
 
-DiscreteLoopModel::Lifted DiscreteLoopModel::lift(const ControllerRealisation& K, const Eigen::Matrix2d& Phi,
-                                                   const Eigen::Vector2d& Gamma) {
-  const auto nc = K.Ac.rows(), N = 2 + nc;
-  // One tick of plant and controller, state [w, x, c].
+DiscreteLoopModel::Lifted DiscreteLoopModel::lift(const ControllerRealisation& K, const Eigen::MatrixXd& Phi,
+                                                   const Eigen::VectorXd& Gamma) {
+  const auto np = Phi.rows(), nc = K.Ac.rows(), N = np + nc;
+  // One step of plant and controller, state [plant, c]; the controller reads the
+  // plant's first two states [w, x].
   auto tick = [&](const Eigen::MatrixXd& Ac, const Eigen::MatrixXd& By, const Eigen::RowVectorXd& Cc,
                   const Eigen::RowVector2d& Dy) {
-    Eigen::MatrixXd T(N, N);
-    T.topLeftCorner(2, 2) = Phi + Gamma * Dy;
-    T.topRightCorner(2, nc) = Gamma * Cc;
+    Eigen::MatrixXd T = Eigen::MatrixXd::Zero(N, N);
+    T.topLeftCorner(np, np) = Phi;
+    T.topLeftCorner(np, 2) += Gamma * Dy;
+    T.topRightCorner(np, nc) = Gamma * Cc;
     T.bottomLeftCorner(nc, 2) = By;
     T.bottomRightCorner(nc, nc) = Ac;
     return T;
   };
-  // The position feedback is cut at the period's first tick only.
-  if (!K.inner.By.col(1).isZero(0.0) || K.inner.Dy(1) != 0.0)
-    throw InternalError("linear analysis: a law's inner ticks read the position");
-  const Eigen::MatrixXd inner = tick(K.inner.Ac, K.inner.By, K.inner.Cc, K.inner.Dy);
   Eigen::MatrixXd later = Eigen::MatrixXd::Identity(N, N);
-  for (int q = 1; q < K.inner_ticks; ++q) later = inner * later;
+  if (K.inner_ticks > 1) {
+    // The position feedback is cut at the period's first tick only.
+    if (!K.inner.By.col(1).isZero(0.0) || K.inner.Dy(1) != 0.0)
+      throw InternalError("linear analysis: a law's inner ticks read the position");
+    const Eigen::MatrixXd inner = tick(K.inner.Ac, K.inner.By, K.inner.Cc, K.inner.Dy);
+    for (int q = 1; q < K.inner_ticks; ++q) later = inner * later;
+  }
   Eigen::MatrixXd By_open = K.By;
   By_open.col(1).setZero();
   Eigen::RowVector2d Dy_open = K.Dy;
@@ -136,8 +157,10 @@ DiscreteLoopModel::Responses DiscreteLoopModel::responses(double f_Hz) const {
   // P = (zI - Phi)^-1 Gamma with the 2x2 adjugate.
   const cd a = z - Phi_(0, 0), b = -Phi_(0, 1), c = -Phi_(1, 0), d = z - Phi_(1, 1);
   const cd det = a * d - b * c;
-  const cd Pw = (d * Gamma_(0) - b * Gamma_(1)) / det;
-  const cd Px = (-c * Gamma_(0) + a * Gamma_(1)) / det;
+  // The command's dead time: d steps of Ts / inner_ticks.
+  const cd delay = std::polar(1.0, -2.0 * kPi * f_Hz * delay_ticks_ * Ts_s_ / K_.inner_ticks);
+  const cd Pw = delay * (d * Gamma_(0) - b * Gamma_(1)) / det;
+  const cd Px = delay * (-c * Gamma_(0) + a * Gamma_(1)) / det;
   if (K_.inner_ticks > 1) {
     // The lifted loop: X/R from the reference, L from a disturbance on the measured position.
     const auto N = lifted_.A.rows();
@@ -210,8 +233,9 @@ cd DiscreteLoopModel::velocity_loop_response(double f_Hz) const {
   const Eigen::RowVectorXcd K = I.Cc.cast<cd>() * Y + I.Dy.cast<cd>();
   const cd a = z - Phi_v_(0, 0), b = -Phi_v_(0, 1), c = -Phi_v_(1, 0), d = z - Phi_v_(1, 1);
   const cd det = a * d - b * c;
-  const cd Pw = (d * Gamma_v_(0) - b * Gamma_v_(1)) / det;
-  const cd Px = (-c * Gamma_v_(0) + a * Gamma_v_(1)) / det;
+  const cd delay = std::pow(z, -delay_ticks_);
+  const cd Pw = delay * (d * Gamma_v_(0) - b * Gamma_v_(1)) / det;
+  const cd Px = delay * (-c * Gamma_v_(0) + a * Gamma_v_(1)) / det;
   return -(K(0) * Pw + K(1) * Px);
 }
 
@@ -219,7 +243,7 @@ std::vector<double> DiscreteLoopModel::simulate(const std::vector<double>& x_ref
   Eigen::Vector2d p = Eigen::Vector2d::Zero();
   Eigen::VectorXd c = K_.start * (x_ref_mm.empty() ? 0.0 : x_ref_mm.front());
   std::vector<double> x(x_ref_mm.size());
-  if (K_.inner_ticks > 1) {
+  if (K_.inner_ticks > 1 || delay_ticks_ > 0) {
     Eigen::VectorXd s = Eigen::VectorXd::Zero(lifted_.A.rows());
     s.tail(c.size()) = c;
     for (std::size_t k = 0; k < x_ref_mm.size(); ++k) {
@@ -438,6 +462,9 @@ std::string format_analysis(const std::string& title, const DiscreteLoopModel& m
   std::string s = fmt::format("{}\n", title);
   s += fmt::format("  {} law, gains: {}\n", controller::loop_law_name(m.law().id()),
                    m.law().gains_text(m.gains(), true));
+  if (m.delay_ticks() > 0)
+    s += fmt::format("  a dead time of {} drive steps ({:g} s) on the command, in the loop\n", m.delay_ticks(),
+                     m.delay_ticks() * m.Ts_s() / m.inner_ticks());
   if (m.inner_ticks() > 1)
     s += fmt::format("  loop broken at the position feedback, the velocity loop closed (it runs {} times a period, "
                      "Tv {:g} s); poles of the whole loop over a period\n",

@@ -8,6 +8,9 @@
 /// (g = Ka Kt), the torque for the cascade (g = 1). Discretised exactly under the
 /// zero-order hold with the matrix exponential:
 ///   p[k+1] = Phi p[k] + Gamma m[k],  p = [w, x],  y[k] = p[k] (encoder and speed sensor as unity).
+/// A dead time on the command (the drive's `delay` effect, d whole drive steps) acts
+/// as m[k - d]: the plant gains the d commands in flight as states, and its response
+/// the factor z^-d.
 /// Controller: the law exactly as controller::PositionLoop computes it (backward
 /// differences, the integrator updated before it acts, the cascade's current loop as
 /// its first-order filter sampled at Ts), written by the law itself
@@ -79,8 +82,10 @@ class DiscreteLoopModel {
   const ControllerRealisation& controller() const noexcept { return K_; }
   /// The law's inner ticks per period (1: the command is held over Ts).
   int inner_ticks() const noexcept { return K_.inner_ticks; }
-  /// Closed-loop matrix with the reference held at 0, state [w, x, loop states of
-  /// the controller] (FADAL: I[k-1] when Ki > 0, e[k-1]; cascade: Iv[k-1] when Tn > 0,
+  /// The command's dead time in drive steps (Ts / inner_ticks()), as the drive rounds it.
+  int delay_ticks() const noexcept { return delay_ticks_; }
+  /// Closed-loop matrix with the reference held at 0, state [w, x, the commands in
+  /// flight where the drive has a dead time, loop states of the controller] (FADAL: I[k-1] when Ki > 0, e[k-1]; cascade: Iv[k-1] when Tn > 0,
   /// Tf[k-1] when tau_i > 0): s[k+1] = A_feedback s[k]; over a whole period where the
   /// law has inner ticks (the held velocity command, set anew at each period's first
   /// tick, left out).
@@ -118,14 +123,15 @@ class DiscreteLoopModel {
   struct Responses {
     std::complex<double> L, Px, X, X_fb;  ///< L, P_x, X/R and X/R with the feedforward off
   };
-  /// A law with inner ticks over one period Ts, state [w, x, c]: z[k+1] = A z[k] +
+  /// A law with inner ticks or a dead time, over one period Ts, state [w, x, the
+  /// commands in flight, c] (Phi, Gamma: the plant with them over one drive step): z[k+1] = A z[k] +
   /// Br x_ref[k] (closed), and with the position feedback of the first tick cut,
   /// z[k+1] = A_open z[k] + Bd d[k] for d fed where the measured position was.
   struct Lifted {
     Eigen::MatrixXd A, A_open;
     Eigen::VectorXd Br, Bd;
   };
-  static Lifted lift(const ControllerRealisation& K, const Eigen::Matrix2d& Phi, const Eigen::Vector2d& Gamma);
+  static Lifted lift(const ControllerRealisation& K, const Eigen::MatrixXd& Phi, const Eigen::VectorXd& Gamma);
   Responses responses(double f_Hz) const;
   LinearPlant plant_;
   controller::PositionLoopParams gains_;
@@ -135,7 +141,8 @@ class DiscreteLoopModel {
   Eigen::Vector2d Gamma_;
   ControllerRealisation K_, K_fb_;  ///< the law, and the law with its feedforward at 0
   bool same_states_{false};          ///< K_fb_.Ac == K_.Ac
-  Lifted lifted_, lifted_fb_;        ///< inner_ticks() > 1 only
+  Lifted lifted_, lifted_fb_;        ///< inner_ticks() > 1 or delay_ticks() > 0 only
+  int delay_ticks_{0};
   Eigen::Matrix2d Phi_v_;            ///< the plant over one inner tick (inner_ticks() > 1 only)
   Eigen::Vector2d Gamma_v_;
   Eigen::MatrixXd A_fb_;
