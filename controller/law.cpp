@@ -47,6 +47,13 @@ void LinearPlant::validate(const std::string& where) const {
   positive("rg", rg_mm_per_rad);
   if (!std::isfinite(B_kg_m2_per_s) || B_kg_m2_per_s < 0.0)
     throw ConfigError(fmt::format("{}: B = {} must be finite and >= 0 for the linear analysis", where, B_kg_m2_per_s));
+  if (load_fraction != 0.0) {
+    if (!(load_fraction > 0.0 && load_fraction < 1.0) || !std::isfinite(K_Nm_per_rad) || !(K_Nm_per_rad > 0.0) ||
+        !std::isfinite(C_Nm_s_per_rad) || C_Nm_s_per_rad < 0.0)
+      throw ConfigError(fmt::format("{}: a compliant coupling needs a load fraction in (0, 1), K > 0 and C >= 0 for the "
+                                    "linear analysis (got {}, {}, {})",
+                                    where, load_fraction, K_Nm_per_rad, C_Nm_s_per_rad));
+  }
   if (!std::isfinite(command_delay_s) || command_delay_s < 0.0)
     throw ConfigError(fmt::format("{}: the command's delay = {} s must be finite and >= 0 for the linear analysis",
                                   where, command_delay_s));

@@ -21,7 +21,7 @@ namespace twin::controller {
 
 /// The linearised drive a law's controller is analysed against: only the terms that
 /// survive linearisation (Ozcan 2017 Fig. 1: J dw/dt = Ka Kt u - B w, dx/dt = rg w),
-/// and a dead time on the command where the drive has one.
+/// and a dead time on the command and a compliant coupling where the drive has them.
 struct LinearPlant {
   double Ka_A_per_V{0.0};
   double Kt_Nm_per_A{0.0};
@@ -30,6 +30,12 @@ struct LinearPlant {
   double rg_mm_per_rad{0.0};
   /// A dead time on the command (the drive's `delay` effect), whole drive steps.
   double command_delay_s{0.0};
+  /// A compliant coupling (the drive's `compliance` effect): the share of J on the
+  /// load side behind a torsional spring and damper; 0: a rigid drive. The loop
+  /// measures the motor's side.
+  double load_fraction{0.0};
+  double K_Nm_per_rad{0.0};
+  double C_Nm_s_per_rad{0.0};
   /// Throws ConfigError naming `where` and the field when a value is not finite or not physical.
   void validate(const std::string& where) const;
 };

@@ -78,11 +78,13 @@ const Snapshot& CoSimulation::step() {
   // 1. Drives at t_k.
   std::array<double, 3> p_mm{};
   std::array<double, 3> v_mm_per_s{};
+  std::array<double, 3> v_motor_mm_per_s{};  // the speed the loop feeds back: the motor's
   for (std::size_t i = 0; i < axes_.size(); ++i) {
     const std::size_t a = index(axes_[i]);
     const feeddrive::DriveOutput out = drives_.output(i);
     p_mm[a] = out.x_mm;
     v_mm_per_s[a] = out.v_mm_per_s;
+    v_motor_mm_per_s[i] = motor_speed_mm_per_s(i, out);
     row.axes[a].x_true_mm = out.x_mm;
     row.axes[a].x_mm = encoder_.measure_mm(out.x_meas_mm);
     row.axes[a].v_mm_per_s = out.v_mm_per_s;
@@ -105,7 +107,7 @@ const Snapshot& CoSimulation::step() {
     const std::size_t a = index(axes_[i]);
     AxisSnapshot& s = row.axes[a];
     s.x_ref_mm = ref.x_mm[a];
-    lo[i] = loops_[i].step(k_, s.x_ref_mm, s.x_mm, s.v_mm_per_s);
+    lo[i] = loops_[i].step(k_, s.x_ref_mm, s.x_mm, v_motor_mm_per_s[i]);
     s.e_mm = lo[i].e_mm;
     s.vcmd_mm_per_s = lo[i].vcmd_mm_per_s;
     s.u_V = lo[i].u_V;
@@ -116,7 +118,7 @@ const Snapshot& CoSimulation::step() {
   }
   // The drives over the period in inner_ticks_ steps; a loop whose velocity
   // loop runs n times a period acts again every inner_ticks_ / n of them, on
-  // the drive's speed of that instant. The row's current and torque are those
+  // the motor's speed of that instant. The row's current and torque are those
   // the period starts with (a log samples them at the tick).
   const double t_end = t0_s_ + static_cast<double>(k_ + 1) * Ts;
   std::array<double, 3> i_first_A{}, Tm_first_Nm{};
@@ -124,7 +126,7 @@ const Snapshot& CoSimulation::step() {
     for (std::size_t i = 0; q > 0 && i < axes_.size(); ++i) {
       const int every = inner_ticks_ / loops_[i].inner_ticks();
       if (q % every != 0) continue;
-      loops_[i].inner_step(q / every, drives_.output(i).v_mm_per_s, lo[i]);
+      loops_[i].inner_step(q / every, motor_speed_mm_per_s(i, drives_.output(i)), lo[i]);
       inputs_[i].u_V = lo[i].u_V;
     }
     const double t_from = t + Ts * q / inner_ticks_;

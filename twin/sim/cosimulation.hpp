@@ -122,6 +122,11 @@ class CoSimulation {
                                     const std::array<double, 3>& v_mm_per_s);
   /// Step 6's health checks of axis i (runaway, command limit cycle).
   void check_axis(std::size_t i, const AxisSnapshot& s, const feeddrive::DriveOutput& out, double t_s);
+  /// The speed axis i's loop feeds back: the motor's (rg w), which behind a compliant
+  /// coupling is not the load's (DriveOutput::v_mm_per_s).
+  double motor_speed_mm_per_s(std::size_t i, const feeddrive::DriveOutput& out) const {
+    return drives_.params(i).rg_mm_per_rad * out.w_rad_per_s;
+  }
 
   MachineDefinition machine_;
   std::vector<Axis> axes_;

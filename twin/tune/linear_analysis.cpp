@@ -1,6 +1,7 @@
 #include "twin/tune/linear_analysis.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <tuple>
@@ -18,8 +19,14 @@ namespace twin::analysis {
 using cd = std::complex<double>;
 
 LinearPlant linear_plant(const feeddrive::DriveParams& d) {
-  return LinearPlant{d.Ka_A_per_V,    d.Kt_Nm_per_A, d.J_kg_m2, d.B_kg_m2_per_s, d.rg_mm_per_rad,
-                     d.effects.delay.enabled ? d.effects.delay.delay_s : 0.0};
+  LinearPlant p{d.Ka_A_per_V, d.Kt_Nm_per_A, d.J_kg_m2, d.B_kg_m2_per_s, d.rg_mm_per_rad};
+  if (d.effects.delay.enabled) p.command_delay_s = d.effects.delay.delay_s;
+  if (const auto& c = d.effects.compliance; c.enabled) {
+    p.load_fraction = c.load_fraction;
+    p.K_Nm_per_rad = c.K_Nm_per_rad;
+    p.C_Nm_s_per_rad = c.C_Nm_s_per_rad;
+  }
+  return p;
 }
 
 Eigen::MatrixXd matrix_exponential(const Eigen::MatrixXd& M) {
@@ -61,27 +68,47 @@ DiscreteLoopModel::DiscreteLoopModel(const LinearPlant& plant, const controller:
   // the command is whole steps of it, rounded as the drive rounds it.
   const double h = Ts_s_ / K_.inner_ticks;
   delay_ticks_ = static_cast<int>(std::llround(plant_.command_delay_s / h));
-  if (K_.inner_ticks > 1 || delay_ticks_ > 0) {
-    // The plant over one step with the commands in flight, the loop lifted over the
+  const bool compliant = plant_.load_fraction > 0.0;
+  if (K_.inner_ticks > 1 || delay_ticks_ > 0 || compliant) {
+    // The plant over one drive step: [w, x] of the motor, [w, x] of the load behind
+    // a compliant coupling, and the commands in flight; the loop lifted over the
     // period; its loop states are the plant's and the controller's, less those no
     // period reads (the velocity command held over the period, set anew at its first tick).
-    const Eigen::MatrixXd Ev = K_.inner_ticks > 1 ? matrix_exponential(M * h) : E;
-    Phi_v_ = Ev.topLeftCorner<2, 2>();
-    Gamma_v_ = Ev.topRightCorner<2, 1>();
-    const auto np = static_cast<Eigen::Index>(2 + delay_ticks_);
-    Eigen::MatrixXd Phi_a = Eigen::MatrixXd::Zero(np, np);
-    Eigen::VectorXd Gamma_a = Eigen::VectorXd::Zero(np);
-    Phi_a.topLeftCorner(2, 2) = Phi_v_;
-    if (delay_ticks_ == 0) {
-      Gamma_a.head(2) = Gamma_v_;
+    const Eigen::Index nphys = compliant ? 4 : 2;
+    Eigen::MatrixXd Mc = Eigen::MatrixXd::Zero(nphys + 1, nphys + 1);
+    if (compliant) {
+      const double Jl = plant_.J_kg_m2 * plant_.load_fraction, Jm = plant_.J_kg_m2 - Jl, rg = plant_.rg_mm_per_rad;
+      const double K = plant_.K_Nm_per_rad, C = plant_.C_Nm_s_per_rad;
+      // Jm dwm = g m - B wm - K (xm - xl)/rg - C (wm - wl);  Jl dwl = K (xm - xl)/rg + C (wm - wl)
+      Mc(0, 0) = -(plant_.B_kg_m2_per_s + C) / Jm;
+      Mc(0, 1) = -K / rg / Jm;
+      Mc(0, 2) = C / Jm;
+      Mc(0, 3) = K / rg / Jm;
+      Mc(0, 4) = g / Jm;
+      Mc(1, 0) = rg;
+      Mc(2, 0) = C / Jl;
+      Mc(2, 1) = K / rg / Jl;
+      Mc(2, 2) = -C / Jl;
+      Mc(2, 3) = -K / rg / Jl;
+      Mc(3, 2) = rg;
     } else {
-      // [w, x, m[k-1], ..., m[k-d]]: the oldest acts, each moves one place on.
-      Phi_a.block(0, np - 1, 2, 1) = Gamma_v_;
-      for (Eigen::Index i = 3; i < np; ++i) Phi_a(i, i - 1) = 1.0;
-      Gamma_a(2) = 1.0;
+      Mc = M;
     }
-    lifted_ = lift(K_, Phi_a, Gamma_a);
-    lifted_fb_ = lift(K_fb_, Phi_a, Gamma_a);
+    const Eigen::MatrixXd Ev = matrix_exponential(Mc * h);
+    const auto np = static_cast<Eigen::Index>(nphys + delay_ticks_);
+    Phi_a_ = Eigen::MatrixXd::Zero(np, np);
+    Gamma_a_ = Eigen::VectorXd::Zero(np);
+    Phi_a_.topLeftCorner(nphys, nphys) = Ev.topLeftCorner(nphys, nphys);
+    if (delay_ticks_ == 0) {
+      Gamma_a_.head(nphys) = Ev.topRightCorner(nphys, 1);
+    } else {
+      // [plant, m[k-1], ..., m[k-d]]: the oldest acts, each moves one place on.
+      Phi_a_.block(0, np - 1, nphys, 1) = Ev.topRightCorner(nphys, 1);
+      for (Eigen::Index i = nphys + 1; i < np; ++i) Phi_a_(i, i - 1) = 1.0;
+      Gamma_a_(nphys) = 1.0;
+    }
+    lifted_ = lift(K_, Phi_a_, Gamma_a_);
+    lifted_fb_ = lift(K_fb_, Phi_a_, Gamma_a_);
     std::vector<Eigen::Index> keep;
     for (Eigen::Index i = 0; i < np + nl; ++i)
       if (i < 2 || !lifted_.A.col(i).isZero(0.0)) keep.push_back(i);
@@ -157,10 +184,15 @@ DiscreteLoopModel::Responses DiscreteLoopModel::responses(double f_Hz) const {
   // P = (zI - Phi)^-1 Gamma with the 2x2 adjugate.
   const cd a = z - Phi_(0, 0), b = -Phi_(0, 1), c = -Phi_(1, 0), d = z - Phi_(1, 1);
   const cd det = a * d - b * c;
-  // The command's dead time: d steps of Ts / inner_ticks.
-  const cd delay = std::polar(1.0, -2.0 * kPi * f_Hz * delay_ticks_ * Ts_s_ / K_.inner_ticks);
-  const cd Pw = delay * (d * Gamma_(0) - b * Gamma_(1)) / det;
-  const cd Px = delay * (-c * Gamma_(0) + a * Gamma_(1)) / det;
+  cd Pw = (d * Gamma_(0) - b * Gamma_(1)) / det;
+  cd Px = (-c * Gamma_(0) + a * Gamma_(1)) / det;
+  if (Phi_a_.size() > 0) {
+    // The plant with its commands in flight and its load side, over one drive step
+    // (Ts at one tick a period).
+    const std::array<cd, 2> P = plant_step_response(f_Hz);
+    Pw = P[0];
+    Px = P[1];
+  }
   if (K_.inner_ticks > 1) {
     // The lifted loop: X/R from the reference, L from a disturbance on the measured position.
     const auto N = lifted_.A.rows();
@@ -231,19 +263,23 @@ cd DiscreteLoopModel::velocity_loop_response(double f_Hz) const {
   const Eigen::MatrixXcd Y =
       (z * Eigen::MatrixXcd::Identity(n, n) - I.Ac.cast<cd>()).partialPivLu().solve(I.By.cast<cd>().eval());
   const Eigen::RowVectorXcd K = I.Cc.cast<cd>() * Y + I.Dy.cast<cd>();
-  const cd a = z - Phi_v_(0, 0), b = -Phi_v_(0, 1), c = -Phi_v_(1, 0), d = z - Phi_v_(1, 1);
-  const cd det = a * d - b * c;
-  const cd delay = std::pow(z, -delay_ticks_);
-  const cd Pw = delay * (d * Gamma_v_(0) - b * Gamma_v_(1)) / det;
-  const cd Px = delay * (-c * Gamma_v_(0) + a * Gamma_v_(1)) / det;
-  return -(K(0) * Pw + K(1) * Px);
+  const std::array<cd, 2> P = plant_step_response(f_Hz);
+  return -(K(0) * P[0] + K(1) * P[1]);
+}
+
+std::array<cd, 2> DiscreteLoopModel::plant_step_response(double f_Hz) const {
+  const cd z = std::polar(1.0, 2.0 * kPi * f_Hz * Ts_s_ / K_.inner_ticks);
+  const auto n = Phi_a_.rows();
+  const Eigen::VectorXcd y =
+      (z * Eigen::MatrixXcd::Identity(n, n) - Phi_a_.cast<cd>()).partialPivLu().solve(Gamma_a_.cast<cd>().eval());
+  return {y(0), y(1)};
 }
 
 std::vector<double> DiscreteLoopModel::simulate(const std::vector<double>& x_ref_mm) const {
   Eigen::Vector2d p = Eigen::Vector2d::Zero();
   Eigen::VectorXd c = K_.start * (x_ref_mm.empty() ? 0.0 : x_ref_mm.front());
   std::vector<double> x(x_ref_mm.size());
-  if (K_.inner_ticks > 1 || delay_ticks_ > 0) {
+  if (Phi_a_.size() > 0) {
     Eigen::VectorXd s = Eigen::VectorXd::Zero(lifted_.A.rows());
     s.tail(c.size()) = c;
     for (std::size_t k = 0; k < x_ref_mm.size(); ++k) {

@@ -10,7 +10,10 @@
 ///   p[k+1] = Phi p[k] + Gamma m[k],  p = [w, x],  y[k] = p[k] (encoder and speed sensor as unity).
 /// A dead time on the command (the drive's `delay` effect, d whole drive steps) acts
 /// as m[k - d]: the plant gains the d commands in flight as states, and its response
-/// the factor z^-d.
+/// the factor z^-d. A compliant coupling (the `compliance` effect) splits J into the
+/// motor's and the load's behind a spring K and damper C:
+///   Jm dwm = g m - B wm - K (xm - xl)/rg - C (wm - wl),  Jl dwl = K (xm - xl)/rg + C (wm - wl);
+/// the loop measures the motor's side, and X/R and E/R are of that measured position.
 /// Controller: the law exactly as controller::PositionLoop computes it (backward
 /// differences, the integrator updated before it acts, the cascade's current loop as
 /// its first-order filter sampled at Ts), written by the law itself
@@ -33,6 +36,7 @@
 /// Frequencies are reported in Hz; margins follow the usual definitions:
 /// gain margin = 1/|L| at the phase crossovers below the unit circle (upward gain
 /// margin), phase margin = 180 deg + arg L at the gain crossovers (the smallest).
+#include <array>
 #include <complex>
 #include <string>
 #include <string_view>
@@ -84,8 +88,9 @@ class DiscreteLoopModel {
   int inner_ticks() const noexcept { return K_.inner_ticks; }
   /// The command's dead time in drive steps (Ts / inner_ticks()), as the drive rounds it.
   int delay_ticks() const noexcept { return delay_ticks_; }
-  /// Closed-loop matrix with the reference held at 0, state [w, x, the commands in
-  /// flight where the drive has a dead time, loop states of the controller] (FADAL: I[k-1] when Ki > 0, e[k-1]; cascade: Iv[k-1] when Tn > 0,
+  /// Closed-loop matrix with the reference held at 0, state [w, x (the motor's), the
+  /// load's w and x behind a compliant coupling, the commands in flight where the
+  /// drive has a dead time, loop states of the controller] (FADAL: I[k-1] when Ki > 0, e[k-1]; cascade: Iv[k-1] when Tn > 0,
   /// Tf[k-1] when tau_i > 0): s[k+1] = A_feedback s[k]; over a whole period where the
   /// law has inner ticks (the held velocity command, set anew at each period's first
   /// tick, left out).
@@ -143,8 +148,12 @@ class DiscreteLoopModel {
   bool same_states_{false};          ///< K_fb_.Ac == K_.Ac
   Lifted lifted_, lifted_fb_;        ///< inner_ticks() > 1 or delay_ticks() > 0 only
   int delay_ticks_{0};
-  Eigen::Matrix2d Phi_v_;            ///< the plant over one inner tick (inner_ticks() > 1 only)
-  Eigen::Vector2d Gamma_v_;
+  /// The plant over one drive step with its load side and the commands in flight
+  /// (empty for a rigid drive without a dead time at one tick a period).
+  Eigen::MatrixXd Phi_a_;
+  Eigen::VectorXd Gamma_a_;
+  /// [P_w, P_x] of that plant at f (the motor's side: what the loop measures).
+  std::array<std::complex<double>, 2> plant_step_response(double f_Hz) const;
   Eigen::MatrixXd A_fb_;
 };
 
