@@ -59,6 +59,13 @@ std::vector<double> cosim_x(const sim::MachineDefinition& machine, const std::ve
   return x;
 }
 
+/// The largest |a[k] - b[k]| (mm) over two responses of the same length.
+double largest_gap_mm(const std::vector<double>& a, const std::vector<double>& b) {
+  double g = 0.0;
+  for (std::size_t k = 0; k < a.size(); ++k) g = std::max(g, std::abs(a[k] - b[k]));
+  return g;
+}
+
 DiscreteLoopModel model_of(const sim::MachineDefinition& m, Axis a = Axis::kX) {
   return DiscreteLoopModel(linear_plant(m.axes[index(a)].drive), m.axes[index(a)].loop, m.Ts_s);
 }
@@ -262,11 +269,7 @@ TEST(CascadeLinear, AVelocityLoopFasterThanThePositionLoopMatchesTheCoSimulation
     sim::MachineDefinition once = m;
     once.axes[index(Axis::kX)].loop.cascade.Tv_s = 0.0;
     const std::vector<double> x_once = model_of(once).simulate(r);
-    double worst = 0.0, apart = 0.0;
-    for (std::size_t k = 0; k < r.size(); ++k) {
-      worst = std::max(worst, std::abs(x_model[k] - x_sim[k]));
-      apart = std::max(apart, std::abs(x_once[k] - x_sim[k]));
-    }
+    const double worst = largest_gap_mm(x_model, x_sim), apart = largest_gap_mm(x_once, x_sim);
     EXPECT_LT(worst, 1e-9) << "feedforward " << feedforward;
     EXPECT_GT(apart, 1e-3) << "feedforward " << feedforward;
   }
@@ -375,11 +378,7 @@ TEST(CascadeLinear, ACommandDelayMatchesTheCoSimulation) {
     sim::MachineDefinition without = m;
     without.axes[index(Axis::kX)].drive.effects.delay.enabled = false;
     const std::vector<double> x_without = model_of(without).simulate(r);
-    double worst = 0.0, apart = 0.0;
-    for (std::size_t k = 0; k < r.size(); ++k) {
-      worst = std::max(worst, std::abs(x_model[k] - x_sim[k]));
-      apart = std::max(apart, std::abs(x_without[k] - x_sim[k]));
-    }
+    const double worst = largest_gap_mm(x_model, x_sim), apart = largest_gap_mm(x_without, x_sim);
     EXPECT_LT(worst, 1e-9) << c.steps;
     EXPECT_GT(apart, 1e-3) << c.steps;
   }
@@ -469,11 +468,7 @@ TEST(CascadeLinear, ACompliantCouplingMatchesAnIndependentTwoMassLoop) {
     sim::MachineDefinition rigid = m;
     rigid.axes[index(Axis::kX)].drive.effects.compliance.enabled = false;
     const std::vector<double> x_rigid = model_of(rigid).simulate(r);
-    double worst = 0.0, apart = 0.0;
-    for (std::size_t k = 0; k < r.size(); ++k) {
-      worst = std::max(worst, std::abs(x_model[k] - x_ind[k]));
-      apart = std::max(apart, std::abs(x_rigid[k] - x_ind[k]));
-    }
+    const double worst = largest_gap_mm(x_model, x_ind), apart = largest_gap_mm(x_rigid, x_ind);
     EXPECT_LT(worst, 1e-9) << m.Ts_s;
     EXPECT_GT(apart, 5e-4) << m.Ts_s;
   }
@@ -491,9 +486,7 @@ TEST(CascadeLinear, TheCoSimulationFeedsTheMotorsSpeedBackBehindACoupling) {
     const std::vector<double> r = smooth_move(static_cast<std::size_t>(0.3 / m.Ts_s), m.Ts_s);
     const std::vector<double> x_sim = cosim_x(m, r, true);
     const std::vector<double> x_ind = two_mass_loop(m, r);
-    double worst = 0.0;
-    for (std::size_t k = 0; k < r.size(); ++k) worst = std::max(worst, std::abs(x_sim[k] - x_ind[k]));
-    EXPECT_LT(worst, 1e-5) << m.Ts_s;
+    EXPECT_LT(largest_gap_mm(x_sim, x_ind), 1e-5) << m.Ts_s;
   }
 }
 
