@@ -149,7 +149,7 @@ struct AxisFromData {
   controller::CascadeGains gains_at_lag;
   /// The velocity loop's ticks per position-loop period the law's integral
   /// shows (1: one, at the position loop's tick); gains.Tv_s is the loop's
-  /// period over it (choose_velocity_loop_period).
+  /// period over it (choose_inner_ticks).
   int law_inner_ticks{1};
   /// The law fitted with the command's acceleration as a column too: the
   /// loop feeds a torque forward (gains.Jff_torque_s2_per_rad).

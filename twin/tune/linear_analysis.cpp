@@ -94,7 +94,7 @@ DiscreteLoopModel::DiscreteLoopModel(const LinearPlant& plant, const controller:
     } else {
       Mc = M;
     }
-    const Eigen::MatrixXd Ev = matrix_exponential(Mc * h);
+    const Eigen::MatrixXd Ev = compliant || K_.inner_ticks > 1 ? matrix_exponential(Mc * h) : E;  // E: over Ts
     const auto np = static_cast<Eigen::Index>(nphys + delay_ticks_);
     Phi_a_ = Eigen::MatrixXd::Zero(np, np);
     Gamma_a_ = Eigen::VectorXd::Zero(np);
@@ -181,17 +181,18 @@ bool DiscreteLoopModel::stable() const {
 
 DiscreteLoopModel::Responses DiscreteLoopModel::responses(double f_Hz) const {
   const cd z = std::polar(1.0, 2.0 * kPi * f_Hz * Ts_s_);
-  // P = (zI - Phi)^-1 Gamma with the 2x2 adjugate.
-  const cd a = z - Phi_(0, 0), b = -Phi_(0, 1), c = -Phi_(1, 0), d = z - Phi_(1, 1);
-  const cd det = a * d - b * c;
-  cd Pw = (d * Gamma_(0) - b * Gamma_(1)) / det;
-  cd Px = (-c * Gamma_(0) + a * Gamma_(1)) / det;
+  // P = (zI - Phi)^-1 Gamma: with the 2x2 adjugate for the rigid plant held over Ts,
+  // else the plant with its load side and commands in flight over one drive step.
+  cd Pw, Px;
   if (Phi_a_.size() > 0) {
-    // The plant with its commands in flight and its load side, over one drive step
-    // (Ts at one tick a period).
     const std::array<cd, 2> P = plant_step_response(f_Hz);
     Pw = P[0];
     Px = P[1];
+  } else {
+    const cd a = z - Phi_(0, 0), b = -Phi_(0, 1), c = -Phi_(1, 0), d = z - Phi_(1, 1);
+    const cd det = a * d - b * c;
+    Pw = (d * Gamma_(0) - b * Gamma_(1)) / det;
+    Px = (-c * Gamma_(0) + a * Gamma_(1)) / det;
   }
   if (K_.inner_ticks > 1) {
     // The lifted loop: X/R from the reference, L from a disturbance on the measured position.

@@ -8,6 +8,7 @@
 #include <complex>
 #include <filesystem>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -346,6 +347,21 @@ TEST(CascadeLinear, AFastVelocityLoopsOwnGainMarginIsItsCriticalGain) {
   EXPECT_FALSE(analyse_loop(model_of(fast_velocity_loop_machine(1))).velocity_loop);
 }
 
+/// The smooth move (0.3 s) with Jff 0.8 J on X: the largest gap (mm) of the analysis of `m`
+/// to `truth(m, r)`, and of the analysis of `m` less its effect under test (`drop`
+/// switches it off) to the same.
+template <class Truth, class Drop>
+std::pair<double, double> smooth_move_gaps_mm(sim::MachineDefinition m, Truth&& truth, Drop&& drop) {
+  m.axes[index(Axis::kX)].loop.cascade.Jff_torque_s2_per_rad = 0.8 * m.axes[index(Axis::kX)].drive.J_kg_m2;
+  const DiscreteLoopModel model = model_of(m);
+  EXPECT_TRUE(model.stable());
+  const std::vector<double> r = smooth_move(static_cast<std::size_t>(0.3 / m.Ts_s), m.Ts_s);
+  const std::vector<double> x_truth = truth(m, r);
+  sim::MachineDefinition without = m;
+  drop(without);
+  return {largest_gap_mm(model.simulate(r), x_truth), largest_gap_mm(model_of(without).simulate(r), x_truth)};
+}
+
 /// The machine with a dead time of `delay_s` on axis X's command (the drive's delay effect).
 sim::MachineDefinition with_command_delay(sim::MachineDefinition m, double delay_s) {
   auto& d = m.axes[index(Axis::kX)].drive.effects.delay;
@@ -367,18 +383,11 @@ TEST(CascadeLinear, ACommandDelayMatchesTheCoSimulation) {
     int steps;
   };
   for (const Case& c : {Case{linear_cascade_machine(), 3e-4, 3}, Case{fast_velocity_loop_machine(8), 1e-3, 8}}) {
-    sim::MachineDefinition m = with_command_delay(c.m, c.delay_s);
-    m.axes[index(Axis::kX)].loop.cascade.Jff_torque_s2_per_rad = 0.8 * m.axes[index(Axis::kX)].drive.J_kg_m2;
-    const DiscreteLoopModel model = model_of(m);
-    ASSERT_EQ(model.delay_ticks(), c.steps);
-    ASSERT_TRUE(model.stable());
-    const std::vector<double> r = smooth_move(static_cast<std::size_t>(0.3 / m.Ts_s), m.Ts_s);
-    const std::vector<double> x_model = model.simulate(r);
-    const std::vector<double> x_sim = cosim_x(m, r);
-    sim::MachineDefinition without = m;
-    without.axes[index(Axis::kX)].drive.effects.delay.enabled = false;
-    const std::vector<double> x_without = model_of(without).simulate(r);
-    const double worst = largest_gap_mm(x_model, x_sim), apart = largest_gap_mm(x_without, x_sim);
+    const sim::MachineDefinition m = with_command_delay(c.m, c.delay_s);
+    ASSERT_EQ(model_of(m).delay_ticks(), c.steps);
+    const auto [worst, apart] = smooth_move_gaps_mm(
+        m, [](const sim::MachineDefinition& mm, const std::vector<double>& r) { return cosim_x(mm, r); },
+        [](sim::MachineDefinition& mm) { mm.axes[index(Axis::kX)].drive.effects.delay.enabled = false; });
     EXPECT_LT(worst, 1e-9) << c.steps;
     EXPECT_GT(apart, 1e-3) << c.steps;
   }
@@ -458,17 +467,10 @@ std::vector<double> two_mass_loop(const sim::MachineDefinition& m, const std::ve
 // mm; its stability edge is checked below.)
 TEST(CascadeLinear, ACompliantCouplingMatchesAnIndependentTwoMassLoop) {
   for (const sim::MachineDefinition& base : {linear_cascade_machine(), fast_velocity_loop_machine(8)}) {
-    sim::MachineDefinition m = with_compliance(base);
-    m.axes[index(Axis::kX)].loop.cascade.Jff_torque_s2_per_rad = 0.8 * m.axes[index(Axis::kX)].drive.J_kg_m2;
-    const DiscreteLoopModel model = model_of(m);
-    ASSERT_TRUE(model.stable());
-    const std::vector<double> r = smooth_move(static_cast<std::size_t>(0.3 / m.Ts_s), m.Ts_s);
-    const std::vector<double> x_model = model.simulate(r);
-    const std::vector<double> x_ind = two_mass_loop(m, r);
-    sim::MachineDefinition rigid = m;
-    rigid.axes[index(Axis::kX)].drive.effects.compliance.enabled = false;
-    const std::vector<double> x_rigid = model_of(rigid).simulate(r);
-    const double worst = largest_gap_mm(x_model, x_ind), apart = largest_gap_mm(x_rigid, x_ind);
+    const sim::MachineDefinition m = with_compliance(base);
+    const auto [worst, apart] = smooth_move_gaps_mm(
+        m, two_mass_loop,
+        [](sim::MachineDefinition& mm) { mm.axes[index(Axis::kX)].drive.effects.compliance.enabled = false; });
     EXPECT_LT(worst, 1e-9) << m.Ts_s;
     EXPECT_GT(apart, 5e-4) << m.Ts_s;
   }
