@@ -77,7 +77,8 @@ void put_snapshot(Writer& w, const sim::Snapshot& s) {
   w.put(s.k);
   w.put(s.t_s);
   for (const auto& a : s.axes) {
-    for (double d : {a.x_ref_mm, a.x_mm, a.x_true_mm, a.e_mm, a.u_V, a.i_A, a.Tm_Nm, a.Tcmd_Nm, a.Td_Nm, a.v_mm_per_s})
+    for (double d : {a.x_ref_mm, a.x_mm, a.x_true_mm, a.e_mm, a.u_V, a.i_A, a.Tm_Nm, a.Tcmd_Nm, a.Td_Nm, a.v_mm_per_s,
+                     a.vcmd_mm_per_s, a.i_mean_A, a.Tm_mean_Nm, a.Tcmd_mean_Nm})
       w.put(d);
     w.put<std::uint8_t>(a.saturated ? 1 : 0);
   }
@@ -96,7 +97,7 @@ sim::Snapshot get_snapshot(Reader& r) {
   s.t_s = r.get<double>();
   for (auto& a : s.axes) {
     for (double* d : {&a.x_ref_mm, &a.x_mm, &a.x_true_mm, &a.e_mm, &a.u_V, &a.i_A, &a.Tm_Nm, &a.Tcmd_Nm, &a.Td_Nm,
-                      &a.v_mm_per_s})
+                      &a.v_mm_per_s, &a.vcmd_mm_per_s, &a.i_mean_A, &a.Tm_mean_Nm, &a.Tcmd_mean_Nm})
       *d = r.get<double>();
     a.saturated = r.get<std::uint8_t>() != 0;
   }
@@ -155,6 +156,9 @@ std::vector<char> serialize_state(const SavedState& s) {
     w.put<std::uint64_t>(c.clamp_watch.size());
     for (const auto& cw : c.clamp_watch)
       for (int v : {cw.ticks_in_block, cw.saturated_ticks, cw.flips, cw.bad_blocks}) w.put<std::int32_t>(v);
+    w.put<std::uint64_t>(c.period_mean.size());
+    for (const auto& pm : c.period_mean)
+      for (double v : {pm.i_A, pm.Tm_Nm, pm.Tcmd_Nm}) w.put(v);
   }
   return w.take();
 }
@@ -207,6 +211,11 @@ SavedState deserialize_state(const char* data, std::size_t size) {
     c.clamp_watch.resize(nw);
     for (auto& cw : c.clamp_watch)
       for (int* v : {&cw.ticks_in_block, &cw.saturated_ticks, &cw.flips, &cw.bad_blocks}) *v = r.get<std::int32_t>();
+    const auto nm = r.get<std::uint64_t>();
+    if (nm > kNumAxes) throw ConfigError(fmt::format("{} period means", nm));
+    c.period_mean.resize(nm);
+    for (auto& pm : c.period_mean)
+      for (double* v : {&pm.i_A, &pm.Tm_Nm, &pm.Tcmd_Nm}) *v = r.get<double>();
   }
   if (!r.at_end()) throw ConfigError("trailing bytes after the state");
   return s;

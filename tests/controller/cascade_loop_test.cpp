@@ -6,7 +6,9 @@
 // Friction off and an ideal encoder make the loop linear, so the only
 // difference is the integrator's error over one tick: 1e-9 mm bounds it
 // (the drive's fixed-step ERK is ~1e-12 mm from the exact solution on the
-// FADAL loop, docs/feeddrive.md).
+// FADAL loop, docs/feeddrive.md). The same holds for the torque's mean over
+// a period's velocity-loop ticks (AxisSnapshot::Tm_mean_Nm), summed tick by
+// tick in the exact response.
 #include <cmath>
 #include <filesystem>
 #include <memory>
@@ -53,6 +55,9 @@ std::vector<double> reference(double Ts_s, std::size_t n) {
 struct Exact {
   std::vector<double> x_mm, torque;
   std::vector<double> command;  ///< the velocity loop's torque, before the current loop's lag
+  /// torque and command as their means over the velocity loop's ticks of
+  /// each period, summed here tick by tick (the period from tick k to k+1)
+  std::vector<double> torque_mean, command_mean;
 };
 
 Exact exact_response(const sim::MachineDefinition& m, const std::vector<double>& r) {
@@ -77,6 +82,7 @@ Exact exact_response(const sim::MachineDefinition& m, const std::vector<double>&
     const double a_ref = (v_ref - v_prev) / Ts;
     const double vcmd = g.Kv_per_s * e + g.kff * v_ref;
     out.x_mm.push_back(x);
+    double T_sum = 0.0, cmd_sum = 0.0;
     for (int q = 0; q < n; ++q) {
       const double ev = (vcmd - rg * w) / rg;
       Iv += Tv * ev;
@@ -87,10 +93,14 @@ Exact exact_response(const sim::MachineDefinition& m, const std::vector<double>&
         out.torque.push_back(Tf);
         out.command.push_back(T);
       }
+      T_sum += Tf;
+      cmd_sum += T;
       const Eigen::Vector3d s = E * Eigen::Vector3d(w, x, Tf);
       w = s(0);
       x = s(1);
     }
+    out.torque_mean.push_back(T_sum / n);
+    out.command_mean.push_back(cmd_sum / n);
     r_prev = rk;
     v_prev = v_ref;
   }
@@ -105,14 +115,25 @@ void expect_matches_exact(const controller::CascadeGains& g, double Ts_s) {
   AxisArray<std::vector<double>> ref;
   ref[index(Axis::kX)] = r;
   sim::CoSimulation cs(m, std::make_shared<sim::SampledReference>(ref, Ts_s), nullptr, {0, 0, 0});
-  double worst = 0.0, e_max = 0.0;
+  double worst = 0.0, e_max = 0.0, mean_apart = 0.0, T_peak = 0.0;
   for (std::size_t k = 0; k < n; ++k) {
     const sim::Snapshot& s = cs.step();
     worst = std::max(worst, std::abs(s.axes[0].x_true_mm - ex.x_mm[k]));
     e_max = std::max(e_max, std::abs(r[k] - ex.x_mm[k]));
     ASSERT_NEAR(s.axes[0].Tm_Nm, ex.torque[k], 1e-9 * (1.0 + std::abs(ex.torque[k]))) << "tick " << k;
     ASSERT_NEAR(s.axes[0].Tcmd_Nm, ex.command[k], 1e-9 * (1.0 + std::abs(ex.command[k]))) << "tick " << k;
+    // The means a drive that averages its trace logs at row k: over the
+    // period before it (at row 0, the row's own).
+    const double T_mean = k > 0 ? ex.torque_mean[k - 1] : ex.torque[0];
+    const double cmd_mean = k > 0 ? ex.command_mean[k - 1] : ex.command[0];
+    ASSERT_NEAR(s.axes[0].Tm_mean_Nm, T_mean, 1e-9 * (1.0 + std::abs(T_mean))) << "tick " << k;
+    ASSERT_NEAR(s.axes[0].Tcmd_mean_Nm, cmd_mean, 1e-9 * (1.0 + std::abs(cmd_mean))) << "tick " << k;
+    mean_apart = std::max(mean_apart, std::abs(s.axes[0].Tm_mean_Nm - s.axes[0].Tm_Nm));
+    T_peak = std::max(T_peak, std::abs(s.axes[0].Tm_Nm));
   }
+  // With one tick a period the mean is the period before's torque; with
+  // several, their mean: either way not the row's own on this move.
+  EXPECT_GT(mean_apart, 1e-3 * T_peak) << "the period's mean must differ from the row's torque";
   EXPECT_LT(worst, 1e-9) << "largest difference from the exact discrete response, mm";
   EXPECT_GT(e_max, 1e-4) << "the move must load the loop, or the comparison shows nothing";
 }
@@ -216,6 +237,13 @@ TEST(CascadeLoop, MachineFileChoosesTheLawAndRefusesTheOtherLawsGains) {
   EXPECT_DOUBLE_EQ(s.axes[0].logged_torque_filter_s, 0.002);
   EXPECT_NO_THROW(s.validate());
   sim::apply_set(s, "x.torque_log_filter=-0.001");
+  EXPECT_THROW(s.validate(), ConfigError);
+  sim::apply_set(s, "x.torque_log_filter=0");
+  EXPECT_NE(yaml.find("torque_log_mean: 0"), std::string::npos);
+  EXPECT_NO_THROW(sim::apply_set(s, "x.torque_log_mean=1"));
+  EXPECT_DOUBLE_EQ(s.axes[0].logged_torque_period_mean, 1.0);
+  EXPECT_NO_THROW(s.validate());
+  sim::apply_set(s, "x.torque_log_mean=0.5");
   EXPECT_THROW(s.validate(), ConfigError);
   io::write_file_atomic(dir / "bad.yaml", yaml + "    Kd: 0.1\n");
   EXPECT_THROW(io::load_machine(dir / "bad.yaml"), ConfigError);

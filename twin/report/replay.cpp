@@ -302,6 +302,7 @@ void realign_late_channels(MeasuredRun& run) {
                                        : &run.trace.columns[static_cast<std::size_t>(it - run.trace.names.begin())];
   };
   const auto say = [&](const std::string& col, std::size_t rows, double lag, const char* behind, const char* why) {
+    run.rows_read_earlier[col] = rows;
     run.notes.push_back(fmt::format("{}: {} is logged {} row{} after the motion it belongs to: it lags {} by {:.2f} "
                                     "rows{}; read {} row{} earlier, the logger's timing, not the machine's",
                                     run.trace.source, col, rows, rows == 1 ? "" : "s", behind, lag, why, rows,
@@ -602,13 +603,17 @@ using TickSums = AxisArray<std::array<std::vector<double>, 3>>;
 
 // The current and torque a log holds of an axis at a tick: the motor's, or
 // the loop's command before the current loop where the machine says the log
-// holds that (AxisDefinition::torque_command_logged).
+// holds that (AxisDefinition::torque_command_logged); the tick's own, or
+// their mean over the period before it where the machine says the log
+// averages (AxisDefinition::logged_torque_period_mean).
 struct LoggedTorque {
   double i_A{0.0}, T{0.0};
 };
 LoggedTorque logged_torque(const sim::AxisDefinition& def, const sim::AxisSnapshot& x) {
-  if (def.torque_command_logged == 0.0) return {x.i_A, x.Tm_Nm};
-  return {x.Tcmd_Nm / def.drive.Kt_Nm_per_A, x.Tcmd_Nm};
+  const bool mean = def.logged_torque_period_mean != 0.0;
+  if (def.torque_command_logged == 0.0) return mean ? LoggedTorque{x.i_mean_A, x.Tm_mean_Nm} : LoggedTorque{x.i_A, x.Tm_Nm};
+  const double Tcmd = mean ? x.Tcmd_mean_Nm : x.Tcmd_Nm;
+  return {Tcmd / def.drive.Kt_Nm_per_A, Tcmd};
 }
 
 // The logged torque through the monitor's first-order low-pass where the

@@ -3,6 +3,7 @@
 /// the run's `<a>_ref_mm` columns at the controller period and the twin's
 /// trace is written with the same column names.
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -32,6 +33,9 @@ struct MeasuredRun {
   /// logger paused): each starts a part replayed from its own start.
   std::vector<std::size_t> time_breaks;
   std::vector<std::string> notes;  ///< what load_run left out of the trace, and why
+  /// Channels load_run read whole rows earlier, logged after the motion
+  /// they belong to (the logger's timing), and by how many rows.
+  std::map<std::string, std::size_t> rows_read_earlier;
 };
 
 /// Reads RUN/meta.json and RUN/trace.csv(.gz); checks the columns and time.

@@ -1,5 +1,6 @@
 #include "twin/sim/cosimulation.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numeric>
 
@@ -57,6 +58,7 @@ CoSimulation::CoSimulation(MachineDefinition machine, std::shared_ptr<const Refe
   drives_.reset(x0);
   inputs_.assign(axes_.size(), feeddrive::DriveInput{});
   clamp_watch_.assign(axes_.size(), ClampWatch{});
+  period_mean_.assign(axes_.size(), PeriodMean{});
 }
 
 CoSimulation::~CoSimulation() = default;
@@ -120,8 +122,11 @@ const Snapshot& CoSimulation::step() {
   // loop runs n times a period acts again every inner_ticks_ / n of them, on
   // the motor's speed of that instant. The row's current and torque are those
   // the period starts with (a log samples them at the tick).
+  // The period's means (AxisSnapshot::i_mean_A) are over the same ticks,
+  // each weighing Ts / inner_ticks_.
   const double t_end = t0_s_ + static_cast<double>(k_ + 1) * Ts;
   std::array<double, 3> i_first_A{}, Tm_first_Nm{};
+  std::array<PeriodMean, 3> sum{};  // per axis of axes_ (at most three): no allocation a tick
   for (int q = 0; q < inner_ticks_; ++q) {
     for (std::size_t i = 0; q > 0 && i < axes_.size(); ++i) {
       const int every = inner_ticks_ / loops_[i].inner_ticks();
@@ -131,9 +136,12 @@ const Snapshot& CoSimulation::step() {
     }
     const double t_from = t + Ts * q / inner_ticks_;
     drives_.advance(t_from, q + 1 == inner_ticks_ ? t_end : t + Ts * (q + 1) / inner_ticks_, inputs_);
-    if (q > 0) continue;
     for (std::size_t i = 0; i < axes_.size(); ++i) {
       const feeddrive::DriveOutput out = drives_.output(i);
+      sum[i].i_A += out.i_A;
+      sum[i].Tm_Nm += out.Tm_Nm;
+      sum[i].Tcmd_Nm += lo[i].torque_demand;
+      if (q > 0) continue;
       i_first_A[i] = out.i_A;
       Tm_first_Nm[i] = out.Tm_Nm;
     }
@@ -148,10 +156,17 @@ const Snapshot& CoSimulation::step() {
     const feeddrive::DriveOutput out = drives_.output(i);
     s.i_A = i_first_A[i];
     s.Tm_Nm = Tm_first_Nm[i];
+    const PeriodMean before = period_mean_valid_ ? period_mean_[i] : PeriodMean{s.i_A, s.Tm_Nm, s.Tcmd_Nm};
+    s.i_mean_A = before.i_A;
+    s.Tm_mean_Nm = before.Tm_Nm;
+    s.Tcmd_mean_Nm = before.Tcmd_Nm;
     check_axis(i, s, out, t);
     v_real2 += s.v_mm_per_s * s.v_mm_per_s;
     dev[a] = s.x_true_mm - s.x_ref_mm;
   }
+  period_mean_valid_ = true;
+  for (std::size_t i = 0; i < axes_.size(); ++i)
+    period_mean_[i] = PeriodMean{sum[i].i_A / inner_ticks_, sum[i].Tm_Nm / inner_ticks_, sum[i].Tcmd_Nm / inner_ticks_};
   row.feed_real_mm_per_min = std::sqrt(v_real2) * kSPerMin;
   // Contour error: the part of the deviation normal to the reference direction.
   const double vr = ref.path_speed_mm_per_s;
@@ -252,6 +267,7 @@ CoSimState CoSimulation::get_state() const {
   if (process_) s.process = std::shared_ptr<const process::ProcessModel>(process_->clone());
   s.last = last_;
   s.clamp_watch = clamp_watch_;
+  if (period_mean_valid_) s.period_mean = period_mean_;
   return s;
 }
 
@@ -263,6 +279,8 @@ void CoSimulation::set_state(const CoSimState& s) {
   if (s.process) process_ = s.process->clone();
   last_ = s.last;
   clamp_watch_ = s.clamp_watch.size() == axes_.size() ? s.clamp_watch : std::vector<ClampWatch>(axes_.size());
+  period_mean_valid_ = s.period_mean.size() == axes_.size();
+  if (period_mean_valid_) std::copy(s.period_mean.begin(), s.period_mean.end(), period_mean_.begin());
 }
 
 void start_in_steady_motion(CoSimulation& cosim, const AxisArray<std::optional<ReferenceAtStart>>& reference,
@@ -305,6 +323,7 @@ void start_in_steady_motion(CoSimulation& cosim, const AxisArray<std::optional<R
   }
   st.k = k0;
   st.last.k = k0 - 1;
+  st.period_mean.clear();  // the first row gives its own tick's
   cosim.set_state(st);
 }
 

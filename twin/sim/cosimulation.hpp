@@ -35,6 +35,11 @@ struct AxisSnapshot {
   double Td_Nm{0.0};         ///< cutting load torque held over the tick
   double v_mm_per_s{0.0};    ///< true axis speed
   double vcmd_mm_per_s{0.0}; ///< cascade law: the position loop's velocity command (0 for the FADAL law)
+  /// i_A, Tm_Nm and Tcmd_Nm as their means over the position-loop period
+  /// that ends at t_k, over its inner (velocity-loop) ticks: what a drive
+  /// that logs a period's mean gives at this row. At k = 0 (no period
+  /// before it), the row's own.
+  double i_mean_A{0.0}, Tm_mean_Nm{0.0}, Tcmd_mean_Nm{0.0};
   bool saturated{false};
 };
 struct Snapshot {
@@ -69,6 +74,12 @@ struct ClampWatch {
   int bad_blocks{0};
 };
 
+/// An axis's current, torque and commanded torque, each its mean over a
+/// position-loop period's inner ticks (AxisSnapshot::i_mean_A).
+struct PeriodMean {
+  double i_A{0.0}, Tm_Nm{0.0}, Tcmd_Nm{0.0};
+};
+
 /// The whole mutable state, for FMU get/set state and retries.
 struct CoSimState {
   std::int64_t k{0};
@@ -77,6 +88,7 @@ struct CoSimState {
   std::shared_ptr<const process::ProcessModel> process;
   Snapshot last;
   std::vector<ClampWatch> clamp_watch;
+  std::vector<PeriodMean> period_mean;  ///< per axis, the period before tick k (empty: none stepped)
 };
 
 class CoSimulation {
@@ -144,6 +156,10 @@ class CoSimulation {
   std::array<double, 3> F_ext_N_{};
   std::optional<double> spindle_override_rpm_;
   Snapshot last_;
+  /// Per axis of axes_: the means over the period just stepped, given
+  /// with the next row (not valid before the first step).
+  std::vector<PeriodMean> period_mean_;
+  bool period_mean_valid_{false};
   std::vector<ClampWatch> clamp_watch_;
 };
 

@@ -56,6 +56,10 @@ std::vector<AxisParamSpec> make_axis_specs() {
                      "cascade: first-order lag of the log's torque or current behind the torque it shows, outside "
                      "the loop (a drive's smoothed monitor); 0: none",
                      a.logged_torque_filter_s, controller::LoopLaw::kCascade),
+      TWIN_LAW_PARAM("torque_log_mean", "1",
+                     "cascade: 1 where the log's torque or current at a row is its mean over the position-loop "
+                     "period before the row (over the velocity loop's ticks in it); 0: the value at the row's tick",
+                     a.logged_torque_period_mean, controller::LoopLaw::kCascade),
       TWIN_AXIS_PARAM("v_max", "mm/s", "interpolator speed limit", a.v_max_mm_per_s),
       TWIN_AXIS_PARAM("a_max", "mm/s^2", "interpolator acceleration limit", a.a_max_mm_per_s2),
       TWIN_AXIS_PARAM("j_max", "mm/s^3", "interpolator jerk limit", a.j_max_mm_per_s3),
@@ -158,6 +162,9 @@ void MachineDefinition::validate() const {
       throw ConfigError(fmt::format("{}: torque_sign = {} must be 1 or -1", w, ax.logged_torque_sign));
     if (ax.torque_command_logged != 0.0 && ax.torque_command_logged != 1.0)
       throw ConfigError(fmt::format("{}: torque_command_logged = {} must be 0 or 1", w, ax.torque_command_logged));
+    if (ax.logged_torque_period_mean != 0.0 && ax.logged_torque_period_mean != 1.0)
+      throw ConfigError(
+          fmt::format("{}: torque_log_mean = {} must be 0 or 1", w, ax.logged_torque_period_mean));
     if (!std::isfinite(ax.logged_torque_filter_s) || ax.logged_torque_filter_s < 0.0)
       throw ConfigError(
           fmt::format("{}: torque_log_filter = {} s must be a finite number >= 0", w, ax.logged_torque_filter_s));

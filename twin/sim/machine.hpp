@@ -47,6 +47,12 @@ struct AxisDefinition {
   /// does not see (a drive's smoothed torque monitor): the replays of
   /// measured runs give that channel so; the simulation does not use it.
   double logged_torque_filter_s{0.0};
+  /// Cascade: 1 where a measured run logs, at each row, the mean of the
+  /// torque (or current) over the position-loop period before it, over the
+  /// velocity loop's ticks in it (a drive that averages what it traces);
+  /// 0 where it logs the value at the row's tick. The replays of measured
+  /// runs give that channel so; the simulation does not use it.
+  double logged_torque_period_mean{0.0};
 };
 
 /// The machine's structure (`structure:` in a machine file): masses, stacking,
