@@ -151,6 +151,13 @@ struct AxisFromData {
   /// shows (1: one, at the position loop's tick); gains.Tv_s is the loop's
   /// period over it (choose_inner_ticks).
   int law_inner_ticks{1};
+  /// With law_inner_ticks > 1: the logged torque at a row is the mean of the
+  /// law's torques over the velocity loop's ticks of the period before it
+  /// (a drive that averages what it traces), which fits the law better
+  /// than the row's own tick (choose_inner_ticks); the machine replays the
+  /// channel so (AxisDefinition::logged_torque_period_mean).
+  bool law_period_mean{false};
+  bool logs_period_mean() const { return law_period_mean && law_inner_ticks > 1; }
   /// The law fitted with the command's acceleration as a column too: the
   /// loop feeds a torque forward (gains.Jff_torque_s2_per_rad).
   bool torque_feedforward{false};

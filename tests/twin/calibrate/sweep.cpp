@@ -301,7 +301,12 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
       });
       int inner = 1;
       for (const ta::AxisFromData& a : r.axis) inner = std::max(inner, a.law_inner_ticks);
-      const std::string inner_text = inner > 1 ? " (velocity loop at Ts/" + std::to_string(inner) + ")" : "";
+      const bool mean = std::any_of(r.axis.begin(), r.axis.end(), [](const ta::AxisFromData& a) {
+        return a.logs_period_mean();
+      });
+      const std::string inner_text = inner > 1 ? " (velocity loop at Ts/" + std::to_string(inner) +
+                                                     (mean ? ", torque logged as the period's mean" : "") + ")"
+                                               : "";
       wrong += !ok;
       track += bad_track;
       torque += bad_torque;
