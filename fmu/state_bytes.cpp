@@ -78,7 +78,7 @@ void put_snapshot(Writer& w, const sim::Snapshot& s) {
   w.put(s.t_s);
   for (const auto& a : s.axes) {
     for (double d : {a.x_ref_mm, a.x_mm, a.x_true_mm, a.e_mm, a.u_V, a.i_A, a.Tm_Nm, a.Tcmd_Nm, a.Td_Nm, a.v_mm_per_s,
-                     a.vcmd_mm_per_s, a.i_mean_A, a.Tm_mean_Nm, a.Tcmd_mean_Nm})
+                     a.vcmd_mm_per_s, a.period_mean.i_A, a.period_mean.Tm_Nm, a.period_mean.Tcmd_Nm})
       w.put(d);
     w.put<std::uint8_t>(a.saturated ? 1 : 0);
   }
@@ -97,7 +97,8 @@ sim::Snapshot get_snapshot(Reader& r) {
   s.t_s = r.get<double>();
   for (auto& a : s.axes) {
     for (double* d : {&a.x_ref_mm, &a.x_mm, &a.x_true_mm, &a.e_mm, &a.u_V, &a.i_A, &a.Tm_Nm, &a.Tcmd_Nm, &a.Td_Nm,
-                      &a.v_mm_per_s, &a.vcmd_mm_per_s, &a.i_mean_A, &a.Tm_mean_Nm, &a.Tcmd_mean_Nm})
+                      &a.v_mm_per_s, &a.vcmd_mm_per_s, &a.period_mean.i_A, &a.period_mean.Tm_Nm,
+                      &a.period_mean.Tcmd_Nm})
       *d = r.get<double>();
     a.saturated = r.get<std::uint8_t>() != 0;
   }

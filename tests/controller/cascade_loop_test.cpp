@@ -7,7 +7,7 @@
 // difference is the integrator's error over one tick: 1e-9 mm bounds it
 // (the drive's fixed-step ERK is ~1e-12 mm from the exact solution on the
 // FADAL loop, docs/feeddrive.md). The same holds for the torque's mean over
-// a period's velocity-loop ticks (AxisSnapshot::Tm_mean_Nm), summed tick by
+// a period's velocity-loop ticks (AxisSnapshot::period_mean), summed tick by
 // tick in the exact response.
 #include <cmath>
 #include <filesystem>
@@ -126,9 +126,9 @@ void expect_matches_exact(const controller::CascadeGains& g, double Ts_s) {
     // period before it (at row 0, the row's own).
     const double T_mean = k > 0 ? ex.torque_mean[k - 1] : ex.torque[0];
     const double cmd_mean = k > 0 ? ex.command_mean[k - 1] : ex.command[0];
-    ASSERT_NEAR(s.axes[0].Tm_mean_Nm, T_mean, 1e-9 * (1.0 + std::abs(T_mean))) << "tick " << k;
-    ASSERT_NEAR(s.axes[0].Tcmd_mean_Nm, cmd_mean, 1e-9 * (1.0 + std::abs(cmd_mean))) << "tick " << k;
-    mean_apart = std::max(mean_apart, std::abs(s.axes[0].Tm_mean_Nm - s.axes[0].Tm_Nm));
+    ASSERT_NEAR(s.axes[0].period_mean.Tm_Nm, T_mean, 1e-9 * (1.0 + std::abs(T_mean))) << "tick " << k;
+    ASSERT_NEAR(s.axes[0].period_mean.Tcmd_Nm, cmd_mean, 1e-9 * (1.0 + std::abs(cmd_mean))) << "tick " << k;
+    mean_apart = std::max(mean_apart, std::abs(s.axes[0].period_mean.Tm_Nm - s.axes[0].Tm_Nm));
     T_peak = std::max(T_peak, std::abs(s.axes[0].Tm_Nm));
   }
   // With one tick a period the mean is the period before's torque; with

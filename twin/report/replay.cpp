@@ -611,8 +611,9 @@ struct LoggedTorque {
 };
 LoggedTorque logged_torque(const sim::AxisDefinition& def, const sim::AxisSnapshot& x) {
   const bool mean = def.logged_torque_period_mean != 0.0;
-  if (def.torque_command_logged == 0.0) return mean ? LoggedTorque{x.i_mean_A, x.Tm_mean_Nm} : LoggedTorque{x.i_A, x.Tm_Nm};
-  const double Tcmd = mean ? x.Tcmd_mean_Nm : x.Tcmd_Nm;
+  if (def.torque_command_logged == 0.0)
+    return mean ? LoggedTorque{x.period_mean.i_A, x.period_mean.Tm_Nm} : LoggedTorque{x.i_A, x.Tm_Nm};
+  const double Tcmd = mean ? x.period_mean.Tcmd_Nm : x.Tcmd_Nm;
   return {Tcmd / def.drive.Kt_Nm_per_A, Tcmd};
 }
 

@@ -122,7 +122,7 @@ const Snapshot& CoSimulation::step() {
   // loop runs n times a period acts again every inner_ticks_ / n of them, on
   // the motor's speed of that instant. The row's current and torque are those
   // the period starts with (a log samples them at the tick).
-  // The period's means (AxisSnapshot::i_mean_A) are over the same ticks,
+  // The period's means (AxisSnapshot::period_mean) are over the same ticks,
   // each weighing Ts / inner_ticks_.
   const double t_end = t0_s_ + static_cast<double>(k_ + 1) * Ts;
   std::array<double, 3> i_first_A{}, Tm_first_Nm{};
@@ -156,10 +156,7 @@ const Snapshot& CoSimulation::step() {
     const feeddrive::DriveOutput out = drives_.output(i);
     s.i_A = i_first_A[i];
     s.Tm_Nm = Tm_first_Nm[i];
-    const PeriodMean before = period_mean_valid_ ? period_mean_[i] : PeriodMean{s.i_A, s.Tm_Nm, s.Tcmd_Nm};
-    s.i_mean_A = before.i_A;
-    s.Tm_mean_Nm = before.Tm_Nm;
-    s.Tcmd_mean_Nm = before.Tcmd_Nm;
+    s.period_mean = period_mean_valid_ ? period_mean_[i] : PeriodMean{s.i_A, s.Tm_Nm, s.Tcmd_Nm};
     check_axis(i, s, out, t);
     v_real2 += s.v_mm_per_s * s.v_mm_per_s;
     dev[a] = s.x_true_mm - s.x_ref_mm;

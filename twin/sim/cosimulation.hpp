@@ -22,6 +22,12 @@
 
 namespace twin::sim {
 
+/// An axis's current, torque and commanded torque, each its mean over a
+/// position-loop period's inner ticks (AxisSnapshot::period_mean).
+struct PeriodMean {
+  double i_A{0.0}, Tm_Nm{0.0}, Tcmd_Nm{0.0};
+};
+
 /// Everything the twin reports at tick k: one row of trace.csv.
 struct AxisSnapshot {
   double x_ref_mm{0.0};
@@ -39,7 +45,7 @@ struct AxisSnapshot {
   /// that ends at t_k, over its inner (velocity-loop) ticks: what a drive
   /// that logs a period's mean gives at this row. At k = 0 (no period
   /// before it), the row's own.
-  double i_mean_A{0.0}, Tm_mean_Nm{0.0}, Tcmd_mean_Nm{0.0};
+  PeriodMean period_mean;
   bool saturated{false};
 };
 struct Snapshot {
@@ -72,12 +78,6 @@ struct ClampWatch {
   int saturated_ticks{0};
   int flips{0};
   int bad_blocks{0};
-};
-
-/// An axis's current, torque and commanded torque, each its mean over a
-/// position-loop period's inner ticks (AxisSnapshot::i_mean_A).
-struct PeriodMean {
-  double i_A{0.0}, Tm_Nm{0.0}, Tcmd_Nm{0.0};
 };
 
 /// The whole mutable state, for FMU get/set state and retries.

@@ -108,7 +108,7 @@ DiscreteLoopModel::DiscreteLoopModel(const LinearPlant& plant, const controller:
       Gamma_a_(nphys) = 1.0;
     }
     lifted_ = lift(K_, Phi_a_, Gamma_a_);
-    lifted_fb_ = lift(K_fb_, Phi_a_, Gamma_a_);
+    if (K_.inner_ticks > 1) lifted_fb_ = lift(K_fb_, Phi_a_, Gamma_a_);  // only responses() reads it
     std::vector<Eigen::Index> keep;
     for (Eigen::Index i = 0; i < np + nl; ++i)
       if (i < 2 || !lifted_.A.col(i).isZero(0.0)) keep.push_back(i);
@@ -151,17 +151,19 @@ DiscreteLoopModel::Lifted DiscreteLoopModel::lift(const ControllerRealisation& K
     const Eigen::MatrixXd inner = tick(K.inner.Ac, K.inner.By, K.inner.Cc, K.inner.Dy);
     for (int q = 1; q < K.inner_ticks; ++q) later = inner * later;
   }
+  Eigen::VectorXd Nr(N);
+  Nr << Gamma * K.Dr, K.Br;
+  Lifted L;
+  L.A = later * tick(K.Ac, K.By, K.Cc, K.Dy);
+  L.Br = later * Nr;
+  if (K.inner_ticks == 1) return L;  // the responses of one tick a period are not lifted
   Eigen::MatrixXd By_open = K.By;
   By_open.col(1).setZero();
   Eigen::RowVector2d Dy_open = K.Dy;
   Dy_open(1) = 0.0;
-  Eigen::VectorXd Nr(N), Nd(N);
-  Nr << Gamma * K.Dr, K.Br;
+  Eigen::VectorXd Nd(N);
   Nd << Gamma * K.Dy(1), K.By.col(1);
-  Lifted L;
-  L.A = later * tick(K.Ac, K.By, K.Cc, K.Dy);
   L.A_open = later * tick(K.Ac, By_open, K.Cc, Dy_open);
-  L.Br = later * Nr;
   L.Bd = later * Nd;
   return L;
 }

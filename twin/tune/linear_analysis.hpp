@@ -128,10 +128,11 @@ class DiscreteLoopModel {
   struct Responses {
     std::complex<double> L, Px, X, X_fb;  ///< L, P_x, X/R and X/R with the feedforward off
   };
-  /// A law with inner ticks or a dead time, over one period Ts, state [w, x, the
-  /// commands in flight, c] (Phi, Gamma: the plant with them over one drive step): z[k+1] = A z[k] +
-  /// Br x_ref[k] (closed), and with the position feedback of the first tick cut,
-  /// z[k+1] = A_open z[k] + Bd d[k] for d fed where the measured position was.
+  /// A law with inner ticks, a dead time or a compliant coupling, over one period Ts, state
+  /// [w, x, the load's, the commands in flight, c] (Phi, Gamma: the plant with them over one
+  /// drive step): z[k+1] = A z[k] + Br x_ref[k] (closed), and, for a law with inner ticks
+  /// (whose responses read them; empty at one tick), with the position feedback of the first
+  /// tick cut, z[k+1] = A_open z[k] + Bd d[k] for d fed where the measured position was.
   struct Lifted {
     Eigen::MatrixXd A, A_open;
     Eigen::VectorXd Br, Bd;
@@ -146,7 +147,8 @@ class DiscreteLoopModel {
   Eigen::Vector2d Gamma_;
   ControllerRealisation K_, K_fb_;  ///< the law, and the law with its feedforward at 0
   bool same_states_{false};          ///< K_fb_.Ac == K_.Ac
-  Lifted lifted_, lifted_fb_;        ///< inner_ticks() > 1 or delay_ticks() > 0 only
+  Lifted lifted_;                    ///< where the plant is stepped as Phi_a_ (else empty)
+  Lifted lifted_fb_;                 ///< the law without feedforward, lifted: inner_ticks() > 1 only
   int delay_ticks_{0};
   /// The plant over one drive step with its load side and the commands in flight
   /// (empty for a rigid drive without a dead time at one tick a period).

@@ -318,6 +318,18 @@ TEST(Replay, ALogThatBeginsInMotionIsReplayedInMotion) {
   for (std::size_t k = 0; k < 200; ++k) ASSERT_NEAR(r.x_ref_mm[0][k] - r.x_mm[0][k], e_ss, 1.0e-3) << "row " << k;
 }
 
+// A run of the shipped cascade machine, logged at its 0.1 ms period: 0.3 s
+// of a move that rests for 50 ms, then follows 10 (1 - cos 20 t) mm.
+analysis::MeasuredRun cascade_move_run(const std::string& name) {
+  std::string csv = "t_s,x_ref_mm\n";
+  for (int i = 0; i < 3000; ++i) {
+    const double t = i * 1e-4;
+    csv += fmt::format("{:.4f},{:.9f}\n", t, t < 0.05 ? 0.0 : 10.0 * (1.0 - std::cos(20.0 * (t - 0.05))));
+  }
+  const auto meta = R"({"machine": "fadal2216_cascade", "controller_period_s": 0.0001, "encoder_resolution_mm": 0.001})";
+  return analysis::load_run(make_run(name, meta, csv));
+}
+
 // A logged torque through a drive's smoothed monitor
 // (AxisDefinition::logged_torque_filter_s): the loop does not see it, so the
 // positions replay as without it, bit for bit, and the torque channel is the
@@ -326,13 +338,7 @@ TEST(Replay, ALogThatBeginsInMotionIsReplayedInMotion) {
 // first row's value, with the log at the loop's period (every tick a row).
 // Tolerance 1e-12 N m: the same arithmetic in another order.
 TEST(Replay, ATorqueMonitorsLowPassIsOutsideTheLoop) {
-  std::string csv = "t_s,x_ref_mm\n";
-  for (int i = 0; i < 3000; ++i) {
-    const double t = i * 1e-4;
-    csv += fmt::format("{:.4f},{:.9f}\n", t, t < 0.05 ? 0.0 : 10.0 * (1.0 - std::cos(20.0 * (t - 0.05))));
-  }
-  const auto meta = R"({"machine": "fadal2216_cascade", "controller_period_s": 0.0001, "encoder_resolution_mm": 0.001})";
-  const auto run = analysis::load_run(make_run("torque_monitor", meta, csv));
+  const auto run = cascade_move_run("torque_monitor");
   const sim::MachineDefinition plain = analysis::machine_for_run(run, "", nullptr);
   sim::MachineDefinition smoothed = plain;
   const double tau_s = 2e-3;
@@ -362,13 +368,7 @@ TEST(Replay, ATorqueMonitorsLowPassIsOutsideTheLoop) {
 // ticks are checked against the exact discrete loop in the cascade loop's
 // tests. Tolerance 1e-12 N m: the same numbers.
 TEST(Replay, ALoggedPeriodMeanIsTheTorqueOverThePeriodBeforeTheRow) {
-  std::string csv = "t_s,x_ref_mm\n";
-  for (int i = 0; i < 3000; ++i) {
-    const double t = i * 1e-4;
-    csv += fmt::format("{:.4f},{:.9f}\n", t, t < 0.05 ? 0.0 : 10.0 * (1.0 - std::cos(20.0 * (t - 0.05))));
-  }
-  const auto meta = R"({"machine": "fadal2216_cascade", "controller_period_s": 0.0001, "encoder_resolution_mm": 0.001})";
-  const auto run = analysis::load_run(make_run("torque_period_mean", meta, csv));
+  const auto run = cascade_move_run("torque_period_mean");
   const sim::MachineDefinition plain = analysis::machine_for_run(run, "", nullptr);
   sim::MachineDefinition averaging = plain;
   averaging.axes[0].logged_torque_period_mean = 1.0;
