@@ -331,6 +331,116 @@ void realign_late_channels(MeasuredRun& run) {
   }
 }
 
+/// A loop slower than its log: at most this period, and this many rows a period.
+constexpr double kMaxHeldLoopPeriod_s = 0.01;
+constexpr std::size_t kMaxRowsPerLoopPeriod = 16;
+/// The least number of changes of the loop's output a period is read from,
+/// and the share of them that must fall on the loop's ticks.
+constexpr std::size_t kMinOutputChanges = 100;
+constexpr double kHeldShare = 0.99;
+
+/// The loop's ticks among the rows of a log faster than the loop.
+struct LoopTicks {
+  std::size_t every{1};  ///< rows per loop period
+  std::size_t phase{0};  ///< the first row of a tick
+  std::string channel;   ///< the loop output that showed them
+  double share{0.0};     ///< of its changes, the part on the ticks
+  std::size_t changes{0};
+};
+
+/// The rows a position loop's output (every axis's `<a>_vcmd_mm_s`, else
+/// `<a>_u_V`) changes on, as a loop slower than the log holds it between
+/// its ticks: the most rows per period `every` (2 to 16, the period at most
+/// 10 ms) for which one phase holds 99 % of at least 100 changes. A loop at
+/// the log's period changes it on any row (its following error moves with
+/// the encoder's counts), so no phase holds most; every = 1 where none is
+/// found, or the run has gaps in its clock (each part its own phase).
+LoopTicks held_loop_output(const MeasuredRun& run) {
+  LoopTicks none;
+  const std::size_t n = run.trace.num_rows();
+  const double dt = run.sample_period_s;
+  if (!run.time_breaks.empty() || !(dt > 0.0)) return none;
+  const auto most = std::min<std::size_t>(
+      kMaxRowsPerLoopPeriod, static_cast<std::size_t>(std::floor(kMaxHeldLoopPeriod_s / dt + 1e-9)));
+  if (most < 2) return none;
+  std::vector<std::size_t> changed;  // rows on which an output changed
+  std::string channel;
+  for (const char* suffix : {"_vcmd_mm_s", "_u_V"}) {
+    for (Axis a : run.axes) {
+      const std::string name = std::string(axis_name(a)) + suffix;
+      const std::vector<double>* c = run.trace.find(name);
+      if (c == nullptr) continue;
+      if (channel.empty()) channel = name;
+      for (std::size_t k = 1; k < n; ++k)
+        if ((*c)[k] != (*c)[k - 1]) changed.push_back(k);
+    }
+    if (!channel.empty()) break;
+  }
+  if (changed.size() < kMinOutputChanges) return none;
+  std::vector<std::size_t> on(most);
+  for (std::size_t every = most; every >= 2; --every) {
+    std::fill(on.begin(), on.end(), 0);
+    for (std::size_t k : changed) ++on[k % every];
+    const auto best = std::max_element(on.begin(), on.begin() + static_cast<std::ptrdiff_t>(every));
+    const double share = static_cast<double>(*best) / static_cast<double>(changed.size());
+    if (share >= kHeldShare)
+      return {every, static_cast<std::size_t>(best - on.begin()), channel, share, changed.size()};
+  }
+  return none;
+}
+
+/// "2nd", "3rd", "4th", ... (2 to 20).
+std::string ordinal(std::size_t k) { return fmt::format("{}{}", k, k == 2 ? "nd" : k == 3 ? "rd" : "th"); }
+
+/// Where the log samples faster than the position loop runs (meta.json's
+/// controller period a whole number of sample periods, or none stated and
+/// the loop's output held between its ticks): the rows of the loop's ticks
+/// kept, the others left out, and said.
+void keep_loop_ticks(MeasuredRun& run) {
+  const double dt = run.sample_period_s;
+  LoopTicks ticks;
+  if (run.meta.controller_period_s) {
+    const double ratio = *run.meta.controller_period_s / dt;
+    const auto every = static_cast<std::size_t>(std::llround(ratio));
+    if (ratio < 1.5 || every > kMaxRowsPerLoopPeriod || std::abs(ratio - static_cast<double>(every)) > 0.01) return;
+    if (!run.time_breaks.empty()) {
+      run.notes.push_back(fmt::format("{}: meta.json's controller period {} s is {} sample periods, but t_s has gaps: "
+                                      "every row is kept",
+                                      run.trace.source, *run.meta.controller_period_s, every));
+      return;
+    }
+    const LoopTicks seen = held_loop_output(run);
+    ticks = seen.every == every ? seen : LoopTicks{every, 0, "", 0.0, 0};
+  } else {
+    ticks = held_loop_output(run);
+    if (ticks.every < 2) return;
+  }
+  const std::size_t n = run.trace.num_rows();
+  if (n < ticks.phase + 2 * ticks.every + 1)
+    throw IoError(fmt::format("{}: {} rows are too few to replay at the position loop's period of {} sample periods",
+                              run.trace.source, n, ticks.every));
+  for (auto& c : run.trace.columns) {
+    std::size_t kept = 0;
+    for (std::size_t k = ticks.phase; k < n; k += ticks.every) c[kept++] = c[k];
+    c.resize(kept);
+  }
+  run.sample_period_s = dt * static_cast<double>(ticks.every);
+  if (run.meta.sample_period_s) run.meta.sample_period_s = run.sample_period_s;
+  run.log_rows_per_loop_period = ticks.every;
+  run.loop_period_seen_in = ticks.channel;
+  run.loop_period_share = ticks.share;
+  const std::string why =
+      !ticks.channel.empty()
+          ? fmt::format("{} changes only on every {} row ({:.1f} % of its {} changes)", ticks.channel,
+                        ordinal(ticks.every), 100.0 * ticks.share, ticks.changes)
+          : std::string("meta.json's controller period (the loop's output does not show on which rows it ticks: "
+                        "the first row taken as a tick)");
+  run.notes.push_back(fmt::format("{}: the log samples every {} s, {} times a position-loop period ({}): the {} rows "
+                                  "of the loop's ticks are kept (every {} from row {}), the rows between left out",
+                                  run.trace.source, dt, ticks.every, why, run.trace.num_rows(), ordinal(ticks.every),
+                                  ticks.phase + 1));
+}
+
 }  // namespace
 
 MeasuredRun load_run(const std::filesystem::path& dir) {
@@ -351,6 +461,7 @@ MeasuredRun load_run(const std::filesystem::path& dir) {
   if (run.meta.sample_period_s && std::abs(*run.meta.sample_period_s - dt) > 0.01 * dt)
     throw IoError(fmt::format("{}: sample_period_s = {} s but the trace's t_s steps by {} s", meta_path.string(),
                               *run.meta.sample_period_s, dt));
+  keep_loop_ticks(run);
   realign_late_channels(run);
   return run;
 }
@@ -757,6 +868,9 @@ MeasuredRun rows_of(const MeasuredRun& run, std::size_t begin, std::size_t end,
   part.meta = run.meta;
   part.axes = run.axes;
   part.sample_period_s = run.sample_period_s;
+  part.log_rows_per_loop_period = run.log_rows_per_loop_period;
+  part.loop_period_seen_in = run.loop_period_seen_in;
+  part.loop_period_share = run.loop_period_share;
   part.trace.source = run.trace.source;
   for (std::size_t c = 0; c < run.trace.names.size(); ++c) {
     if (!names.empty() && std::find(names.begin(), names.end(), run.trace.names[c]) == names.end()) continue;

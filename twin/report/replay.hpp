@@ -36,6 +36,15 @@ struct MeasuredRun {
   /// Channels load_run read whole rows earlier, logged after the motion
   /// they belong to (the logger's timing), and by how many rows.
   std::map<std::string, std::size_t> rows_read_earlier;
+  /// A log that samples faster than its position loop runs: the rows of the
+  /// log per loop period (1: the log is at the loop's period or slower).
+  /// load_run keeps only the rows of the loop's ticks, so that the trace
+  /// and sample_period_s are then the loop's.
+  std::size_t log_rows_per_loop_period{1};
+  /// The channel whose changes showed that period (empty where meta.json
+  /// stated it), and the share of its changes on the loop's ticks.
+  std::string loop_period_seen_in;
+  double loop_period_share{0.0};
 };
 
 /// Reads RUN/meta.json and RUN/trace.csv(.gz); checks the columns and time.
@@ -46,7 +55,13 @@ struct MeasuredRun {
 /// over 1.5 periods is a gap (`time_breaks`, with a note), and a gap on more
 /// than one row in 20 is an error. A torque or current column that lags the
 /// axis's logged speed changes by a whole 1 to 3 rows (at 5 ms or faster) is
-/// logged late: it is read that many rows earlier, with a note.
+/// logged late: it is read that many rows earlier, with a note. A log
+/// sampled faster than its position loop runs, by a whole 2 to 16 rows a
+/// loop period (at most 10 ms), is cut to the rows of the loop's ticks,
+/// with a note: where meta.json states the controller period so, or where
+/// it states none and the loop's output (<a>_vcmd_mm_s or <a>_u_V) changes
+/// on one row in every so many and held between (99 % of at least 100
+/// changes); the rows it changes on are the loop's ticks.
 MeasuredRun load_run(const std::filesystem::path& dir);
 
 /// The machine a run is replayed on: `machine_override` (name or path; one

@@ -663,6 +663,104 @@ TEST(RealLogs, ADelayOfHalfARowIsFoundOnALogSlowerThanTheLoop) {
     }
 }
 
+// Which rows load_run keeps of a log faster than its loop, on a made-up
+// 1 kHz log whose x_vcmd_mm_s changes only on rows 2, 5, 8, ... (a 3 ms
+// loop, phase 2): exactly those rows, 3 ms apart, with a note; the same
+// where meta.json states 3 ms. Kept as logged: a command that changes on
+// every row, one that changes fewer than 100 times, and a log whose meta
+// states its own period.
+TEST(RealLogs, TheRowsOfASlowerLoopsTicksAreFoundFromItsHeldOutput) {
+  const auto write = [](const std::string& name, const std::string& period, int every, int rows) {
+    const auto d = work(name);
+    std::ofstream(d / "meta.json") << R"({"machine": null, "axes": ["x"], "sample_period_s": 0.001, )"
+                                   << R"("controller_period_s": )" << period << "}";
+    std::ofstream f(d / "trace.csv");
+    f << "t_s,x_ref_mm,x_mm,x_vcmd_mm_s,x_torque_raw\n";
+    double vcmd = 0.0;
+    for (int k = 0; k < rows; ++k) {
+      if (k % every == 2 % every) vcmd = 10.0 * std::sin(0.01 * k) + 0.001 * k;
+      f << fmt::format("{:.3f},{:.6f},{:.6f},{:.6f},{:.6f}\n", 1e-3 * k, 0.5 * k * 1e-3, 0.5 * k * 1e-3 - 0.01, vcmd,
+                       std::cos(0.02 * k));
+    }
+    return d;
+  };
+  for (const char* period : {"null", "0.003"}) {
+    SCOPED_TRACE(period);
+    const MeasuredRun held = load_run(write("held3", period, 3, 3000));
+    EXPECT_EQ(held.log_rows_per_loop_period, 3u);
+    EXPECT_NEAR(held.sample_period_s, 3e-3, 1e-12);
+    ASSERT_EQ(held.trace.num_rows(), 1000u);
+    const auto& t = held.trace.at("t_s");
+    EXPECT_NEAR(t[0], 0.002, 1e-12);
+    EXPECT_NEAR(t[999], 2.999, 1e-9);
+    EXPECT_NEAR(held.trace.at("x_torque_raw")[1], std::cos(0.02 * 5), 1e-6);
+    EXPECT_EQ(held.loop_period_seen_in, "x_vcmd_mm_s");
+    ASSERT_FALSE(held.notes.empty());
+    EXPECT_THAT(held.notes.back(), HasSubstr("x_vcmd_mm_s changes only on every 3rd row (100.0 % of its 1000 changes)"));
+    EXPECT_THAT(held.notes.back(), HasSubstr("every 3rd from row 3"));
+  }
+  const MeasuredRun every_row = load_run(write("held1", "null", 1, 3000));
+  EXPECT_EQ(every_row.log_rows_per_loop_period, 1u);
+  EXPECT_EQ(every_row.trace.num_rows(), 3000u);
+  const MeasuredRun few = load_run(write("held_few", "null", 3, 240));  // 80 changes
+  EXPECT_EQ(few.trace.num_rows(), 240u);
+  const MeasuredRun own = load_run(write("held_own", "0.001", 3, 3000));
+  EXPECT_EQ(own.trace.num_rows(), 3000u);
+  EXPECT_DOUBLE_EQ(own.sample_period_s, 1e-3);
+}
+
+// A 1 kHz log of a cascade whose position loop runs every 2 ms (the
+// velocity loop every 1 ms), the controller period not stated: the velocity
+// command changes only on every second row. Taken as a 1 ms loop, the twin
+// recomputed the command every row where the machine holds it. Oracles: the
+// truth's structure, which the data shows exactly (2 ms, the rows of the
+// loop's ticks, a velocity loop of 2 ticks a period); the truth's gains as
+// for the 1 kHz loop (expect_truth_gains); the held-out machine's check on
+// the other program; and `twin replay --machine` on the 1 kHz validation
+// log giving the report's numbers. The same truth with meta.json stating
+// 2 ms gives the same machine; a 1 ms loop logged at 1 kHz without the
+// period stated is not read as slower.
+TEST(RealLogs, APositionLoopSlowerThanItsLogIsReadFromTheHeldVelocityCommand) {
+  truth::RunSpec sp = cascade_spec_with_stribeck(1e-3);
+  sp.cascade.position_every = 2;
+  sp.period_in_meta = truth::RunSpec::PeriodInMeta::kNone;
+  const DataCalibration r = calibrate_on_two_programs(sp, "held_vcmd");
+  EXPECT_TRUE(has_note(r, "controller period 0.002 s: x_vcmd_mm_s changes only every 2nd row"));
+  EXPECT_DOUBLE_EQ(r.final_machine.Ts_s, 2e-3);
+  ASSERT_EQ(r.axis.size(), 1u);
+  const AxisFromData& ax = r.axis[0];
+  ASSERT_TRUE(ax.identified) << ax.note;
+  EXPECT_EQ(ax.law_inner_ticks, 2) << ax.loop_source;
+  expect_truth_gains(ax, sp);
+  expect_held_out_check(r);
+  ASSERT_EQ(r.validation_runs.size(), 1u);
+  const auto& e = r.validation_runs[0].calibrated.nrms;
+  const auto yaml_dir = work("held_vcmd_yaml");
+  io::write_file_atomic(yaml_dir / "machine.yaml", io::machine_to_yaml(r.final_machine, "test"));
+  const MeasuredRun val = load_run(std::filesystem::temp_directory_path() / "twin_real_logs_test" / "held_vcmd_val");
+  EXPECT_DOUBLE_EQ(val.sample_period_s, 2e-3);
+  const RunErrors again =
+      evaluate_machine_on_run(val, machine_for_run(val, (yaml_dir / "machine.yaml").string(), nullptr), nullptr, nullptr);
+  for (const auto& [k, v] : e) {
+    ASSERT_TRUE(again.calibrated.nrms.count(k)) << k;
+    EXPECT_DOUBLE_EQ(again.calibrated.nrms.at(k), v) << k;
+  }
+
+  sp.period_in_meta = truth::RunSpec::PeriodInMeta::kLoop;
+  const DataCalibration stated = calibrate_on_two_programs(sp, "held_vcmd_stated");
+  EXPECT_TRUE(has_note(stated, "controller period 0.002 s from meta.json"));
+  ASSERT_EQ(stated.axis.size(), 1u);
+  EXPECT_DOUBLE_EQ(stated.axis[0].gains.Kv_per_s, ax.gains.Kv_per_s);
+  EXPECT_DOUBLE_EQ(stated.validation_runs[0].calibrated.nrms.at("x_err_mm"), e.at("x_err_mm"));
+
+  sp.cascade.position_every = 1;
+  sp.period_in_meta = truth::RunSpec::PeriodInMeta::kNone;
+  const DataCalibration fast = calibrate_on_two_programs(sp, "held_vcmd_fast");
+  EXPECT_TRUE(has_note(fast, "the log's own period 0.001 s is taken"));
+  EXPECT_FALSE(has_note(fast, "changes only every"));
+  EXPECT_DOUBLE_EQ(fast.final_machine.Ts_s, 1e-3);
+}
+
 // A 1 kHz cascade log whose positions, commanded and measured, are exported
 // to 0.01 mm (a display's two decimals), with a Stribeck rise in the truth.
 // An encoder does not round the command, so that is the log's rounding: the

@@ -204,6 +204,9 @@ struct CascadeOptions {
   int contour{0};                  ///< both programs of circular contours (contour_program): 1 or 2; 0: moves
   int log_every{1};                ///< every log_every-th loop period logged (a log slower than the loop)
   int velocity_ticks{1};           ///< the velocity loop's ticks per position-loop period
+  int position_every{1};           ///< the position loop's period in logged periods (a log faster than it)
+  /// meta.json's controller period: the loop's, the log's own, or none.
+  twin::truth::RunSpec::PeriodInMeta period_in_meta{twin::truth::RunSpec::PeriodInMeta::kLoop};
 };
 
 // A friction law added to every run of the sweep (--friction): the truth's
@@ -254,6 +257,8 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     sp.cascade.log_torque_mean = loop.torque_mean;
     sp.log_every = loop.log_every;
     sp.cascade.velocity_ticks = loop.velocity_ticks;
+    sp.cascade.position_every = loop.position_every;
+    sp.period_in_meta = loop.period_in_meta;
     const double load = sp.effects.load_Nm;
     c.set(sp.effects);
     sp.effects.load_Nm = load;
@@ -307,16 +312,20 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
       const std::string inner_text = inner > 1 ? " (velocity loop at Ts/" + std::to_string(inner) +
                                                      (mean ? ", torque logged as the period's mean" : "") + ")"
                                                : "";
+      const std::string period_text =
+          std::abs(r.final_machine.Ts_s - sp.Ts_s) > 1e-12
+              ? " (position loop at " + std::to_string(r.final_machine.Ts_s * 1e3).substr(0, 5) + " ms)"
+              : "";
       wrong += !ok;
       track += bad_track;
       torque += bad_torque;
       rose += up;
       ++total;
-      std::printf("%-40s %-44s err %.4f  torque %.4f (identified %.4f, regression %.4f)  %.1f s%s%s%s%s%s%s%s\n",
+      std::printf("%-40s %-44s err %.4f  torque %.4f (identified %.4f, regression %.4f)  %.1f s%s%s%s%s%s%s%s%s\n",
                   c.name.c_str(), kept.c_str(), e_cal, t_cal, t_id, t_reg, wall_s, ok ? "" : " WRONG",
                   bad_track ? " TRACK" : "", bad_torque ? " TORQUE" : "", up ? " ROSE" : "",
                   unreached ? " (the limit is never reached)" : "", monitor ? " (a lag in the torque monitor)" : "",
-                  inner_text.c_str());
+                  inner_text.c_str(), period_text.c_str());
       std::fflush(stdout);
     } catch (const twin::Error& e) {
       std::printf("%-40s error: %s\n", c.name.c_str(), e.what());
@@ -379,6 +388,26 @@ int main(int argc, char** argv) {
         return 2;
       }
       loop.velocity_ticks = static_cast<int>(n);
+    } else if (!std::strcmp(argv[i], "--position-every") && has_value) {
+      const long n = std::strtol(argv[++i], nullptr, 10);
+      if (n < 1 || n > 16) {
+        std::fprintf(stderr, "calibrate_sweep: --position-every takes a whole number of logged periods from 1 to 16\n");
+        return 2;
+      }
+      loop.position_every = static_cast<int>(n);
+    } else if (!std::strcmp(argv[i], "--period-in-meta") && has_value) {
+      const std::string v = argv[++i];
+      using P = twin::truth::RunSpec::PeriodInMeta;
+      if (v == "loop") {
+        loop.period_in_meta = P::kLoop;
+      } else if (v == "log") {
+        loop.period_in_meta = P::kLog;
+      } else if (v == "none") {
+        loop.period_in_meta = P::kNone;
+      } else {
+        std::fprintf(stderr, "calibrate_sweep: --period-in-meta takes loop, log or none, not '%s'\n", v.c_str());
+        return 2;
+      }
     } else if (!std::strcmp(argv[i], "--log-every") && has_value) {
       log_every = std::strtol(argv[++i], nullptr, 10);
       if (log_every < 1) {

@@ -118,6 +118,10 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   double table_mm = ref[0];           // backlash: table behind the play
   bool stuck = true;                  // friction side held (Karnopp)
   double I = 0.0, e_prev = 0.0, vref_prev = 0.0;
+  // The cascade's position loop every pe periods: its output and the
+  // command's acceleration held between its ticks.
+  const std::size_t pe = static_cast<std::size_t>(sp.cascade.on ? std::max(1, sp.cascade.position_every) : 1);
+  double vcmd = 0.0, aref_p = 0.0, vref_p_prev = 0.0;
   // The velocity loop's ticks per period (cascade only) and their period.
   const int nv = sp.cascade.on ? std::max(1, sp.cascade.velocity_ticks) : 1;
   const double Tv = Ts / nv;
@@ -287,7 +291,13 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     I += Ts * err;
     double u = p.Kp * err + p.Ki * I + p.Kd * (err - e_prev) / Ts + p.K1 * aref + p.K2 * vref;
     u = std::clamp(u, -p.u_max, p.u_max);
-    const double vcmd = cl.Kv * err + cl.kff * vref;
+    // The cascade's position loop: on its own ticks only (position_every).
+    if (k % pe == 0) {
+      const double vref_p = k >= pe ? (ref[k] - ref[k - pe]) / (pe * Ts) : 0.0;
+      aref_p = (vref_p - vref_p_prev) / (pe * Ts);
+      vref_p_prev = vref_p;
+      vcmd = cl.Kv * err + cl.kff * vref_p;
+    }
     e_prev = err;
     vref_prev = vref;
     for (int q = 0; q < nv; ++q) {
@@ -295,7 +305,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
       if (cl.on) {
         const double ev = (vcmd - v_motor) / p.rg;
         const double Iv_next = Iv + Tv * ev;
-        Tcmd = cl.Kvp * (ev + (cl.Tn > 0.0 ? Iv_next / cl.Tn : 0.0)) + cl.Jff * aref / p.rg;
+        Tcmd = cl.Kvp * (ev + (cl.Tn > 0.0 ? Iv_next / cl.Tn : 0.0)) + cl.Jff * aref_p / p.rg;
         const bool clamped = cl.T_max_Nm > 0.0 && std::abs(Tcmd) > cl.T_max_Nm;
         if (clamped) {
           Tcmd = std::clamp(Tcmd, -cl.T_max_Nm, cl.T_max_Nm);
@@ -354,8 +364,15 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   }
   std::fclose(f);
   std::ofstream meta(out_dir / "meta.json");
-  meta << "{\"machine\": " << (cl.on ? "null" : "\"fadal2216\"") << ", \"axes\": [\"" << sp.axis << "\"], \"controller_period_s\": " << Ts
-       << ", \"sample_period_s\": " << Ts * static_cast<double>(every)
+  meta << "{\"machine\": " << (cl.on ? "null" : "\"fadal2216\"") << ", \"axes\": [\"" << sp.axis
+       << "\"], \"controller_period_s\": ";
+  if (sp.period_in_meta == RunSpec::PeriodInMeta::kLoop)
+    meta << Ts * static_cast<double>(pe);
+  else if (sp.period_in_meta == RunSpec::PeriodInMeta::kLog)
+    meta << Ts;
+  else
+    meta << "null";
+  meta << ", \"sample_period_s\": " << Ts * static_cast<double>(every)
        << ", \"encoder_resolution_mm\": " << sp.resolution_mm
        << ", \"description\": \"truth simulator of the calibration tests\"}\n";
   if (stats != nullptr) *stats = st;

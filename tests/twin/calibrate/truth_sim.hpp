@@ -123,6 +123,13 @@ struct CascadeLaw {
   /// instant; the log samples the torque at the position loop's ticks. A
   /// dead time (effects.delay_ticks) stays that many position-loop periods.
   int velocity_ticks{1};
+  /// The position loop's period in the truth's periods Ts_s: 1, or more
+  /// where the log samples faster than the position loop runs (a 2 ms
+  /// position loop traced every 1 ms). Its velocity command, following
+  /// error and the command's speed and acceleration are taken every this
+  /// many periods and held between; the velocity loop runs every period
+  /// (and velocity_ticks times within it), and the log has every period.
+  int position_every{1};
 };
 
 struct RunSpec {
@@ -147,6 +154,12 @@ struct RunSpec {
   /// and without the u column when log_current_only.
   int log_every{1};
   bool log_current_only{false};
+  /// What meta.json gives as controller_period_s: the loop's period (Ts_s
+  /// times the cascade's position_every), the log's own period Ts_s (a log
+  /// that states its own rate as the loop's), or null (a log that does not
+  /// say how fast its loop runs).
+  enum class PeriodInMeta { kLoop, kLog, kNone };
+  PeriodInMeta period_in_meta{PeriodInMeta::kLoop};
 };
 
 /// A reference of moves at `speeds` (mm/s) for 1.4 s each with 0.6 s dwells
