@@ -412,6 +412,34 @@ TEST(DataEffects, RisingFrictionIsKeptWhereBreakawayIsBelowCoulomb) {
   expect_validation_improves(o);
 }
 
+// A truth with no effect beyond stick/slip, its position loop every 2 ms
+// over a 1 ms velocity loop, logged every 1 ms with no period stated (the
+// sweep's `--position-every 2 --period-in-meta none` run without an
+// effect). At some stops the truth sticks a little off where the twin does,
+// and one such stop on the held-out rows made rising_friction look better
+// there (0.0789 to 0.0501) while the other program's torque rose eightfold
+// (0.0117 to 0.0936). Oracle: the truth has no rising friction, so nothing
+// is kept, and the calibrated machine predicts the other program as the
+// identified one does (the same replay: to 1e-12). The candidate is refused
+// because one second of the held-out rows carries its whole gain; on a truth
+// with the effect (RisingFrictionIsKeptWhereBreakawayIsBelowCoulomb) it is
+// kept.
+TEST(DataEffects, AGainOneStopCarriesIsNotAnEffect) {
+  truth::RunSpec sp = cascade_spec();
+  sp.cascade.position_every = 2;
+  sp.period_in_meta = truth::RunSpec::PeriodInMeta::kNone;
+  const Outcome o = calibrate_spec("one_stop", sp);
+  EXPECT_TRUE(o.kept.empty()) << describe(o);
+  const auto rising = std::find_if(o.r.effects.begin(), o.r.effects.end(),
+                                   [](const DataEffect& e) { return e.effect == "rising_friction"; });
+  ASSERT_NE(rising, o.r.effects.end()) << describe(o);
+  EXPECT_THAT(rising->evidence, ::testing::HasSubstr("one event")) << describe(o);
+  ASSERT_EQ(o.r.validation_runs.size(), 1u);
+  const RunErrors& v = o.r.validation_runs[0];
+  EXPECT_NEAR(v.calibrated.nrms.at("x_torque_raw"), v.identified.nrms.at("x_torque_raw"), 1e-12);
+  expect_held_out_machine_check(o);
+}
+
 // Friction rising to 0.45 N m (18 raw) below about 3 rad/s (4.77 mm/s of
 // travel) over Coulomb levels of 0.25 / 0.15 N m (the truth's own law,
 // Tc + (Ts - Tc) exp(-(w/ws)^2), with its breakaway at Ts). The breakaway
