@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <string_view>
 
 #include <Eigen/Dense>
 #include <fmt/format.h>
@@ -392,6 +393,48 @@ LoopTicks held_loop_output(const MeasuredRun& run) {
 /// "2nd", "3rd", "4th", ... (2 to 20).
 std::string ordinal(std::size_t k) { return fmt::format("{}{}", k, k == 2 ? "nd" : k == 3 ? "rd" : "th"); }
 
+/// How many rows after the loop's tick its velocity command shows a new
+/// value (0 to every - 1): a logger that samples the command before the loop
+/// updates it at a tick shows the new value a row later. The P law
+/// vcmd = Kv e + kff v_ref + c is fitted by least squares on the rows the
+/// command changes on, with the following error and the reference's speed
+/// over a loop period taken s rows earlier; s is the one of the smallest
+/// residual, where that is under half the residual at s = 0 (the law holds
+/// exactly at its own tick, but for the log's rounding). `residuals`
+/// receives the residual RMS at each s.
+std::size_t vcmd_rows_after_tick(const MeasuredRun& run, const LoopTicks& t, std::vector<double>& residuals) {
+  residuals.clear();
+  constexpr std::string_view kVcmd = "_vcmd_mm_s";
+  if (!t.channel.ends_with(kVcmd)) return 0;
+  const std::string axis = t.channel.substr(0, t.channel.size() - kVcmd.size());
+  const std::vector<double>*ref = run.trace.find(axis + "_ref_mm"), *x = run.trace.find(axis + "_mm"),
+        *v = run.trace.find(t.channel);
+  if (ref == nullptr || x == nullptr || v == nullptr) return 0;
+  const std::size_t n = v->size(), m = t.every;
+  const double period = static_cast<double>(m) * run.sample_period_s;
+  for (std::size_t late = 0; late < m; ++late) {
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    double yy = 0.0;
+    std::size_t rows = 0;
+    for (std::size_t k = t.phase + 2 * m; k < n; k += m) {
+      const std::size_t at = k - late;
+      const Eigen::Vector3d c((*ref)[at] - (*x)[at], ((*ref)[at] - (*ref)[at - m]) / period, 1.0);
+      A.noalias() += c * c.transpose();
+      b.noalias() += c * (*v)[k];
+      yy += (*v)[k] * (*v)[k];
+      ++rows;
+    }
+    if (rows < kMinOutputChanges) return 0;
+    const Eigen::Vector3d theta = A.ldlt().solve(b);
+    const double sse = std::max(0.0, yy - theta.dot(b));
+    if (!std::isfinite(sse)) return 0;
+    residuals.push_back(std::sqrt(sse / static_cast<double>(rows)));
+  }
+  const auto best = static_cast<std::size_t>(std::min_element(residuals.begin(), residuals.end()) - residuals.begin());
+  return best > 0 && residuals[best] < 0.5 * residuals[0] ? best : 0;
+}
+
 /// Where the log samples faster than the position loop runs (meta.json's
 /// controller period a whole number of sample periods, or none stated and
 /// the loop's output held between its ticks): the rows of the loop's ticks
@@ -419,11 +462,26 @@ void keep_loop_ticks(MeasuredRun& run) {
   if (n < ticks.phase + 2 * ticks.every + 1)
     throw IoError(fmt::format("{}: {} rows are too few to replay at the position loop's period of {} sample periods",
                               run.trace.source, n, ticks.every));
-  for (auto& c : run.trace.columns) {
+  // The loop's ticks: the rows the command changes on, or `late` rows
+  // before them where it shows each value late; every axis's velocity
+  // command is then read that many rows on.
+  std::vector<double> residuals;
+  const std::size_t late = vcmd_rows_after_tick(run, ticks, residuals);
+  const std::size_t first = late > 0 ? ticks.phase + ticks.every - late : ticks.phase;
+  std::size_t rows_kept = 0;
+  for (std::size_t c = 0; c < run.trace.columns.size(); ++c) {
+    auto& col = run.trace.columns[c];
+    const std::string& name = run.trace.names[c];
+    const bool is_vcmd = name.ends_with("_vcmd_mm_s");
+    const std::size_t shift = is_vcmd ? late : 0;
     std::size_t kept = 0;
-    for (std::size_t k = ticks.phase; k < n; k += ticks.every) c[kept++] = c[k];
-    c.resize(kept);
+    for (std::size_t k = first; k + late < n; k += ticks.every) col[kept++] = col[k + shift];
+    col.resize(kept);
+    rows_kept = kept;
   }
+  if (rows_kept < 3)
+    throw IoError(fmt::format("{}: {} rows are too few to replay at the position loop's period of {} sample periods",
+                              run.trace.source, n, ticks.every));
   run.sample_period_s = dt * static_cast<double>(ticks.every);
   if (run.meta.sample_period_s) run.meta.sample_period_s = run.sample_period_s;
   run.log_rows_per_loop_period = ticks.every;
@@ -438,7 +496,14 @@ void keep_loop_ticks(MeasuredRun& run) {
   run.notes.push_back(fmt::format("{}: the log samples every {} s, {} times a position-loop period ({}): the {} rows "
                                   "of the loop's ticks are kept (every {} from row {}), the rows between left out",
                                   run.trace.source, dt, ticks.every, why, run.trace.num_rows(), ordinal(ticks.every),
-                                  ticks.phase + 1));
+                                  first + 1));
+  if (late > 0)
+    run.notes.push_back(fmt::format(
+        "{}: {} shows each new value {} row{} after the loop's tick (the logger samples it before the loop updates "
+        "it): its P law fits the position {} row{} earlier with a residual of {:.3g} mm/s against {:.3g} at the "
+        "row itself; the velocity command is read {} row{} on, the logger's timing, not the machine's",
+        run.trace.source, ticks.channel, late, late == 1 ? "" : "s", late, late == 1 ? "" : "s", residuals[late],
+        residuals[0], late, late == 1 ? "" : "s"));
 }
 
 }  // namespace

@@ -753,6 +753,21 @@ TEST(RealLogs, APositionLoopSlowerThanItsLogIsReadFromTheHeldVelocityCommand) {
   EXPECT_DOUBLE_EQ(stated.axis[0].gains.Kv_per_s, ax.gains.Kv_per_s);
   EXPECT_DOUBLE_EQ(stated.validation_runs[0].calibrated.nrms.at("x_err_mm"), e.at("x_err_mm"));
 
+  // A logger that samples the command before the loop updates it: each
+  // new value shows a row after the tick. The P law fits the position a
+  // row earlier, so the ticks are the rows before the changes and the
+  // command is read a row on; the same machine's gains follow.
+  sp.cascade.log_vcmd_before_update = true;
+  sp.period_in_meta = truth::RunSpec::PeriodInMeta::kNone;
+  const DataCalibration before = calibrate_on_two_programs(sp, "held_vcmd_before");
+  EXPECT_TRUE(has_note(before, "shows each new value 1 row after the loop's tick"));
+  EXPECT_TRUE(has_note(before, "controller period 0.002 s"));
+  ASSERT_EQ(before.axis.size(), 1u);
+  ASSERT_TRUE(before.axis[0].identified) << before.axis[0].note;
+  expect_truth_gains(before.axis[0], sp);
+  expect_held_out_check(before);
+  sp.cascade.log_vcmd_before_update = false;
+
   sp.cascade.position_every = 1;
   sp.period_in_meta = truth::RunSpec::PeriodInMeta::kNone;
   const DataCalibration fast = calibrate_on_two_programs(sp, "held_vcmd_fast");

@@ -205,6 +205,7 @@ struct CascadeOptions {
   int log_every{1};                ///< every log_every-th loop period logged (a log slower than the loop)
   int velocity_ticks{1};           ///< the velocity loop's ticks per position-loop period
   int position_every{1};           ///< the position loop's period in logged periods (a log faster than it)
+  bool vcmd_before_update{false};  ///< with position_every: the command logged before the loop updates it
   /// meta.json's controller period: the loop's, the log's own, or none.
   twin::truth::RunSpec::PeriodInMeta period_in_meta{twin::truth::RunSpec::PeriodInMeta::kLoop};
 };
@@ -258,6 +259,7 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     sp.log_every = loop.log_every;
     sp.cascade.velocity_ticks = loop.velocity_ticks;
     sp.cascade.position_every = loop.position_every;
+    sp.cascade.log_vcmd_before_update = loop.vcmd_before_update;
     sp.period_in_meta = loop.period_in_meta;
     const double load = sp.effects.load_Nm;
     c.set(sp.effects);
@@ -395,6 +397,8 @@ int main(int argc, char** argv) {
         return 2;
       }
       loop.position_every = static_cast<int>(n);
+    } else if (!std::strcmp(argv[i], "--vcmd-before-update")) {
+      loop.vcmd_before_update = true;
     } else if (!std::strcmp(argv[i], "--period-in-meta") && has_value) {
       const std::string v = argv[++i];
       using P = twin::truth::RunSpec::PeriodInMeta;

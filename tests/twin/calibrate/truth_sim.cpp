@@ -292,6 +292,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     double u = p.Kp * err + p.Ki * I + p.Kd * (err - e_prev) / Ts + p.K1 * aref + p.K2 * vref;
     u = std::clamp(u, -p.u_max, p.u_max);
     // The cascade's position loop: on its own ticks only (position_every).
+    const double vcmd_before = vcmd;
     if (k % pe == 0) {
       const double vref_p = k >= pe ? (ref[k] - ref[k - pe]) / (pe * Ts) : 0.0;
       aref_p = (vref_p - vref_p_prev) / (pe * Ts);
@@ -336,7 +337,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
         const double i_measured = i_logged + noise(rng);
         if (k % every == 0 && cl.on) {
           std::fprintf(f, "%.4f,%.10g,%.10g", static_cast<double>(k) * Ts, pos(ref[k]), pos(x_meas));
-          if (cl.log_velocities) std::fprintf(f, ",%.6f", vcmd);
+          if (cl.log_velocities) std::fprintf(f, ",%.6f", cl.log_vcmd_before_update ? vcmd_before : vcmd);
           if (cl.log_velocities && cl.log_motor_speed) std::fprintf(f, ",%.6f", v_motor);
           const double T_logged = cl.log_torque_mean ? T_period_mean : T_monitor;
           double raw = cl.raw_per_Nm * (T_logged + noise(rng));

@@ -130,6 +130,10 @@ struct CascadeLaw {
   /// many periods and held between; the velocity loop runs every period
   /// (and velocity_ticks times within it), and the log has every period.
   int position_every{1};
+  /// With position_every > 1: the log samples the velocity command before
+  /// the position loop updates it at its tick, so each new value shows a
+  /// row after the tick (the rest of the row as at the tick).
+  bool log_vcmd_before_update{false};
 };
 
 struct RunSpec {
