@@ -4836,9 +4836,9 @@ void try_rising_friction(DataCalibration& out, const std::vector<RunData>& runs,
         eff.kept                 ? std::string()
         : !lowers                ? std::string(" (not kept)")
         : !tracking_ok           ? std::string(" (not kept: the tracking error rises)")
-                                 : fmt::format(" (not kept: its gain is one event: the second of the held-out rows "
-                                               "from {:.4g} s into the log{} gains {:.2g} times what they all gain together, "
-                                               "and without that second the error rises)",
+                                 : fmt::format(" (not kept: its gain is one event: the second of the held-out "
+                                               "rows from {:.4g} s into the log{} gains {:.2g} times what they "
+                                               "all gain together, and without that second the error rises)",
                                                gain.largest_at_s,
                                                runs.size() > 1 ? fmt::format(" of run {}", gain.largest_run + 1)
                                                                : std::string(),

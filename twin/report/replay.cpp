@@ -364,7 +364,7 @@ LoopTicks held_loop_output(const MeasuredRun& run) {
   const auto most = std::min<std::size_t>(
       kMaxRowsPerLoopPeriod, static_cast<std::size_t>(std::floor(kMaxHeldLoopPeriod_s / dt + 1e-9)));
   if (most < 2) return none;
-  std::vector<std::size_t> changed;  // rows on which an output changed
+  std::vector<char> changes(n, 0);  // rows on which an axis's output changed
   std::string channel;
   for (const char* suffix : {"_vcmd_mm_s", "_u_V"}) {
     for (Axis a : run.axes) {
@@ -373,10 +373,13 @@ LoopTicks held_loop_output(const MeasuredRun& run) {
       if (c == nullptr) continue;
       if (channel.empty()) channel = name;
       for (std::size_t k = 1; k < n; ++k)
-        if ((*c)[k] != (*c)[k - 1]) changed.push_back(k);
+        if ((*c)[k] != (*c)[k - 1]) changes[k] = 1;
     }
     if (!channel.empty()) break;
   }
+  std::vector<std::size_t> changed;
+  for (std::size_t k = 1; k < n; ++k)
+    if (changes[k]) changed.push_back(k);
   if (changed.size() < kMinOutputChanges) return none;
   std::vector<std::size_t> on(most);
   for (std::size_t every = most; every >= 2; --every) {
@@ -489,8 +492,8 @@ void keep_loop_ticks(MeasuredRun& run) {
   run.loop_period_share = ticks.share;
   const std::string why =
       !ticks.channel.empty()
-          ? fmt::format("{} changes only on every {} row ({:.1f} % of its {} changes)", ticks.channel,
-                        ordinal(ticks.every), 100.0 * ticks.share, ticks.changes)
+          ? fmt::format("{} changes only on every {} row ({:.1f} % of the {} rows the loop's output changes on)",
+                        ticks.channel, ordinal(ticks.every), 100.0 * ticks.share, ticks.changes)
           : std::string("meta.json's controller period (the loop's output does not show on which rows it ticks: "
                         "the first row taken as a tick)");
   run.notes.push_back(fmt::format("{}: the log samples every {} s, {} times a position-loop period ({}): the {} rows "

@@ -696,7 +696,8 @@ TEST(RealLogs, TheRowsOfASlowerLoopsTicksAreFoundFromItsHeldOutput) {
     EXPECT_NEAR(held.trace.at("x_torque_raw")[1], std::cos(0.02 * 5), 1e-6);
     EXPECT_EQ(held.loop_period_seen_in, "x_vcmd_mm_s");
     ASSERT_FALSE(held.notes.empty());
-    EXPECT_THAT(held.notes.back(), HasSubstr("x_vcmd_mm_s changes only on every 3rd row (100.0 % of its 1000 changes)"));
+    EXPECT_THAT(held.notes.back(), HasSubstr("x_vcmd_mm_s changes only on every 3rd row (100.0 % of the 1000 "
+                                             "rows the loop's output changes on)"));
     EXPECT_THAT(held.notes.back(), HasSubstr("every 3rd from row 3"));
   }
   const MeasuredRun every_row = load_run(write("held1", "null", 1, 3000));
