@@ -343,24 +343,27 @@ constexpr double kHeldShare = 0.99;
 /// The loop's ticks among the rows of a log faster than the loop.
 struct LoopTicks {
   std::size_t every{1};  ///< rows per loop period
-  std::size_t phase{0};  ///< the first row of a tick
-  std::string channel;   ///< the loop output that showed them
-  double share{0.0};     ///< of its changes, the part on the ticks
+  /// Per part of the run between gaps in its clock (parts_between_breaks):
+  /// the first row of a tick, counted from the part's first row.
+  std::vector<std::size_t> phase;
+  std::string channel;  ///< the loop output that showed them
+  double share{0.0};    ///< of the rows it changes on, the part on the ticks
   std::size_t changes{0};
 };
 
 /// The rows a position loop's output (every axis's `<a>_vcmd_mm_s`, else
 /// `<a>_u_V`) changes on, as a loop slower than the log holds it between
 /// its ticks: the most rows per period `every` (2 to 16, the period at most
-/// 10 ms) for which one phase holds 99 % of at least 100 changes. A loop at
-/// the log's period changes it on any row (its following error moves with
-/// the encoder's counts), so no phase holds most; every = 1 where none is
-/// found, or the run has gaps in its clock (each part its own phase).
+/// 10 ms) for which one phase in each part of the run between gaps in its
+/// clock (the logger's clock restarts there) holds, over the parts, 99 % of
+/// at least 100 changes. A loop at the log's period changes it on any row
+/// (its following error moves with the encoder's counts), so no phase holds
+/// most; every = 1 where none is found.
 LoopTicks held_loop_output(const MeasuredRun& run) {
   LoopTicks none;
   const std::size_t n = run.trace.num_rows();
   const double dt = run.sample_period_s;
-  if (!run.time_breaks.empty() || !(dt > 0.0)) return none;
+  if (!(dt > 0.0)) return none;
   const auto most = std::min<std::size_t>(
       kMaxRowsPerLoopPeriod, static_cast<std::size_t>(std::floor(kMaxHeldLoopPeriod_s / dt + 1e-9)));
   if (most < 2) return none;
@@ -377,18 +380,25 @@ LoopTicks held_loop_output(const MeasuredRun& run) {
     }
     if (!channel.empty()) break;
   }
-  std::vector<std::size_t> changed;
-  for (std::size_t k = 1; k < n; ++k)
-    if (changes[k]) changed.push_back(k);
-  if (changed.size() < kMinOutputChanges) return none;
+  const auto parts = parts_between_breaks(run, n);
+  std::size_t total = 0;
+  for (const auto& [first, end] : parts)
+    for (std::size_t k = first + 1; k < end; ++k) total += changes[k] != 0;
+  if (total < kMinOutputChanges) return none;
   std::vector<std::size_t> on(most);
   for (std::size_t every = most; every >= 2; --every) {
-    std::fill(on.begin(), on.end(), 0);
-    for (std::size_t k : changed) ++on[k % every];
-    const auto best = std::max_element(on.begin(), on.begin() + static_cast<std::ptrdiff_t>(every));
-    const double share = static_cast<double>(*best) / static_cast<double>(changed.size());
-    if (share >= kHeldShare)
-      return {every, static_cast<std::size_t>(best - on.begin()), channel, share, changed.size()};
+    LoopTicks t{every, {}, channel, 0.0, total};
+    std::size_t held = 0;
+    for (const auto& [first, end] : parts) {
+      std::fill(on.begin(), on.end(), 0);
+      for (std::size_t k = first + 1; k < end; ++k)
+        if (changes[k]) ++on[(k - first) % every];
+      const auto best = std::max_element(on.begin(), on.begin() + static_cast<std::ptrdiff_t>(every));
+      held += *best;
+      t.phase.push_back(static_cast<std::size_t>(best - on.begin()));
+    }
+    t.share = static_cast<double>(held) / static_cast<double>(total);
+    if (t.share >= kHeldShare) return t;
   }
   return none;
 }
@@ -413,21 +423,23 @@ std::size_t vcmd_rows_after_tick(const MeasuredRun& run, const LoopTicks& t, std
   const std::vector<double>*ref = run.trace.find(axis + "_ref_mm"), *x = run.trace.find(axis + "_mm"),
         *v = run.trace.find(t.channel);
   if (ref == nullptr || x == nullptr || v == nullptr) return 0;
-  const std::size_t n = v->size(), m = t.every;
+  const auto parts = parts_between_breaks(run, v->size());
+  const std::size_t m = t.every;
   const double period = static_cast<double>(m) * run.sample_period_s;
   for (std::size_t late = 0; late < m; ++late) {
     Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
     Eigen::Vector3d b = Eigen::Vector3d::Zero();
     double yy = 0.0;
     std::size_t rows = 0;
-    for (std::size_t k = t.phase + 2 * m; k < n; k += m) {
-      const std::size_t at = k - late;
-      const Eigen::Vector3d c((*ref)[at] - (*x)[at], ((*ref)[at] - (*ref)[at - m]) / period, 1.0);
-      A.noalias() += c * c.transpose();
-      b.noalias() += c * (*v)[k];
-      yy += (*v)[k] * (*v)[k];
-      ++rows;
-    }
+    for (std::size_t p = 0; p < parts.size(); ++p)
+      for (std::size_t k = parts[p].first + t.phase[p] + 2 * m; k < parts[p].second; k += m) {
+        const std::size_t at = k - late;
+        const Eigen::Vector3d c((*ref)[at] - (*x)[at], ((*ref)[at] - (*ref)[at - m]) / period, 1.0);
+        A.noalias() += c * c.transpose();
+        b.noalias() += c * (*v)[k];
+        yy += (*v)[k] * (*v)[k];
+        ++rows;
+      }
     if (rows < kMinOutputChanges) return 0;
     const Eigen::Vector3d theta = A.ldlt().solve(b);
     const double sse = std::max(0.0, yy - theta.dot(b));
@@ -441,65 +453,64 @@ std::size_t vcmd_rows_after_tick(const MeasuredRun& run, const LoopTicks& t, std
 /// Where the log samples faster than the position loop runs (meta.json's
 /// controller period a whole number of sample periods, or none stated and
 /// the loop's output held between its ticks): the rows of the loop's ticks
-/// kept, the others left out, and said.
+/// kept in each part of the run between gaps in its clock, the others left
+/// out, and said.
 void keep_loop_ticks(MeasuredRun& run) {
   const double dt = run.sample_period_s;
+  const std::size_t n = run.trace.num_rows();
+  const auto parts = parts_between_breaks(run, n);
   LoopTicks ticks;
   if (run.meta.controller_period_s) {
     const double ratio = *run.meta.controller_period_s / dt;
     const auto every = static_cast<std::size_t>(std::llround(ratio));
     if (ratio < 1.5 || every > kMaxRowsPerLoopPeriod || std::abs(ratio - static_cast<double>(every)) > 0.01) return;
-    if (!run.time_breaks.empty()) {
-      run.notes.push_back(fmt::format("{}: meta.json's controller period {} s is {} sample periods, but t_s has gaps: "
-                                      "every row is kept",
-                                      run.trace.source, *run.meta.controller_period_s, every));
-      return;
-    }
     const LoopTicks seen = held_loop_output(run);
-    ticks = seen.every == every ? seen : LoopTicks{every, 0, "", 0.0, 0};
+    ticks = seen.every == every ? seen : LoopTicks{every, std::vector<std::size_t>(parts.size(), 0), "", 0.0, 0};
   } else {
     ticks = held_loop_output(run);
     if (ticks.every < 2) return;
   }
-  const std::size_t n = run.trace.num_rows();
-  if (n < ticks.phase + 2 * ticks.every + 1)
-    throw IoError(fmt::format("{}: {} rows are too few to replay at the position loop's period of {} sample periods",
-                              run.trace.source, n, ticks.every));
   // The loop's ticks: the rows the command changes on, or `late` rows
   // before them where it shows each value late; every axis's velocity
   // command is then read that many rows on.
   std::vector<double> residuals;
   const std::size_t late = vcmd_rows_after_tick(run, ticks, residuals);
-  const std::size_t first = late > 0 ? ticks.phase + ticks.every - late : ticks.phase;
-  std::size_t rows_kept = 0;
+  const std::size_t m = ticks.every;
+  std::vector<std::size_t> rows;  // the rows kept, and where each part's start among them
+  std::vector<std::size_t> breaks;
+  for (std::size_t p = 0; p < parts.size(); ++p) {
+    const auto [first, end] = parts[p];
+    const std::size_t before = rows.size();
+    const std::size_t from = first + (late > 0 ? ticks.phase[p] + m - late : ticks.phase[p]);
+    for (std::size_t k = from; k + late < end; k += m) rows.push_back(k);
+    if (before > 0 && rows.size() > before) breaks.push_back(before);  // a part with no tick leaves no part
+  }
+  if (rows.size() < 3)
+    throw IoError(fmt::format("{}: {} rows are too few to replay at the position loop's period of {} sample periods",
+                              run.trace.source, n, m));
   for (std::size_t c = 0; c < run.trace.columns.size(); ++c) {
     auto& col = run.trace.columns[c];
-    const std::string& name = run.trace.names[c];
-    const bool is_vcmd = name.ends_with("_vcmd_mm_s");
-    const std::size_t shift = is_vcmd ? late : 0;
-    std::size_t kept = 0;
-    for (std::size_t k = first; k + late < n; k += ticks.every) col[kept++] = col[k + shift];
-    col.resize(kept);
-    rows_kept = kept;
+    const std::size_t shift = run.trace.names[c].ends_with("_vcmd_mm_s") ? late : 0;
+    for (std::size_t j = 0; j < rows.size(); ++j) col[j] = col[rows[j] + shift];
+    col.resize(rows.size());
   }
-  if (rows_kept < 3)
-    throw IoError(fmt::format("{}: {} rows are too few to replay at the position loop's period of {} sample periods",
-                              run.trace.source, n, ticks.every));
-  run.sample_period_s = dt * static_cast<double>(ticks.every);
+  run.time_breaks = breaks;
+  run.sample_period_s = dt * static_cast<double>(m);
   if (run.meta.sample_period_s) run.meta.sample_period_s = run.sample_period_s;
-  run.log_rows_per_loop_period = ticks.every;
+  run.log_rows_per_loop_period = m;
   run.loop_period_seen_in = ticks.channel;
   run.loop_period_share = ticks.share;
   const std::string why =
       !ticks.channel.empty()
           ? fmt::format("{} changes only on every {} row ({:.1f} % of the {} rows the loop's output changes on)",
-                        ticks.channel, ordinal(ticks.every), 100.0 * ticks.share, ticks.changes)
+                        ticks.channel, ordinal(m), 100.0 * ticks.share, ticks.changes)
           : std::string("meta.json's controller period (the loop's output does not show on which rows it ticks: "
                         "the first row taken as a tick)");
+  std::string from_rows = fmt::format("row {}", rows.front() + 1);
+  for (std::size_t b : breaks) from_rows += fmt::format(", after the gap from row {}", rows[b] + 1);
   run.notes.push_back(fmt::format("{}: the log samples every {} s, {} times a position-loop period ({}): the {} rows "
-                                  "of the loop's ticks are kept (every {} from row {}), the rows between left out",
-                                  run.trace.source, dt, ticks.every, why, run.trace.num_rows(), ordinal(ticks.every),
-                                  first + 1));
+                                  "of the loop's ticks are kept (every {} from {}), the rows between left out",
+                                  run.trace.source, dt, m, why, rows.size(), ordinal(m), from_rows));
   if (late > 0)
     run.notes.push_back(fmt::format(
         "{}: {} shows each new value {} row{} after the loop's tick (the logger samples it before the loop updates "

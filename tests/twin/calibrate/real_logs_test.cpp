@@ -700,6 +700,33 @@ TEST(RealLogs, TheRowsOfASlowerLoopsTicksAreFoundFromItsHeldOutput) {
                                              "rows the loop's output changes on)"));
     EXPECT_THAT(held.notes.back(), HasSubstr("every 3rd from row 3"));
   }
+  // Gaps in the clock: the ticks fall on other rows of each part after a
+  // gap. Rows 1500 to 1509 and row 2000 missing (a tick among them: 1502,
+  // 1505, 1508 and 2000): the parts after the gaps start at rows 1510 and
+  // 2001, whose ticks (k % 3 == 2) are their rows 1 and 2 (k = 1511, 2003).
+  {
+    const auto d = write("held_gaps", "null", 3, 3000);
+    std::ifstream in(d / "trace.csv");
+    std::vector<std::string> lines;
+    for (std::string line; std::getline(in, line);) lines.push_back(line);
+    in.close();
+    std::ofstream out(d / "trace.csv");
+    for (std::size_t i = 0; i < lines.size(); ++i) {
+      const std::ptrdiff_t row = static_cast<std::ptrdiff_t>(i) - 1;
+      if ((row >= 1500 && row < 1510) || row == 2000) continue;
+      out << lines[i] << "\n";
+    }
+    out.close();
+    const MeasuredRun gaps = load_run(d);
+    EXPECT_EQ(gaps.log_rows_per_loop_period, 3u);
+    const auto& t = gaps.trace.at("t_s");
+    ASSERT_EQ(gaps.time_breaks.size(), 2u);
+    // Every kept row is a tick of the made-up loop (its row k % 3 == 2).
+    for (double tk : t) EXPECT_EQ(std::lround(tk * 1e3) % 3, 2) << tk;
+    EXPECT_NEAR(t[gaps.time_breaks[0]], 1.511, 1e-9);
+    EXPECT_NEAR(t[gaps.time_breaks[1]], 2.003, 1e-9);
+    EXPECT_EQ(gaps.trace.num_rows(), 1000u - 3u - 1u);
+  }
   const MeasuredRun every_row = load_run(write("held1", "null", 1, 3000));
   EXPECT_EQ(every_row.log_rows_per_loop_period, 1u);
   EXPECT_EQ(every_row.trace.num_rows(), 3000u);
@@ -1037,52 +1064,71 @@ TEST(RealLogs, AChannelLoggedARowLateIsReadBackInLine) {
 // other program and on the fitting run's held-out part, gaps and all.
 TEST(RealLogs, GapsInTheClockAreSegments) {
   const double Ts = 1e-3;
-  truth::RunSpec sp = cascade_spec(Ts);
-  // Writes the truth run of `ref` with rows left out: `block` rows from the
-  // first row at or after block_from where the command moves faster than
-  // 5 mm/s, and one row at each such place after `singles`.
-  auto gappy_run = [&](const std::string& name, const std::vector<double>& ref, std::size_t block_from,
-                       std::size_t block, const std::vector<std::size_t>& singles) {
-    sp.reference_mm = ref;
-    const auto whole = work(name + "_whole");
-    truth::write_truth_run(whole, sp);
-    auto moving_from = [&](std::size_t k) {
-      while (k + 1 < ref.size() && std::abs(ref[k + 1] - ref[k]) < 5.0 * Ts) ++k;
-      return k;
+  // position_every 2: the same with the position loop every 2 ms and no
+  // period stated; the rows of its ticks are found in each part between
+  // gaps (their phase moves where a gap drops an odd number of rows), and
+  // the calibration must find the same at the loop's 2 ms.
+  for (const int position_every : {1, 2}) {
+    SCOPED_TRACE(position_every);
+    truth::RunSpec sp = cascade_spec(Ts);
+    sp.cascade.position_every = position_every;
+    if (position_every > 1) sp.period_in_meta = truth::RunSpec::PeriodInMeta::kNone;
+    const std::string tag = position_every > 1 ? "gaps2" : "gaps";
+    // Writes the truth run of `ref` with rows left out: `block` rows from the
+    // first row at or after block_from where the command moves faster than
+    // 5 mm/s, and one row at each such place after `singles`.
+    auto gappy_run = [&](const std::string& name, const std::vector<double>& ref, std::size_t block_from,
+                         std::size_t block, const std::vector<std::size_t>& singles) {
+      sp.reference_mm = ref;
+      const auto whole = work(name + "_whole");
+      truth::write_truth_run(whole, sp);
+      auto moving_from = [&](std::size_t k) {
+        while (k + 1 < ref.size() && std::abs(ref[k + 1] - ref[k]) < 5.0 * Ts) ++k;
+        return k;
+      };
+      std::vector<std::size_t> dropped;
+      const std::size_t cut = moving_from(block_from);
+      for (std::size_t k = cut; k < cut + block; ++k) dropped.push_back(k);
+      for (std::size_t from : singles) dropped.push_back(moving_from(from));
+      const MeasuredRun run = rewritten_run(whole, name, [&](std::ptrdiff_t row, std::string&) {
+        return row < 0 || std::find(dropped.begin(), dropped.end(), static_cast<std::size_t>(row)) == dropped.end();
+      });
+      return std::make_pair(run, cut);
     };
-    std::vector<std::size_t> dropped;
-    const std::size_t cut = moving_from(block_from);
-    for (std::size_t k = cut; k < cut + block; ++k) dropped.push_back(k);
-    for (std::size_t from : singles) dropped.push_back(moving_from(from));
-    const MeasuredRun run = rewritten_run(whole, name, [&](std::ptrdiff_t row, std::string&) {
-      return row < 0 || std::find(dropped.begin(), dropped.end(), static_cast<std::size_t>(row)) == dropped.end();
-    });
-    return std::make_pair(run, cut);
-  };
-  const auto [run, cut] = gappy_run("gaps_fit", program(Ts, 1.0, 24.0), 4000, 700, {9000, 12000, 20000});
-  const MeasuredRun val = gappy_run("gaps_val", program(Ts, 1.6, 12.0), 3000, 300, {7000, 9500}).first;
+    const auto [run, cut] = gappy_run(tag + "_fit", program(Ts, 1.0, 24.0), 4000, 700, {9000, 12000, 20000});
+    const MeasuredRun val = gappy_run(tag + "_val", program(Ts, 1.6, 12.0), 3000, 300, {7000, 9500}).first;
 
-  EXPECT_NEAR(run.sample_period_s, Ts, 1e-9);
-  ASSERT_EQ(run.time_breaks.size(), 4u);
-  EXPECT_EQ(run.time_breaks[0], cut);
-  bool said = false;
-  for (const auto& n : run.notes) said = said || n.find("t_s has 4 gaps") != std::string::npos;
-  EXPECT_TRUE(said);
-  const auto segs = find_segments(run, 0.0, std::nullopt, nullptr);
-  ASSERT_EQ(segs.size(), 5u);
-  for (std::size_t i = 0; i < 4; ++i) EXPECT_EQ(segs[i + 1].begin, run.time_breaks[i]);
-  ASSERT_EQ(val.time_breaks.size(), 3u);
+    EXPECT_NEAR(run.sample_period_s, Ts * position_every, 1e-9);
+    ASSERT_EQ(run.time_breaks.size(), 4u);
+    if (position_every == 1) {
+      EXPECT_EQ(run.time_breaks[0], cut);
+    } else {
+      EXPECT_NEAR(run.trace.at("t_s")[run.time_breaks[0]] - run.trace.at("t_s")[run.time_breaks[0] - 1],
+                  Ts * (700 + position_every), Ts * position_every + 1e-9);
+      bool ticks = false;
+      for (const auto& n : run.notes) ticks = ticks || n.find("after the gap from row") != std::string::npos;
+      EXPECT_TRUE(ticks);
+    }
+    bool said = false;
+    for (const auto& n : run.notes) said = said || n.find("t_s has 4 gaps") != std::string::npos;
+    EXPECT_TRUE(said);
+    const auto segs = find_segments(run, 0.0, std::nullopt, nullptr);
+    ASSERT_EQ(segs.size(), 5u);
+    for (std::size_t i = 0; i < 4; ++i) EXPECT_EQ(segs[i + 1].begin, run.time_breaks[i]);
+    ASSERT_EQ(val.time_breaks.size(), 3u);
 
-  const DataCalibration r = calibrate_from_data({run}, {val}, machine_for_run(run, "", nullptr));
-  ASSERT_EQ(r.axis.size(), 1u);
-  const AxisFromData& ax = r.axis[0];
-  ASSERT_TRUE(ax.identified) << ax.note;
-  expect_truth_gains(ax, sp);
-  expect_held_out_check(r);
-  ASSERT_EQ(r.fit_runs.size(), 1u);
-  EXPECT_LT(r.fit_runs[0].calibrated.nrms.at("x_err_mm"), 0.01);
-  // The twin's own trace holds every logged row, at its logged time.
-  EXPECT_EQ(r.replay_after.t_s, run.trace.at("t_s"));
+    const DataCalibration r = calibrate_from_data({run}, {val}, machine_for_run(run, "", nullptr));
+    EXPECT_DOUBLE_EQ(r.final_machine.Ts_s, Ts * position_every);
+    ASSERT_EQ(r.axis.size(), 1u);
+    const AxisFromData& ax = r.axis[0];
+    ASSERT_TRUE(ax.identified) << ax.note;
+    expect_truth_gains(ax, sp);
+    expect_held_out_check(r);
+    ASSERT_EQ(r.fit_runs.size(), 1u);
+    EXPECT_LT(r.fit_runs[0].calibrated.nrms.at("x_err_mm"), 0.01);
+    // The twin's own trace holds every logged row, at its logged time.
+    EXPECT_EQ(r.replay_after.t_s, run.trace.at("t_s"));
+  }
 }
 
 // One Coulomb level where the log does not support two. The truth's
