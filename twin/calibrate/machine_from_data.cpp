@@ -20,6 +20,7 @@
 #include "twin/calibrate/signal.hpp"
 #include "twin/core/error.hpp"
 #include "twin/core/golden_section.hpp"
+#include "twin/core/text.hpp"
 
 namespace twin::analysis {
 namespace {
@@ -2674,11 +2675,11 @@ double controller_period(const MeasuredRun& r0, const DataCalibrationOptions& op
   } else if (const std::size_t every = r0.log_rows_per_loop_period; every > 1) {
     // load_run kept the rows of the loop's ticks (its own note says which).
     Ts = r0.sample_period_s;
-    out.notes.push_back(fmt::format("controller period {} s: {} changes only every {}{} row of the {} s log ({:.1f} % "
+    out.notes.push_back(fmt::format("controller period {} s: {} changes only every {} row of the {} s log ({:.1f} % "
                                     "of its changes), as a position loop of that period holds its output between its "
                                     "ticks",
-                                    Ts, r0.loop_period_seen_in, every, every == 2 ? "nd" : every == 3 ? "rd" : "th",
-                                    Ts / static_cast<double>(every), 100.0 * r0.loop_period_share));
+                                    Ts, r0.loop_period_seen_in, ordinal(every), Ts / static_cast<double>(every),
+                                    100.0 * r0.loop_period_share));
   } else if (r0.sample_period_s <= 1e-3 + 1e-12) {
     Ts = r0.sample_period_s;
     out.notes.push_back(fmt::format("controller period not stated: the log's own period {} s is taken", Ts));

@@ -1,8 +1,10 @@
 #pragma once
-/// Quoting user text in one-line error messages.
+/// Quoting user text in one-line error messages, and small words for notes.
 #include <cstddef>
 #include <string>
 #include <string_view>
+
+#include <fmt/format.h>
 
 namespace twin {
 
@@ -37,5 +39,8 @@ inline std::string printable_excerpt(std::string_view text, std::size_t max_char
   }
   return out;
 }
+
+/// "2nd", "3rd", "4th", ... for 2 to 20 (the rows of a loop period in notes).
+inline std::string ordinal(std::size_t k) { return fmt::format("{}{}", k, k == 2 ? "nd" : k == 3 ? "rd" : "th"); }
 
 }  // namespace twin

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "twin/core/error.hpp"
+#include "twin/core/text.hpp"
 #include "twin/io/atomic_file.hpp"
 #include "twin/io/machine_file.hpp"
 #include "twin/sim/cosimulation.hpp"
@@ -402,9 +403,6 @@ LoopTicks held_loop_output(const MeasuredRun& run) {
   }
   return none;
 }
-
-/// "2nd", "3rd", "4th", ... (2 to 20).
-std::string ordinal(std::size_t k) { return fmt::format("{}{}", k, k == 2 ? "nd" : k == 3 ? "rd" : "th"); }
 
 /// How many rows after the loop's tick its velocity command shows a new
 /// value (0 to every - 1): a logger that samples the command before the loop
