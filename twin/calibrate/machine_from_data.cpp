@@ -515,6 +515,15 @@ struct LawFitOptions {
   /// averages what it traces), not the torque of the row's own tick.
   bool period_mean{false};
 };
+/// The velocity loop's ticks before the row's own that `o` takes the law's
+/// columns at (LawFitOptions::lag_fraction times inner_ticks, where that is
+/// a whole count of ticks of a law that logs its tick's torque), else 0.
+int tick_lag_of(const LawFitOptions& o) {
+  if (o.inner_ticks <= 1 || o.period_mean || !(o.lag_fraction > 0.0)) return 0;
+  const double t = o.lag_fraction * o.inner_ticks;
+  const long r = std::lround(t);
+  return r >= 1 && r < o.inner_ticks && std::abs(t - static_cast<double>(r)) < 1e-9 ? static_cast<int>(r) : 0;
+}
 /// Where the lead columns start in VelocityLoopFit::ls.theta.
 std::size_t lead_column(const LawFitOptions& o) { return o.current_lag ? 3 : 2; }
 /// `o` with what the axis's law has been found to need where the speed is
@@ -534,8 +543,12 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
   const auto [lag, lag_fraction, clip, current_lag, lag_a, torque_ff, lead_period_mm, by_table_motion, limit_rows,
               constant_after_limit, inner_ticks, bend_J, bend_s, period_mean] = o;
   // The bend's share (below) from the law's Kvp: the law fitted without it
-  // first.
-  if (inner_ticks > 1 && bend_J > 0.0 && bend_s == 0.0 && !runs.empty()) {
+  // first. Not at a tick before the row's (a dead time of part of a row):
+  // the speed then bends by the torques the ticks apply, the dead time's
+  // ticks behind the law's, not by the law's own (with it, a 1 ms dead time
+  // under a 2 ms loop left twice the residual of the straight line).
+  const int tick_lag = tick_lag_of(o);
+  if (inner_ticks > 1 && bend_J > 0.0 && bend_s == 0.0 && !runs.empty() && tick_lag == 0) {
     LawFitOptions straight_o = o;
     straight_o.bend_J = 0.0;
     VelocityLoopFit straight = fit_velocity_loop(runs, a, channel, straight_o);
@@ -563,14 +576,18 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
   // against the log's 0.080 of noise; Kvp and Ki within 0.1 %; a free column
   // of the speed fitted it as well, 5.0e-6 s against 4.9e-6 s so, but took
   // the count of ticks' share of the sum and the steps of a gap too).
-  const bool speed_col = inner_ticks > 1 && bend_s > 0.0;
+  const bool speed_col = inner_ticks > 1 && bend_s > 0.0 && tick_lag == 0;
   // A column `lag` (and lag_fraction) rows back, from row j of its segment;
   // 0 before its first row. Between two rows a cubic through the four
   // about (Catmull-Rom), linear where the outer two are not in the segment.
   const std::size_t back = lag + (lag_fraction > 0.0 ? 1 : 0);
+  // With inner_ticks > 1 (the row's own tick logged), a part of a row that
+  // is a whole count of the velocity loop's ticks is taken at that tick
+  // exactly (below), not off the cubic: the tick holds row k-1's command,
+  // which the cubic mixes with row k's.
   const auto lagged = [&](const std::vector<double>& c, std::size_t j) {
     if (j < back) return 0.0;
-    if (lag_fraction == 0.0) return c[j - lag];
+    if (lag_fraction == 0.0 || tick_lag > 0) return c[j - lag];
     const double u = lag_fraction, p1 = c[j - lag], p2 = c[j - lag - 1];
     if (j < lag + 2 || j - lag + 1 >= c.size()) return (1.0 - u) * p1 + u * p2;
     return catmull_rom(c[j - lag + 1], p1, p2, c[j - lag - 2], u);
@@ -675,6 +692,41 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
           if (torque_ff) ar[j] = ar_tick[j - 1];
           if (lead)
             for (std::size_t c = 0; c < 4; ++c) l[c][j] = 0.5 * (l_tick[c][j - 1] + l_tick[c][j]);
+        }
+      }
+      // The tick tick_lag ticks before row k's, q = n - tick_lag ticks after
+      // row k-1's: its error is on row k-1's command and the speed at q/n of
+      // the row; its integral is the ticks' errors times dt / n summed to it.
+      // The speed between two rows is read off the cubic through the four
+      // about (the line where those are not in the segment), here and for
+      // the integral's sum over the ticks of each row: on the line, a 2 ms
+      // dead time under a 4 ms loop over a 1 ms velocity loop fitted best a
+      // tick early. The feedforward is row k-1's, a lead error's columns
+      // taken at q/n between the rows.
+      if (tick_lag > 0) {
+        const int n = inner_ticks, q = n - tick_lag;
+        const double Tv = rd.run->sample_period_s / n;
+        const auto speed_at = [&](std::size_t k, int tk) {  // tk ticks after row k - 1's, 0 < tk <= n
+          const double u = static_cast<double>(tk) / n;
+          if (tk == n) return v[k];
+          if (k < s.begin + 2 || k + 1 >= end) return (1.0 - u) * v[k - 1] + u * v[k];
+          return catmull_rom(v[k - 2], v[k - 1], v[k], v[k + 1], u);
+        };
+        const std::vector<double> ar_tick = ar;
+        std::array<std::vector<double>, 4> l_tick = l;
+        double I_row = ie[0];  // the integral at row k - 1's tick
+        for (std::size_t j = 1; j < e.size(); ++j) {
+          const std::size_t k = s.begin + j;
+          double I = I_row;
+          for (int tk = 1; tk <= q; ++tk) I += Tv * (vc[k - 1] - speed_at(k, tk));
+          e[j] = vc[k - 1] - speed_at(k, q);
+          ie[j] = I;
+          for (int tk = q + 1; tk < n; ++tk) I += Tv * (vc[k - 1] - speed_at(k, tk));
+          I_row = I + Tv * (vc[k] - v[k]);
+          const double sq = static_cast<double>(q) / n;
+          if (torque_ff) ar[j] = ar_tick[j - 1];
+          if (lead)
+            for (std::size_t c = 0; c < 4; ++c) l[c][j] = (1.0 - sq) * l_tick[c][j - 1] + sq * l_tick[c][j];
         }
       }
       if (lag_a > 0.0)
@@ -2834,6 +2886,41 @@ bool drive_on_logged_speed(const AxisFit& f, Axis a) {
   return resolves_velocity_loop(f.r0.sample_period_s) && all_runs_log(f.runs, col(a, "_v_mm_s"));
 }
 
+/// What the torque applied over the row k to k+1 of a velocity loop that
+/// runs n times a row exceeds the logged torque of row k by (the mean of the
+/// n ticks' torques less the first's), where the drive applies the law's
+/// torque `dead` ticks late and logs what it applies: the applied ticks are
+/// the law's ticks -p .. n-1-p about row b = k - dead / n, p = dead % n.
+/// Each tick's speed error is on its period's command (row b-1's before row
+/// b's tick, row b's from it) and the speed moving linearly between the rows;
+/// from one tick to the next the law's torque moves by Kvp times the error's
+/// change plus Ki Tv times the new error (Ki_Tv). With no dead time this is
+/// -Kvp dv (n-1)/(2n) + Ki Tv (n-1) (e/2 - dv (n+1)/(6n)), e row k's speed
+/// error and dv the speed's change over the row. nullopt where row b is not
+/// inside its segment.
+std::optional<double> law_ticks_mean_offset(const std::vector<double>& vc, const std::vector<double>& v,
+                                            const RunData& rd, std::size_t k, int n, int dead, double Kvp,
+                                            double Ki_Tv) {
+  const auto L = static_cast<std::size_t>(dead / n);
+  const int p = dead % n;
+  if (k < L || !rd.interior[k - L]) return std::nullopt;  // rows b - 1 to b + 1 in one segment
+  const std::size_t b = k - L;
+  const auto error_at = [&](int m) {
+    const double sm = static_cast<double>(m) / n;
+    if (m < 0) return vc[b - 1] - (v[b] + sm * (v[b] - v[b - 1]));
+    if (m == 0) return vc[b] - v[b];
+    return vc[b] - (v[b] + sm * (v[b + 1] - v[b]));
+  };
+  double Tm = 0.0, sum = 0.0, e_prev = error_at(-p);
+  for (int m = -p + 1; m <= n - 1 - p; ++m) {
+    const double e = error_at(m);
+    Tm += Kvp * (e - e_prev) + Ki_Tv * e;
+    sum += Tm;
+    e_prev = e;
+  }
+  return sum / n;
+}
+
 DriveRows drive_rows(const AxisFit& f, const AxisFromData& ax, const DriveRowsOptions& o = {}) {
   const std::size_t ahead = o.ahead;
   const double a_lag = o.a_lag;
@@ -2879,10 +2966,23 @@ DriveRows drive_rows(const AxisFit& f, const AxisFromData& ax, const DriveRowsOp
   // row's speed error and Tv the loop's period. Paired with the row's own
   // torque (its sawtooth's top), a 125 us loop under a 1 ms one took J 2 %
   // high, and the replay's torque at rest was 0.097 NRMS off the log against
-  // 0.022 with the truth's J; with the mean, J within 0.3 %.
+  // 0.022 with the truth's J; with the mean, J within 0.3 %. Behind a dead
+  // time the ticks applied over the row are the law's that many ticks
+  // earlier (law_ticks_mean_offset), on the law's gains at that lag: a 1 ms
+  // one under a 2 ms loop took J 1.3 % high with the ticks taken from the
+  // row on and the gains fitted at no lag.
   const int n_inner = ax.law_inner_ticks;
   const bool within = own_speed && n_inner > 1 && ax.torque_held_over_row && ax.velocity_loop_from_data;
-  const double Kvp = ax.gains.Kvp_torque_s_per_rad, Ki = ax.gains.Tn_s > 0.0 ? Kvp / ax.gains.Tn_s : 0.0;
+  // The loop's dead time in its ticks (the law's lag: whole rows and a part
+  // of one), which the torque applied over a row is that many ticks behind.
+  const int dead_ticks =
+      within ? static_cast<int>(ax.torque_lag_samples) * n_inner +
+                   static_cast<int>(std::lround(ax.torque_lag_fraction * n_inner))
+             : 0;
+  // The law's gains at its dead time where it has one (fitted at lag 0 the
+  // law takes the dead time's misfit into its gains).
+  const controller::CascadeGains& law = dead_ticks > 0 ? ax.gains_at_lag : ax.gains;
+  const double Kvp = law.Kvp_torque_s_per_rad, Ki = law.Tn_s > 0.0 ? Kvp / law.Tn_s : 0.0;
   std::vector<const std::vector<double>*> command(f.runs.size(), nullptr);
   if (within)
     for (std::size_t r = 0; r < f.runs.size(); ++r)
@@ -2902,18 +3002,19 @@ DriveRows drive_rows(const AxisFit& f, const AxisFromData& ax, const DriveRowsOp
       *m = Motion{through(m->acc, before->acc), through(m->vel, before->vel), through(m->pos, before->pos),
                   through(m->neg, before->neg)};
     }
+    const bool forward = own_speed && (o.forward || ax.torque_held_over_row);
+    double T = logged_torque_at(*ch, k, ax.logs_period_mean(), forward);
+    if (within && !ax.logs_period_mean()) {
+      const std::optional<double> off =
+          law_ticks_mean_offset(*command[r], *speed[r], f.runs[r], k, n_inner, dead_ticks, Kvp, Ki * f.Ts / n_inner);
+      if (!off) return;
+      T += *off;
+    }
     d.acc.push_back(m->acc);
     d.vel.push_back(m->vel);
     d.pos.push_back(m->pos);
     d.neg.push_back(m->neg);
     d.one.push_back(1.0);
-    const bool forward = own_speed && (o.forward || ax.torque_held_over_row);
-    double T = logged_torque_at(*ch, k, ax.logs_period_mean(), forward);
-    if (within && !ax.logs_period_mean()) {
-      const double n = n_inner, dv = (*speed[r])[k + 1] - (*speed[r])[k], e = (*command[r])[k] - (*speed[r])[k];
-      T += -Kvp * dv * (n - 1.0) / (2.0 * n) +
-           Ki * (f.Ts / n) * (n - 1.0) * (0.5 * e - dv * (n + 1.0) / (6.0 * n));
-    }
     d.T.push_back(T);
     d.a2 += d.acc.back() * d.acc.back();
     d.T2 += d.T.back() * d.T.back();
@@ -3139,6 +3240,17 @@ void set_velocity_loop(const VelocityLoopFit& vl, const AxisFit& f, controller::
   g.Jff_torque_s2_per_rad = vl.torque_ff ? vl.ls.theta.back() : 0.0;
 }
 
+/// A dead time of part of a position-loop period is looked for in steps of
+/// the velocity loop's ticks where it runs at most this many times a period.
+/// The columns at a tick between two rows read the speed there off the cubic
+/// through the rows, and the law's integral sums n - 1 such speeds a row:
+/// at 4 ticks a row their small error each row (0.016 mm/s RMS at the
+/// middle tick of a 4 ms row) drifts through the integral, and a 2 ms dead
+/// time under a 4 ms loop fitted best a tick early (residual 0.71 against
+/// 0.08 on the truth's own speeds at its ticks). At 2 a row one speed is
+/// read a row and the dead time is found.
+constexpr int kTickLagMaxInnerTicks = 2;
+
 /// The rows a torque may follow its law late: up to 10 ms, 1 to 10 rows.
 std::size_t max_torque_lag_rows(const AxisFit& f) {
   return static_cast<std::size_t>(std::clamp(std::lround(0.01 / f.r0.sample_period_s), 1L, 10L));
@@ -3158,7 +3270,12 @@ void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const Torque
   ax.gains_at_lag = ax.gains;
   ax.torque_lag_samples = 0;
   ax.torque_lag_fraction = 0.0;
-  const long per_row = std::clamp(std::lround(f.r0.sample_period_s / f.Ts), 1L, 10L);
+  // A velocity loop twice as fast as the position loop logged at its ticks:
+  // the lags are its ticks (fit_velocity_loop takes the columns at each).
+  const bool by_ticks =
+      ax.law_inner_ticks > 1 && ax.law_inner_ticks <= kTickLagMaxInnerTicks && !ax.logs_period_mean();
+  const long per_row =
+      by_ticks ? ax.law_inner_ticks : std::clamp(std::lround(f.r0.sample_period_s / f.Ts), 1L, 10L);
   double best = vl.ls.residual_rms;
   for (std::size_t step = 1; step <= max_torque_lag_rows(f) * static_cast<std::size_t>(per_row); ++step) {
     const std::size_t lag = step / static_cast<std::size_t>(per_row);
@@ -3439,15 +3556,18 @@ std::string choose_inner_ticks(const AxisFit& f, AxisFromData& ax, const LawFitO
   if (!vl.ls.ok || !samples_every_loop_period(f)) return {};
   const auto best_over_lags = [&](int n, bool mean) {
     std::optional<VelocityLoopFit> best;
-    for (std::size_t lag = 0; lag <= max_torque_lag_rows(f); ++lag) {
-      LawFitOptions at = law_options(ax, o);
-      at.lag = lag;
-      at.inner_ticks = n;
-      at.bend_J = 0.0;
-      at.period_mean = mean;
-      VelocityLoopFit fit = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, at);
-      if (fit.gains_physical() && (!best || fit.ls.residual_rms < best->ls.residual_rms)) best = std::move(fit);
-    }
+    const int steps = mean || n > kTickLagMaxInnerTicks ? 1 : n;
+    for (std::size_t lag = 0; lag <= max_torque_lag_rows(f); ++lag)
+      for (int step = 0; step < steps; ++step) {
+        LawFitOptions at = law_options(ax, o);
+        at.lag = lag;
+        at.lag_fraction = static_cast<double>(step) / steps;
+        at.inner_ticks = n;
+        at.bend_J = 0.0;
+        at.period_mean = mean;
+        VelocityLoopFit fit = fit_velocity_loop(f.runs, ax.axis, ax.channel.column, at);
+        if (fit.gains_physical() && (!best || fit.ls.residual_rms < best->ls.residual_rms)) best = std::move(fit);
+      }
     return best;
   };
   const std::optional<VelocityLoopFit> once = best_over_lags(1, false);
@@ -3761,11 +3881,16 @@ void refit_drive_under_fast_velocity_loop(const AxisFit& f, AxisFromData& ax) {
   trial.torque_held_over_row = true;
   std::string why_not;
   if (!fit_drive(f, trial, {}, why_not)) return;
+  const std::string behind =
+      ax.torque_lag_rows() > 0.0
+          ? fmt::format(", {:.3g} ms earlier behind the dead time the law shows",
+                        1e3 * ax.torque_lag_rows() * f.r0.sample_period_s)
+          : std::string();
   trial.torque_timing = fmt::format("the drive fitted on the speed's forward difference over the row against the "
-                                    "torque's mean over the velocity loop's {} ticks in it (the law's torque at each, "
+                                    "torque's mean over the velocity loop's {} ticks in it (the law's torque at each{}, "
                                     "the speed moving linearly from the row to the next): J {:.4g}, {:.4g} on the "
                                     "row's own torque",
-                                    ax.law_inner_ticks, trial.J, ax.J);
+                                    ax.law_inner_ticks, behind, trial.J, ax.J);
   ax = std::move(trial);
 }
 
@@ -3782,7 +3907,7 @@ AxisFromData identify_axis_from_data(const AxisFit& f, Axis a, sim::MachineDefin
   if (!identify_drive_in_channel(f, ax, out)) return ax;
   identify_velocity_loop(f, ax, have_vcmd);
   refit_drive_under_fast_velocity_loop(f, ax);
-  if (ax.velocity_loop_from_data && ax.gains.tau_i_s == 0.0 && ax.torque_lag_samples == 0 &&
+  if (ax.velocity_loop_from_data && ax.gains.tau_i_s == 0.0 && ax.torque_lag_rows() == 0.0 &&
       samples_every_loop_period(f))
     ax.motion_behind_torque = motion_behind_torque(f, ax);
   set_identified_axis(m.axes[index(a)], ax);
