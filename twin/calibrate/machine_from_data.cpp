@@ -524,6 +524,9 @@ int tick_lag_of(const LawFitOptions& o) {
   const long r = std::lround(t);
   return r >= 1 && r < o.inner_ticks && std::abs(t - static_cast<double>(r)) < 1e-9 ? static_cast<int>(r) : 0;
 }
+/// The rows over which the integral of a law taken at a tick between rows
+/// is pulled to the one the position's change gives (fit_velocity_loop).
+constexpr double kTickSumDriftRows = 10.0;
 /// Where the lead columns start in VelocityLoopFit::ls.theta.
 std::size_t lead_column(const LawFitOptions& o) { return o.current_lag ? 3 : 2; }
 /// `o` with what the axis's law has been found to need where the speed is
@@ -698,11 +701,20 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
       // row k-1's: its error is on row k-1's command and the speed at q/n of
       // the row; its integral is the ticks' errors times dt / n summed to it.
       // The speed between two rows is read off the cubic through the four
-      // about (the line where those are not in the segment), here and for
-      // the integral's sum over the ticks of each row: on the line, a 2 ms
-      // dead time under a 4 ms loop over a 1 ms velocity loop fitted best a
-      // tick early. The feedforward is row k-1's, a lead error's columns
-      // taken at q/n between the rows.
+      // about (the line where those are not in the segment): on the line, a
+      // 2 ms dead time under a 4 ms loop over a 1 ms velocity loop fitted
+      // best a tick early. Summed a whole row at a time, the cubic's small
+      // error each row (0.016 mm/s RMS at the middle tick of a 4 ms row)
+      // drifts through the integral, whose gain is large (1570 raw per mm
+      // there): where the drive's speed and the position are logged (no
+      // lead error's or gap's columns, which part the two), the row's sum of
+      // the ticks' speeds is also the position's change plus Tv/2 the
+      // speed's (the speed moves linearly over each tick under its held
+      // torque), and the integral is pulled to that over kTickSumDriftRows
+      // rows (the position's change alone carries its rounding into every
+      // row: residual 0.46 against 0.31 so at 4 ms, 0.26 against 0.17 at 2
+      // ms; the cubic alone 1.41 and 0.50). The feedforward is row k-1's, a
+      // lead error's columns taken at q/n between the rows.
       if (tick_lag > 0) {
         const int n = inner_ticks, q = n - tick_lag;
         const double Tv = rd.run->sample_period_s / n;
@@ -714,15 +726,28 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
         };
         const std::vector<double> ar_tick = ar;
         std::array<std::vector<double>, 4> l_tick = l;
-        double I_row = ie[0];  // the integral at row k - 1's tick
+        const std::vector<double>* x_row =
+            lead || by_table_motion || has_lowpassed_twin(t, channel) ? nullptr : t.find(col(a, "_mm"));
+        const double keep_drift = std::exp(-1.0 / kTickSumDriftRows);
+        double I_row = ie[0];    // the integral at row k - 1's tick
+        double I_cubic = ie[0];  // the same summed off the cubic alone
+        double I_pos = ie[0];    // the same from the position's change
+        double drift = 0.0;      // I_pos - I_cubic, low-passed
         for (std::size_t j = 1; j < e.size(); ++j) {
           const std::size_t k = s.begin + j;
           double I = I_row;
           for (int tk = 1; tk <= q; ++tk) I += Tv * (vc[k - 1] - speed_at(k, tk));
           e[j] = vc[k - 1] - speed_at(k, q);
           ie[j] = I;
-          for (int tk = q + 1; tk < n; ++tk) I += Tv * (vc[k - 1] - speed_at(k, tk));
-          I_row = I + Tv * (vc[k] - v[k]);
+          double row_sum = Tv * (vc[k] - v[k]);
+          for (int tk = 1; tk < n; ++tk) row_sum += Tv * (vc[k - 1] - speed_at(k, tk));
+          I_cubic += row_sum;
+          if (x_row != nullptr) {
+            I_pos += Tv * ((n - 1) * vc[k - 1] + vc[k]) - ((*x_row)[k] - (*x_row)[k - 1]) -
+                     0.5 * Tv * (v[k] - v[k - 1]);
+            drift = keep_drift * drift + (1.0 - keep_drift) * (I_pos - I_cubic);
+          }
+          I_row = I_cubic + drift;
           const double sq = static_cast<double>(q) / n;
           if (torque_ff) ar[j] = ar_tick[j - 1];
           if (lead)
@@ -2905,11 +2930,16 @@ std::optional<double> law_ticks_mean_offset(const std::vector<double>& vc, const
   const int p = dead % n;
   if (k < L || !rd.interior[k - L]) return std::nullopt;  // rows b - 1 to b + 1 in one segment
   const std::size_t b = k - L;
+  // Behind a dead time the speed between the rows is read off the cubic
+  // through the four about (the line where row b+2 is not in the segment).
+  const bool cubic = dead > 0, cubic_after = cubic && b + 1 < rd.interior.size() && rd.interior[b + 1];
   const auto error_at = [&](int m) {
     const double sm = static_cast<double>(m) / n;
-    if (m < 0) return vc[b - 1] - (v[b] + sm * (v[b] - v[b - 1]));
+    if (m < 0)
+      return vc[b - 1] - (cubic ? catmull_rom(v[b - 2], v[b - 1], v[b], v[b + 1], 1.0 + sm)
+                                : v[b] + sm * (v[b] - v[b - 1]));
     if (m == 0) return vc[b] - v[b];
-    return vc[b] - (v[b] + sm * (v[b + 1] - v[b]));
+    return vc[b] - (cubic_after ? catmull_rom(v[b - 1], v[b], v[b + 1], v[b + 2], sm) : v[b] + sm * (v[b + 1] - v[b]));
   };
   double Tm = 0.0, sum = 0.0, e_prev = error_at(-p);
   for (int m = -p + 1; m <= n - 1 - p; ++m) {
@@ -3241,15 +3271,11 @@ void set_velocity_loop(const VelocityLoopFit& vl, const AxisFit& f, controller::
 }
 
 /// A dead time of part of a position-loop period is looked for in steps of
-/// the velocity loop's ticks where it runs at most this many times a period.
-/// The columns at a tick between two rows read the speed there off the cubic
-/// through the rows, and the law's integral sums n - 1 such speeds a row:
-/// at 4 ticks a row their small error each row (0.016 mm/s RMS at the
-/// middle tick of a 4 ms row) drifts through the integral, and a 2 ms dead
-/// time under a 4 ms loop fitted best a tick early (residual 0.71 against
-/// 0.08 on the truth's own speeds at its ticks). At 2 a row one speed is
-/// read a row and the dead time is found.
-constexpr int kTickLagMaxInnerTicks = 2;
+/// the velocity loop's ticks where it runs at most this many times a period
+/// (the columns at a tick read the speeds between the rows off a cubic, and
+/// at 8 or 16 ticks a row a tick's dead time is one a current loop's lag
+/// covers).
+constexpr int kTickLagMaxInnerTicks = 4;
 
 /// The rows a torque may follow its law late: up to 10 ms, 1 to 10 rows.
 std::size_t max_torque_lag_rows(const AxisFit& f) {
