@@ -2957,7 +2957,8 @@ bool drive_on_logged_speed(const AxisFit& f, Axis a) {
 /// torque `dead` ticks late and logs what it applies: the applied ticks are
 /// the law's ticks -p .. n-1-p about row b = k - dead / n, p = dead % n.
 /// Each tick's speed error is on its period's command (row b-1's before row
-/// b's tick, row b's from it) and the speed moving linearly between the rows;
+/// b's tick, row b's from it) and the speed between the rows on the line
+/// (behind a dead time off the cubic through the rows about);
 /// from one tick to the next the law's torque moves by Kvp times the error's
 /// change plus Ki Tv times the new error (Ki_Tv). With no dead time this is
 /// -Kvp dv (n-1)/(2n) + Ki Tv (n-1) (e/2 - dv (n+1)/(6n)), e row k's speed
@@ -3336,8 +3337,8 @@ void velocity_loop_lag(const AxisFit& f, const VelocityLoopFit& vl, const Torque
   ax.gains_at_lag = ax.gains;
   ax.torque_lag_samples = 0;
   ax.torque_lag_fraction = 0.0;
-  // A velocity loop twice as fast as the position loop logged at its ticks:
-  // the lags are its ticks (fit_velocity_loop takes the columns at each).
+  // A velocity loop 2 to 4 times as fast as the position loop logged at its
+  // ticks: the lags are its ticks (fit_velocity_loop takes the columns at each).
   const bool by_ticks =
       ax.law_inner_ticks > 1 && ax.law_inner_ticks <= kTickLagMaxInnerTicks && !ax.logs_period_mean();
   const long per_row =
@@ -3960,16 +3961,16 @@ void refit_drive_under_fast_velocity_loop(const AxisFit& f, AxisFromData& ax) {
   trial.torque_held_over_row = true;
   std::string why_not;
   if (!fit_drive(f, trial, {}, why_not)) return;
-  const std::string behind =
+  const std::string at_each =
       ax.torque_lag_rows() > 0.0
-          ? fmt::format(", {:.3g} ms earlier behind the dead time the law shows",
+          ? fmt::format("the law's torque at each, {:.3g} ms earlier behind the dead time the law shows, the speed "
+                        "between the rows off the cubic through them",
                         1e3 * ax.torque_lag_rows() * f.r0.sample_period_s)
-          : std::string();
+          : std::string("the law's torque at each, the speed moving linearly from the row to the next");
   trial.torque_timing = fmt::format("the drive fitted on the speed's forward difference over the row against the "
-                                    "torque's mean over the velocity loop's {} ticks in it (the law's torque at each{}, "
-                                    "the speed moving linearly from the row to the next): J {:.4g}, {:.4g} on the "
-                                    "row's own torque",
-                                    ax.law_inner_ticks, behind, trial.J, ax.J);
+                                    "torque's mean over the velocity loop's {} ticks in it ({}): J {:.4g}, {:.4g} on "
+                                    "the row's own torque",
+                                    ax.law_inner_ticks, at_each, trial.J, ax.J);
   ax = std::move(trial);
 }
 
