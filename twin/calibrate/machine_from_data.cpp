@@ -768,25 +768,26 @@ VelocityLoopFit fit_velocity_loop(const std::vector<RunData>& runs, Axis a, cons
         const std::vector<double>* x_row =
             lead || by_table_motion || has_lowpassed_twin(t, channel) ? nullptr : t.find(col(a, "_mm"));
         const double keep_drift = std::exp(-1.0 / kTickSumDriftRows);
-        double I_row = ie[0];    // the integral at row k - 1's tick
-        double I_cubic = ie[0];  // the same summed off the cubic alone
+        double I_cubic = ie[0];  // the integral at row k - 1's tick, summed off the cubic alone
         double I_pos = ie[0];    // the same from the position's change
         double drift = 0.0;      // I_pos - I_cubic, low-passed
         for (std::size_t j = 1; j < e.size(); ++j) {
           const std::size_t k = s.begin + j;
-          double I = I_row;
-          for (int tk = 1; tk <= q; ++tk) I += Tv * (vc[k - 1] - speed_at(k, tk));
-          e[j] = vc[k - 1] - speed_at(k, q);
-          ie[j] = I;
-          double row_sum = Tv * (vc[k] - v[k]);
-          for (int tk = 1; tk < n; ++tk) row_sum += Tv * (vc[k - 1] - speed_at(k, tk));
-          I_cubic += row_sum;
+          double row_sum = 0.0;  // the ticks' errors times Tv from row k - 1's on
+          for (int tk = 1; tk < n; ++tk) {
+            const double speed = speed_at(k, tk);
+            row_sum += Tv * (vc[k - 1] - speed);
+            if (tk == q) {
+              e[j] = vc[k - 1] - speed;
+              ie[j] = I_cubic + drift + row_sum;
+            }
+          }
+          I_cubic += row_sum + Tv * (vc[k] - v[k]);
           if (x_row != nullptr) {
             I_pos += Tv * ((n - 1) * vc[k - 1] + vc[k]) - ((*x_row)[k] - (*x_row)[k - 1]) -
                      0.5 * Tv * (v[k] - v[k - 1]);
             drift = keep_drift * drift + (1.0 - keep_drift) * (I_pos - I_cubic);
           }
-          I_row = I_cubic + drift;
           const double sq = static_cast<double>(q) / n;
           if (torque_ff) ar[j] = ar_tick[j - 1];
           if (lead)

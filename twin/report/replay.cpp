@@ -359,8 +359,9 @@ struct LoopTicks {
 /// clock (the logger's clock restarts there) holds, over the parts, 99 % of
 /// at least 100 changes. A loop at the log's period changes it on any row
 /// (its following error moves with the encoder's counts), so no phase holds
-/// most; every = 1 where none is found.
-LoopTicks held_loop_output(const MeasuredRun& run) {
+/// most; every = 1 where none is found. `parts`: the run's parts between
+/// gaps in its clock (parts_between_breaks).
+LoopTicks held_loop_output(const MeasuredRun& run, const std::vector<std::pair<std::size_t, std::size_t>>& parts) {
   LoopTicks none;
   const std::size_t n = run.trace.num_rows();
   const double dt = run.sample_period_s;
@@ -381,7 +382,6 @@ LoopTicks held_loop_output(const MeasuredRun& run) {
     }
     if (!channel.empty()) break;
   }
-  const auto parts = parts_between_breaks(run, n);
   std::size_t total = 0;
   for (const auto& [first, end] : parts)
     for (std::size_t k = first + 1; k < end; ++k) total += changes[k] != 0;
@@ -412,8 +412,9 @@ LoopTicks held_loop_output(const MeasuredRun& run) {
 /// over a loop period taken s rows earlier; s is the one of the smallest
 /// residual, where that is under half the residual at s = 0 (the law holds
 /// exactly at its own tick, but for the log's rounding). `residuals`
-/// receives the residual RMS at each s.
-std::size_t vcmd_rows_after_tick(const MeasuredRun& run, const LoopTicks& t, std::vector<double>& residuals) {
+/// receives the residual RMS at each s; `parts` as held_loop_output's.
+std::size_t vcmd_rows_after_tick(const MeasuredRun& run, const std::vector<std::pair<std::size_t, std::size_t>>& parts,
+                                 const LoopTicks& t, std::vector<double>& residuals) {
   residuals.clear();
   constexpr std::string_view kVcmd = "_vcmd_mm_s";
   if (!t.channel.ends_with(kVcmd)) return 0;
@@ -421,7 +422,6 @@ std::size_t vcmd_rows_after_tick(const MeasuredRun& run, const LoopTicks& t, std
   const std::vector<double>*ref = run.trace.find(axis + "_ref_mm"), *x = run.trace.find(axis + "_mm"),
         *v = run.trace.find(t.channel);
   if (ref == nullptr || x == nullptr || v == nullptr) return 0;
-  const auto parts = parts_between_breaks(run, v->size());
   const std::size_t m = t.every;
   const double period = static_cast<double>(m) * run.sample_period_s;
   for (std::size_t late = 0; late < m; ++late) {
@@ -462,17 +462,17 @@ void keep_loop_ticks(MeasuredRun& run) {
     const double ratio = *run.meta.controller_period_s / dt;
     const auto every = static_cast<std::size_t>(std::llround(ratio));
     if (ratio < 1.5 || every > kMaxRowsPerLoopPeriod || std::abs(ratio - static_cast<double>(every)) > 0.01) return;
-    const LoopTicks seen = held_loop_output(run);
+    const LoopTicks seen = held_loop_output(run, parts);
     ticks = seen.every == every ? seen : LoopTicks{every, std::vector<std::size_t>(parts.size(), 0), "", 0.0, 0};
   } else {
-    ticks = held_loop_output(run);
+    ticks = held_loop_output(run, parts);
     if (ticks.every < 2) return;
   }
   // The loop's ticks: the rows the command changes on, or `late` rows
   // before them where it shows each value late; every axis's velocity
   // command is then read that many rows on.
   std::vector<double> residuals;
-  const std::size_t late = vcmd_rows_after_tick(run, ticks, residuals);
+  const std::size_t late = vcmd_rows_after_tick(run, parts, ticks, residuals);
   const std::size_t m = ticks.every;
   std::vector<std::size_t> rows;  // the rows kept, and where each part's start among them
   std::vector<std::size_t> breaks;
