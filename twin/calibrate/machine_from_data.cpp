@@ -2658,12 +2658,12 @@ void backlash_from_position(DataSearch& s) {
 
 // backlash where no motor speed is logged and the speed is the encoder's
 // own: the gap the velocity law shows (gap_in_law, found with the law in
-// identify_velocity_loop), 0.6 to 1.15 times it replayed: the step is Ki
-// times the gap, and the law's Ki read on the encoder's speed under a
-// position loop slower than the velocity loop is low (2 ms over 1 ms, the
-// cascade sweep's 40 um gap at twice the size: the law showed 58 um, and
-// the smallest of 0.85 to 1.15 times it, 50 um, tracked the other program
-// at 0.018). Returns whether the law shows one.
+// identify_velocity_loop), 0.6 to 1.15 times it replayed: under a position
+// loop slower than the velocity loop the constants step by more than Ki
+// times the gap (2 ms over 1 ms, the cascade sweep's 40 um gap at twice
+// the size: 58 um with the law's Ki within 1 % of the truth's; why is not
+// found), and the smallest of 0.85 to 1.15 times it, 50 um, tracked the
+// other program at 0.018. Returns whether the law shows one.
 bool backlash_from_law(DataSearch& s) {
   const double g = s.ax.law_gap_mm;
   if (!(s.fast && s.logs_position() && g > 0.0)) return false;

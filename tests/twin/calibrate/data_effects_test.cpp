@@ -355,11 +355,11 @@ TEST(DataEffects, BacklashIsFoundWithoutTheMotorSpeed) {
 // A gap of 40 um under a 2 ms position loop over the 1 ms velocity loop,
 // without the motor's speed: the velocity law on the encoder's speed shows
 // its constant stepping with the direction by Ki times a gap of 58 um (its
-// Ki low there), and of 0.85 to 1.15 times that the smallest, 50 um, was
-// kept: the other program tracked at 0.018. Replayed down to 0.6 times the
-// law's gap, the gap kept is within 15 % of the truth's (35 um; the
-// replay's choice, on the fitting rows' tracking error, on a law whose own
-// figure is 46 % high). Oracles: the truth's gap, only backlash kept, the
+// Ki within 1 % of the truth's), and of 0.85 to 1.15 times that the
+// smallest, 50 um, was kept: the other program tracked at 0.018. Replayed
+// down to 0.6 times the law's gap, the gap kept is within 15 % of the
+// truth's (35 um; the replay's choice, on the fitting rows' tracking error,
+// on a law whose own figure is 46 % high). Oracles: the truth's gap, only backlash kept, the
 // validation's tracking error improved, and the held-out machine's check.
 TEST(DataEffects, BacklashIsFoundWithoutTheMotorSpeedUnderASlowerPositionLoop) {
   truth::RunSpec sp = cascade_spec_without_speed();
