@@ -359,8 +359,9 @@ TEST(DataEffects, BacklashIsFoundWithoutTheMotorSpeed) {
 // smallest, 50 um, was kept: the other program tracked at 0.018. Replayed
 // down to 0.6 times the law's gap, the gap kept is within 15 % of the
 // truth's (35 um; the replay's choice, on the fitting rows' tracking error,
-// on a law whose own figure is 46 % high). Oracles: the truth's gap, only backlash kept, the
-// validation's tracking error improved, and the held-out machine's check.
+// on a law whose own figure is 46 % high). Oracles: the truth's gap, only
+// backlash kept, the validation's tracking error improved, and the held-out
+// machine's check.
 TEST(DataEffects, BacklashIsFoundWithoutTheMotorSpeedUnderASlowerPositionLoop) {
   truth::RunSpec sp = cascade_spec_without_speed();
   sp.cascade.position_every = 2;
