@@ -486,6 +486,14 @@ void keep_loop_ticks(MeasuredRun& run) {
   if (rows.size() < 3)
     throw IoError(fmt::format("{}: {} rows are too few to replay at the position loop's period of {} sample periods",
                               run.trace.source, n, m));
+  MeasuredRun::LogRows log{run.trace, dt, rows};
+  for (std::size_t c = 0; c < log.trace.columns.size(); ++c) {
+    if (late == 0 || !log.trace.names[c].ends_with("_vcmd_mm_s")) continue;
+    auto& col = log.trace.columns[c];
+    for (const auto& [first, end] : parts)
+      for (std::size_t k = first; k < end; ++k) col[k] = k + late < end ? col[k + late] : col[end - 1];
+  }
+  run.log_rows = std::move(log);
   for (std::size_t c = 0; c < run.trace.columns.size(); ++c) {
     auto& col = run.trace.columns[c];
     const std::size_t shift = run.trace.names[c].ends_with("_vcmd_mm_s") ? late : 0;
@@ -540,6 +548,7 @@ MeasuredRun load_run(const std::filesystem::path& dir) {
                               *run.meta.sample_period_s, dt));
   keep_loop_ticks(run);
   realign_late_channels(run);
+  if (!run.rows_read_earlier.empty()) run.log_rows.reset();  // the log's rows are as logged, not realigned
   return run;
 }
 

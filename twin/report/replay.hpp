@@ -45,6 +45,18 @@ struct MeasuredRun {
   /// stated it), and the share of its changes on the loop's ticks.
   std::string loop_period_seen_in;
   double loop_period_share{0.0};
+  /// Where load_run kept only the loop's ticks: the log's own rows, every
+  /// column as read (the velocity command moved on as on the kept rows),
+  /// their sample period, and the log's row each kept row is. A velocity
+  /// loop that runs at the log's rate is fitted on these (its law holds on
+  /// every row, and a speed differentiated there is not bent by the loop
+  /// period's central difference); the replay runs on the kept rows.
+  struct LogRows {
+    io::TraceTable trace;
+    double sample_period_s{0.0};
+    std::vector<std::size_t> kept;
+  };
+  std::optional<LogRows> log_rows;
 };
 
 /// Reads RUN/meta.json and RUN/trace.csv(.gz); checks the columns and time.
