@@ -4063,10 +4063,14 @@ void refit_on_log_rows(const AxisFit& f, DataCalibration& out, sim::MachineDefin
     const AxisFromData& ax = out.axis[ai];
     const Axis a = ax.axis;
     const std::size_t i = index(a);
-    const bool plain = ax.identified && ax.velocity_loop_from_data && ax.torque_lag_rows() == 0.0 &&
-                       ax.gains.tau_i_s == 0.0 && !ax.torque_feedforward && ax.law_lead_period_mm == 0.0 &&
-                       ax.law_gap_mm == 0.0 && !ax.law_holds_integral_at_limit() && !ax.logs_period_mean() &&
-                       !ax.torque_command_logged && !ax.lag_in_monitor && ax.channel.present();
+    // The dead time the law shows on the kept rows, in the log's rows.
+    const double lag_log_rows = ax.torque_lag_rows() * static_cast<double>(f.r0.log_rows_per_loop_period);
+    const auto lag0 = static_cast<std::size_t>(std::llround(lag_log_rows));
+    const bool plain = ax.identified && ax.velocity_loop_from_data &&
+                       std::abs(lag_log_rows - static_cast<double>(lag0)) < 1e-6 && ax.gains.tau_i_s == 0.0 &&
+                       !ax.torque_feedforward && ax.law_lead_period_mm == 0.0 && ax.law_gap_mm == 0.0 &&
+                       !ax.law_holds_integral_at_limit() && !ax.logs_period_mean() && !ax.torque_command_logged &&
+                       !ax.lag_in_monitor && ax.channel.present();
     if (!plain) continue;
     // Each run's spans of the log's rows and its columns there; the largest
     // |torque| and the torque's white noise over them (for a limit).
@@ -4111,7 +4115,7 @@ void refit_on_log_rows(const AxisFit& f, DataCalibration& out, sim::MachineDefin
     // still drives the axis).
     const double at_limit = T_max - std::max(0.02 * T_max, 4.0 * white_noise_rms(std::move(d2)));
     std::vector<double> vc_c, v_c, sum_c, T_c, acc_c, pos_c, neg_c, one_c;
-    std::vector<std::size_t> law_rows, drive_rows_all, group_of;
+    std::vector<std::size_t> law_rows, drive_rows_all, group_of, in_span;
     std::size_t groups = 0;
     for (const Span& sp : spans) {
       const MeasuredRun::LogRows& lr = *sp.lr;
@@ -4170,27 +4174,53 @@ void refit_on_log_rows(const AxisFit& f, DataCalibration& out, sim::MachineDefin
         neg_c.push_back(dir < 0 ? -1.0 : 0.0);
         one_c.push_back(1.0);
         group_of.push_back(groups - 1);
+        in_span.push_back(j - margin);
         drive_rows_all.push_back(row);
         if (law_row) law_rows.push_back(row);
       }
     }
     if (law_rows.size() < 1000) continue;
-    // The law's constant of each stretch taken out (its columns less their
-    // stretch's means over the law's rows), then its three gains.
-    const auto less_group_means = [&](const std::vector<double>& c) {
-      std::vector<double> sum(groups, 0.0), cnt(groups, 0.0), out_c(c.size(), 0.0);
-      for (std::size_t k : law_rows) {
-        sum[group_of[k]] += c[k];
-        cnt[group_of[k]] += 1.0;
-      }
-      for (std::size_t k : law_rows) out_c[k] = c[k] - sum[group_of[k]] / cnt[group_of[k]];
-      return out_c;
+    // The law with its columns `lag` rows before the torque's row (a dead
+    // time between the law and the logged torque): each stretch's constant
+    // taken out (the columns less their stretch's means over the rows
+    // fitted), then its three gains.
+    const auto fit_law = [&](std::size_t lag) {
+      std::vector<std::size_t> rows;
+      for (std::size_t k : law_rows)
+        if (in_span[k] >= lag) rows.push_back(k);
+      std::vector<double> sum(groups, 0.0), cnt(groups, 0.0);
+      for (std::size_t k : rows) cnt[group_of[k]] += 1.0;
+      const auto less_group_means = [&](const std::vector<double>& c, std::size_t back) {
+        std::fill(sum.begin(), sum.end(), 0.0);
+        for (std::size_t k : rows) sum[group_of[k]] += c[k - back];
+        std::vector<double> out_c(c.size(), 0.0);
+        for (std::size_t k : rows) out_c[k] = c[k - back] - sum[group_of[k]] / cnt[group_of[k]];
+        return out_c;
+      };
+      const std::vector<double> vc_d = less_group_means(vc_c, lag), v_d = less_group_means(v_c, lag),
+                                sum_d = less_group_means(sum_c, lag), T_d = less_group_means(T_c, 0);
+      return least_squares({&vc_d, &v_d, &sum_d}, T_d, rows);
     };
-    const std::vector<double> vc_d = less_group_means(vc_c), v_d = less_group_means(v_c),
-                              sum_d = less_group_means(sum_c), T_d = less_group_means(T_c);
-    const LsqResult law = least_squares({&vc_d, &v_d, &sum_d}, T_d, law_rows);
-    if (!law.ok || !(law.theta[0] > 0.0) || !(law.theta[2] > 0.0)) continue;
+    const auto gains_ok = [](const LsqResult& ls) { return ls.ok && ls.theta[0] > 0.0 && ls.theta[2] > 0.0; };
+    const LsqResult law = fit_law(0);
+    if (!gains_ok(law)) continue;
     const double Kvp = law.theta[0], Ki = law.theta[2];
+    // Behind a dead time, the law at the rows about the one the loop's
+    // ticks show, the smallest residual's.
+    std::size_t lag = 0;
+    LsqResult law_lag = law;
+    if (lag0 > 0) {
+      law_lag = LsqResult{};
+      for (std::size_t L = lag0 - 1; L <= lag0 + 1; ++L) {
+        if (L == 0) continue;
+        LsqResult ls = fit_law(L);
+        if (gains_ok(ls) && (!law_lag.ok || ls.residual_rms < law_lag.residual_rms)) {
+          law_lag = std::move(ls);
+          lag = L;
+        }
+      }
+      if (!law_lag.ok) continue;
+    }
     DriveRows d;
     d.acc = acc_c;
     d.vel = v_c;
@@ -4214,6 +4244,13 @@ void refit_on_log_rows(const AxisFit& f, DataCalibration& out, sim::MachineDefin
     refit.gains.Kvp_torque_s_per_rad = Kvp;
     refit.gains.Tn_s = Kvp / Ki;
     refit.gains_at_lag = refit.gains;
+    const std::size_t per_period = f.r0.log_rows_per_loop_period;
+    if (lag > 0) {
+      refit.gains_at_lag.Kvp_torque_s_per_rad = law_lag.theta[0];
+      refit.gains_at_lag.Tn_s = law_lag.theta[0] / law_lag.theta[2];
+      refit.torque_lag_samples = lag / per_period;
+      refit.torque_lag_fraction = static_cast<double>(lag % per_period) / static_cast<double>(per_period);
+    }
     refit.fit_rows = d.rows.size();
     set_identified_axis(trial.axes[i], refit);
     const std::string left_out =
@@ -4225,17 +4262,39 @@ void refit_on_log_rows(const AxisFit& f, DataCalibration& out, sim::MachineDefin
     refit.torque_timing = fmt::format("the drive fitted on the log's own rows (every {:g} s), the speed the "
                                       "position's difference there",
                                       f.runs.front().run->log_rows->sample_period_s);
-    said.push_back(fmt::format("axis {}: on the log's own rows ({} of them, every {:g} s{}) the velocity law has Kvp "
-                               "{:.4g} and Tn {:.4g} s (residual {:.3g}), the drive J {:.4g} and B {:.4g}, against "
-                               "Kvp {:.4g}, Tn {:.4g} s and J {:.4g} on the loop's ticks",
-                               axis_name(a), d.rows.size(), f.runs.front().run->log_rows->sample_period_s, left_out,
-                               Kvp, Kvp / Ki, law.residual_rms, refit.J, refit.B, ax.gains.Kvp_torque_s_per_rad,
-                               ax.gains.Tn_s, ax.J));
+    const double dt_log = f.runs.front().run->log_rows->sample_period_s;
+    const std::string at_lag =
+        lag > 0 ? fmt::format(" {:.3g} ms behind its torque (the loop's ticks showed {:.3g} ms)", 1e3 * lag * dt_log,
+                              1e3 * lag0 * dt_log)
+                : std::string();
+    const controller::CascadeGains& was = lag > 0 ? ax.gains_at_lag : ax.gains;
+    said.push_back(fmt::format("axis {}: on the log's own rows ({} of them, every {:g} s{}) the velocity law{} has "
+                               "Kvp {:.4g} and Tn {:.4g} s (residual {:.3g}), the drive J {:.4g} and B {:.4g}, "
+                               "against Kvp {:.4g}, Tn {:.4g} s and J {:.4g} on the loop's ticks",
+                               axis_name(a), d.rows.size(), dt_log, left_out, at_lag,
+                               refit.gains_at_lag.Kvp_torque_s_per_rad, refit.gains_at_lag.Tn_s, law_lag.residual_rms,
+                               refit.J, refit.B, was.Kvp_torque_s_per_rad, was.Tn_s, ax.J));
     changed.emplace_back(ai, std::move(refit));
   }
   if (changed.empty()) return;
-  const FitRunErrors base = errors_on_fit_runs(f.runs, m, out.axes, out.rounding, out.replays);
-  const FitRunErrors with = errors_on_fit_runs(f.runs, trial, out.axes, out.rounding, out.replays);
+  // Behind a dead time the two are compared with it in the loop, each on
+  // its law at its lag (as the delay is tried later).
+  sim::MachineDefinition base_m = m, trial_m = trial;
+  const double dt = f.r0.sample_period_s;
+  const auto with_dead_time = [&](sim::MachineDefinition& mm, const AxisFromData& x) {
+    if (x.torque_lag_rows() == 0.0) return;
+    Trial t;
+    t.kind = EffectKind::kDelay;
+    t.sets = {{{EffectParam::delay_delay_s, x.torque_lag_rows() * dt}}};
+    t.gains = x.gains_at_lag;
+    mm = with_trial(mm, x.axis, t, 0);
+  };
+  for (const auto& [ai, refit] : changed) {
+    with_dead_time(base_m, out.axis[ai]);
+    with_dead_time(trial_m, refit);
+  }
+  const FitRunErrors base = errors_on_fit_runs(f.runs, base_m, out.axes, out.rounding, out.replays);
+  const FitRunErrors with = errors_on_fit_runs(f.runs, trial_m, out.axes, out.rounding, out.replays);
   for (std::size_t c = 0; c < changed.size(); ++c) {
     auto& [ai, refit] = changed[c];
     const std::vector<std::string> keys = axis_keys(refit);
