@@ -709,9 +709,11 @@ TEST(RealLogs, ADeadTimeOfATickOfTheVelocityLoopIsFoundUnderASlowerPositionLoop)
 // Which rows load_run keeps of a log faster than its loop, on a made-up
 // 1 kHz log whose x_vcmd_mm_s changes only on rows 2, 5, 8, ... (a 3 ms
 // loop, phase 2): exactly those rows, 3 ms apart, with a note; the same
-// where meta.json states 3 ms. Kept as logged: a command that changes on
-// every row, one that changes fewer than 100 times, and a log whose meta
-// states its own period.
+// where meta.json states 3 ms; the log's own rows kept beside them
+// (MeasuredRun::log_rows: all 3000, and which row each kept one is, the
+// rows the law and the drive are fitted on again). Kept as logged: a
+// command that changes on every row, one that changes fewer than 100
+// times, and a log whose meta states its own period.
 TEST(RealLogs, TheRowsOfASlowerLoopsTicksAreFoundFromItsHeldOutput) {
   const auto write = [](const std::string& name, const std::string& period, int every, int rows) {
     const auto d = work(name);
@@ -742,6 +744,17 @@ TEST(RealLogs, TheRowsOfASlowerLoopsTicksAreFoundFromItsHeldOutput) {
     EXPECT_THAT(held.notes.back(), HasSubstr("x_vcmd_mm_s changes only on every 3rd row (100.0 % of the 1000 "
                                              "rows the loop's output changes on)"));
     EXPECT_THAT(held.notes.back(), HasSubstr("every 3rd from row 3"));
+    // The log's own rows, beside: every row as read, and which each kept row is.
+    ASSERT_TRUE(held.log_rows.has_value());
+    EXPECT_EQ(held.log_rows->trace.num_rows(), 3000u);
+    EXPECT_DOUBLE_EQ(held.log_rows->sample_period_s, 1e-3);
+    ASSERT_EQ(held.log_rows->kept.size(), 1000u);
+    for (std::size_t j : {std::size_t{0}, std::size_t{1}, std::size_t{999}}) {
+      const std::size_t k = held.log_rows->kept[j];
+      EXPECT_EQ(k, 3 * j + 2);
+      EXPECT_DOUBLE_EQ(held.log_rows->trace.at("t_s")[k], t[j]);
+      EXPECT_DOUBLE_EQ(held.log_rows->trace.at("x_torque_raw")[k], held.trace.at("x_torque_raw")[j]);
+    }
   }
   // Gaps in the clock: the ticks fall on other rows of each part after a
   // gap. Rows 1500 to 1509 and row 2000 missing (a tick among them: 1502,
@@ -773,6 +786,7 @@ TEST(RealLogs, TheRowsOfASlowerLoopsTicksAreFoundFromItsHeldOutput) {
   const MeasuredRun every_row = load_run(write("held1", "null", 1, 3000));
   EXPECT_EQ(every_row.log_rows_per_loop_period, 1u);
   EXPECT_EQ(every_row.trace.num_rows(), 3000u);
+  EXPECT_FALSE(every_row.log_rows.has_value());
   const MeasuredRun few = load_run(write("held_few", "null", 3, 240));  // 80 changes
   EXPECT_EQ(few.trace.num_rows(), 240u);
   const MeasuredRun own = load_run(write("held_own", "0.001", 3, 3000));
