@@ -201,6 +201,10 @@ struct AxisFromData {
   /// loop without it and gives the logged channel through it
   /// (AxisDefinition::logged_torque_filter_s; place_law_lag).
   bool lag_in_monitor{false};
+  /// With lag_in_monitor: the share of the lag (gains.tau_i_s) that is the
+  /// current loop's, in the loop; the rest is the monitor's
+  /// (split_monitor_lag; 0: all the monitor's).
+  double lag_share_in_loop{0.0};
   /// Where the speed is taken from the position and no lag is read through
   /// its low-pass (a first-order lag fits there as a dead time of about the
   /// same total, or not beyond the law's noise): the law fitted with a
