@@ -73,7 +73,9 @@ struct MeasuredRun {
 /// with a note: where meta.json states the controller period so, or where
 /// it states none and the loop's output (<a>_vcmd_mm_s or <a>_u_V) changes
 /// on one row in every so many and held between (99 % of at least 100
-/// changes); the rows it changes on are the loop's ticks.
+/// changes); the rows it changes on are the loop's ticks. The log's own
+/// rows are kept beside them (MeasuredRun::log_rows; dropped where a
+/// channel is read rows earlier).
 MeasuredRun load_run(const std::filesystem::path& dir);
 
 /// The machine a run is replayed on: `machine_override` (name or path; one
