@@ -4726,6 +4726,7 @@ std::string figure_text(double v) { return v < 1e300 ? fmt::format("{:.4g}", v) 
 /// again on the final machine with the effects found (`again`), where only
 /// a change is said.
 constexpr double kMotionShowsLag = 0.1;
+void split_monitor_lag(DataCalibration& out, const std::vector<RunData>& runs, const AxisArray<bool>& taken);
 void place_law_lag(DataCalibration& out, const std::vector<RunData>& runs, bool again) {
   const sim::MachineDefinition& base = again ? out.final_machine : out.identified;
   sim::MachineDefinition trial = base;
@@ -4748,6 +4749,7 @@ void place_law_lag(DataCalibration& out, const std::vector<RunData>& runs, bool 
   const std::optional<ChannelErrors> now_e = held_out_lowpassed(out, runs, base);
   const std::optional<ChannelErrors> moved_e = held_out_lowpassed(out, runs, trial);
   if (!moved_e) return;
+  AxisArray<bool> to_monitor{};  // the lags moved into the monitor on the machine as identified
   for (AxisFromData& ax : out.axis) {
     if (!on[index(ax.axis)]) continue;
     const std::string err = col(ax.axis, "_err_mm");
@@ -4771,11 +4773,13 @@ void place_law_lag(DataCalibration& out, const std::vector<RunData>& runs, bool 
     ax.lag_in_monitor = in_monitor;
     move_lag(out.identified.axes[index(ax.axis)], in_monitor);
     if (again) move_lag(out.final_machine.axes[index(ax.axis)], in_monitor);
+    to_monitor[index(ax.axis)] = in_monitor && !again;
   }
+  split_monitor_lag(out, runs, to_monitor);
   if (!again) out.final_machine = out.identified;
 }
 
-/// The lag place_law_dead_time put in the monitor, split: a share of it
+/// The lag place_law_dead_time or place_law_lag put in the monitor, split: a share of it
 /// the current loop's, in the loop, the rest the monitor's (a drive that
 /// lags its torque and smooths what it traces). Through the speed's
 /// low-pass the law shows one first-order lag of about their sum. Shares
