@@ -3942,6 +3942,13 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
   }
 }
 
+/// A law's lag of `tau_s` placed `share_in_loop` in the loop (the current
+/// loop's) and the rest in the logged channel's monitor.
+void place_lag(sim::AxisDefinition& def, double tau_s, double share_in_loop) {
+  def.loop.cascade.tau_i_s = share_in_loop * tau_s;
+  def.logged_torque_filter_s = (1.0 - share_in_loop) * tau_s;
+}
+
 /// The axis of the machine: the cascade loop and the drive in the channel's
 /// unit (Kt = Ka = 1, rg = 1 mm/rad).
 void set_identified_axis(sim::AxisDefinition& def, const AxisFromData& ax) {
@@ -3954,9 +3961,9 @@ void set_identified_axis(sim::AxisDefinition& def, const AxisFromData& ax) {
   def.loop.law = controller::LoopLaw::kCascade;
   def.loop.cascade = ax.gains;
   def.torque_command_logged = ax.torque_command_logged ? 1.0 : 0.0;
-  def.logged_torque_filter_s = ax.lag_in_monitor ? (1.0 - ax.lag_share_in_loop) * ax.gains.tau_i_s : 0.0;
+  def.logged_torque_filter_s = 0.0;
   def.logged_torque_period_mean = ax.logs_period_mean() ? 1.0 : 0.0;
-  if (ax.lag_in_monitor) def.loop.cascade.tau_i_s = ax.lag_share_in_loop * ax.gains.tau_i_s;
+  if (ax.lag_in_monitor) place_lag(def, ax.gains.tau_i_s, ax.lag_share_in_loop);
   def.following_error_limit_mm = 1e3;
 }
 
@@ -4116,8 +4123,11 @@ void refit_on_log_rows(const AxisFit& f, DataCalibration& out, sim::MachineDefin
     // constant of its own. The drive takes every row (the torque at a limit
     // still drives the axis).
     const double at_limit = T_max - std::max(0.02 * T_max, 4.0 * white_noise_rms(std::move(d2)));
-    std::vector<double> vc_c, v_c, sum_c, T_c, acc_c, pos_c, neg_c, one_c;
-    std::vector<std::size_t> law_rows, drive_rows_all, group_of, in_span;
+    // The drive's columns on every row taken (d.vel and d.T are the law's
+    // speed and torque too), the law's own beside them.
+    DriveRows d;
+    std::vector<double> vc_c, sum_c;
+    std::vector<std::size_t> law_rows, group_of, in_span;
     std::size_t groups = 0;
     for (const Span& sp : spans) {
       const MeasuredRun::LogRows& lr = *sp.lr;
@@ -4165,19 +4175,21 @@ void refit_on_log_rows(const AxisFit& f, DataCalibration& out, sim::MachineDefin
           ++groups;
           fresh = false;
         }
-        const std::size_t row = T_c.size();
+        const std::size_t row = d.T.size();
         vc_c.push_back(vcf[k]);
-        v_c.push_back(v[j]);
         sum_c.push_back(logged_v != nullptr ? sum : sum - (xf[k] - xf[sp.rows.begin]));
-        T_c.push_back(Tf[k]);
-        acc_c.push_back(acc[j]);
         const int dir = direction(v[j], rd.v_move[i]);
-        pos_c.push_back(dir > 0 ? 1.0 : 0.0);
-        neg_c.push_back(dir < 0 ? -1.0 : 0.0);
-        one_c.push_back(1.0);
+        d.acc.push_back(acc[j]);
+        d.vel.push_back(v[j]);
+        d.pos.push_back(dir > 0 ? 1.0 : 0.0);
+        d.neg.push_back(dir < 0 ? -1.0 : 0.0);
+        d.one.push_back(1.0);
+        d.T.push_back(Tf[k]);
+        d.a2 += acc[j] * acc[j];
+        d.T2 += Tf[k] * Tf[k];
+        d.rows.push_back(row);
         group_of.push_back(groups - 1);
         in_span.push_back(j - margin);
-        drive_rows_all.push_back(row);
         if (law_row) law_rows.push_back(row);
       }
     }
@@ -4199,8 +4211,8 @@ void refit_on_log_rows(const AxisFit& f, DataCalibration& out, sim::MachineDefin
         for (std::size_t k : rows) out_c[k] = c[k - back] - sum[group_of[k]] / cnt[group_of[k]];
         return out_c;
       };
-      const std::vector<double> vc_d = less_group_means(vc_c, lag), v_d = less_group_means(v_c, lag),
-                                sum_d = less_group_means(sum_c, lag), T_d = less_group_means(T_c, 0);
+      const std::vector<double> vc_d = less_group_means(vc_c, lag), v_d = less_group_means(d.vel, lag),
+                                sum_d = less_group_means(sum_c, lag), T_d = less_group_means(d.T, 0);
       return least_squares({&vc_d, &v_d, &sum_d}, T_d, rows);
     };
     const auto gains_ok = [](const LsqResult& ls) { return ls.ok && ls.theta[0] > 0.0 && ls.theta[2] > 0.0; };
@@ -4222,18 +4234,6 @@ void refit_on_log_rows(const AxisFit& f, DataCalibration& out, sim::MachineDefin
         }
       }
       if (!law_lag.ok) continue;
-    }
-    DriveRows d;
-    d.acc = acc_c;
-    d.vel = v_c;
-    d.pos = pos_c;
-    d.neg = neg_c;
-    d.one = one_c;
-    d.T = T_c;
-    d.rows = drive_rows_all;
-    for (std::size_t k : d.rows) {
-      d.a2 += acc_c[k] * acc_c[k];
-      d.T2 += T_c[k] * T_c[k];
     }
     const DriveColumns dc = drive_columns(d);
     const LsqResult drive = least_squares(dc.X, d.T, d.rows);
@@ -4261,10 +4261,10 @@ void refit_on_log_rows(const AxisFit& f, DataCalibration& out, sim::MachineDefin
                           "the law",
                           d.rows.size() - law_rows.size(), at_limit)
             : std::string();
+    const double dt_log = f.runs.front().run->log_rows->sample_period_s;
     refit.torque_timing = fmt::format("the drive fitted on the log's own rows (every {:g} s), the speed the "
                                       "position's difference there",
-                                      f.runs.front().run->log_rows->sample_period_s);
-    const double dt_log = f.runs.front().run->log_rows->sample_period_s;
+                                      dt_log);
     const std::string at_lag =
         lag > 0 ? fmt::format(" {:.3g} ms behind its torque (the loop's ticks showed {:.3g} ms)", 1e3 * lag * dt_log,
                               1e3 * lag0 * dt_log)
@@ -4799,9 +4799,7 @@ void split_monitor_lag(DataCalibration& out, const std::vector<RunData>& runs, c
     sim::MachineDefinition m = out.identified;
     for (const AxisFromData& ax : out.axis) {
       if (!taken[index(ax.axis)]) continue;
-      sim::AxisDefinition& def = m.axes[index(ax.axis)];
-      def.loop.cascade.tau_i_s = share * ax.gains.tau_i_s;
-      def.logged_torque_filter_s = (1.0 - share) * ax.gains.tau_i_s;
+      place_lag(m.axes[index(ax.axis)], ax.gains.tau_i_s, share);
     }
     const std::optional<ChannelErrors> e = held_out_lowpassed(out, runs, m);
     if (!e) continue;
@@ -4826,8 +4824,7 @@ void split_monitor_lag(DataCalibration& out, const std::vector<RunData>& runs, c
     }
     ax.lag_share_in_loop = b.share;
     sim::AxisDefinition& def = out.identified.axes[index(ax.axis)];
-    def.loop.cascade.tau_i_s = b.share * ax.gains.tau_i_s;
-    def.logged_torque_filter_s = (1.0 - b.share) * ax.gains.tau_i_s;
+    place_lag(def, ax.gains.tau_i_s, b.share);
     ax.loop_source += fmt::format("; {:g} of it is the current loop's, in the loop ({:.3g} ms), the rest the "
                                   "monitor's ({:.3g} ms): the held-out rows of the fitting runs replay the tracking "
                                   "error to {} so, {} with the whole lag in the monitor",

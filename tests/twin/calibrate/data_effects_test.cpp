@@ -17,6 +17,7 @@
 #include <functional>
 #include <string>
 #include <utility>
+#include <string_view>
 #include <vector>
 
 #include <gmock/gmock.h>
@@ -83,13 +84,24 @@ std::pair<MeasuredRun, MeasuredRun> truth_runs(const std::string& name, truth::R
 
 // `motor_speed`: whether the motor's speed is logged beside the velocity
 // command (a CNC may trace its loop's command and not the speed it feeds back).
-/// The runs of `sp` (truth_runs) calibrated on the first, validated on the second.
-Outcome calibrate_spec(const std::string& name, const truth::RunSpec& sp, int contour = 0) {
-  const auto [fit, val] = truth_runs(name, sp, contour);
+/// Calibrated on `fit`, validated on `val`, with the effects kept.
+Outcome calibrate_runs(const MeasuredRun& fit, const MeasuredRun& val) {
   Outcome o{calibrate_from_data({fit}, {val}, machine_for_run(fit, "", nullptr)), {}};
   for (const DataEffect& e : o.r.effects)
     if (e.kept) o.kept.push_back(e.effect);
   return o;
+}
+
+/// The runs of `sp` (truth_runs) calibrated on the first, validated on the second.
+Outcome calibrate_spec(const std::string& name, const truth::RunSpec& sp, int contour = 0) {
+  const auto [fit, val] = truth_runs(name, sp, contour);
+  return calibrate_runs(fit, val);
+}
+
+/// The calibration's first note that contains `text` (end() where none does).
+std::vector<std::string>::const_iterator note_with(const Outcome& o, std::string_view text) {
+  return std::find_if(o.r.notes.begin(), o.r.notes.end(),
+                      [&](const std::string& n) { return n.find(text) != std::string::npos; });
 }
 
 Outcome calibrate_truth(const std::string& name, const truth::Effects& fx, double noise_Nm = -1.0,
@@ -337,9 +349,7 @@ TEST(DataEffects, BacklashIsFoundWithoutTheMotorSpeed) {
     const Outcome o = calibrate_spec(Jff > 0.0 ? "backlash_ff_no_speed" : "backlash_no_speed", sp);
     expect_only(o, "backlash");
     ASSERT_EQ(o.r.axis.size(), 1u);
-    const auto law_speed = std::find_if(o.r.notes.begin(), o.r.notes.end(), [](const std::string& n) {
-      return n.find("the motor's speed read from the velocity law") != std::string::npos;
-    });
+    const auto law_speed = note_with(o, "the motor's speed read from the velocity law");
     ASSERT_NE(law_speed, o.r.notes.end());
     EXPECT_THAT(*law_speed, ::testing::HasSubstr(": kept,"));
     const AxisFromData& ax = o.r.axis[0];
@@ -398,9 +408,7 @@ TEST(DataEffects, TheLawAndDriveAreFittedOnTheLogsOwnRowsUnderASlowerPositionLoo
   ASSERT_EQ(o.r.axis.size(), 1u);
   const AxisFromData& ax = o.r.axis[0];
   EXPECT_EQ(ax.law_inner_ticks, 4) << ax.loop_source;
-  const auto note = std::find_if(o.r.notes.begin(), o.r.notes.end(), [](const std::string& n) {
-    return n.find("on the log's own rows") != std::string::npos;
-  });
+  const auto note = note_with(o, "on the log's own rows");
   ASSERT_NE(note, o.r.notes.end()) << describe(o);
   EXPECT_THAT(*note, ::testing::HasSubstr(": kept,"));
   const double Kvp_raw = 0.5 * kRawPerNm / kRg, J_raw = 0.0084 * kRawPerNm / kRg, B_raw = 0.016 * kRawPerNm / kRg;
@@ -431,9 +439,7 @@ TEST(DataEffects, TheLawBehindADeadTimeIsFittedOnTheLogsOwnRowsUnderASlowerPosit
   const Outcome o = calibrate_spec("dead_time_on_log_rows", sp);
   ASSERT_EQ(o.r.axis.size(), 1u);
   const AxisFromData& ax = o.r.axis[0];
-  const auto note = std::find_if(o.r.notes.begin(), o.r.notes.end(), [](const std::string& n) {
-    return n.find("on the log's own rows") != std::string::npos;
-  });
+  const auto note = note_with(o, "on the log's own rows");
   ASSERT_NE(note, o.r.notes.end()) << describe(o);
   EXPECT_THAT(*note, ::testing::HasSubstr(": kept,"));
   expect_only(o, "delay");
@@ -527,9 +533,7 @@ TEST(DataEffects, AGainOneStopCarriesIsNotAnEffect) {
   ASSERT_TRUE(fit.log_rows.has_value());
   fit.log_rows.reset();
   val.log_rows.reset();
-  Outcome o{calibrate_from_data({fit}, {val}, machine_for_run(fit, "", nullptr)), {}};
-  for (const DataEffect& e : o.r.effects)
-    if (e.kept) o.kept.push_back(e.effect);
+  const Outcome o = calibrate_runs(fit, val);
   EXPECT_TRUE(o.kept.empty()) << describe(o);
   const auto rising = std::find_if(o.r.effects.begin(), o.r.effects.end(),
                                    [](const DataEffect& e) { return e.effect == "rising_friction"; });
@@ -1218,9 +1222,7 @@ TEST(DataEffects, TheDriveIsFittedOnTheTorqueTimingTheLogShows) {
     EXPECT_NEAR(ax.c - ax.Tc_neg, down_raw, 0.01 * std::abs(down_raw)) << ax.torque_timing;
   };
   {
-    Outcome o{calibrate_from_data({fit}, {val}, machine_for_run(fit, "", nullptr)), {}};
-    for (const DataEffect& e : o.r.effects)
-      if (e.kept) o.kept.push_back(e.effect);
+    const Outcome o = calibrate_runs(fit, val);
     ASSERT_EQ(o.r.axis.size(), 1u);
     EXPECT_TRUE(o.r.axis[0].torque_held_over_row) << o.r.axis[0].torque_timing;
     expect_truth_drive(o.r.axis[0]);
