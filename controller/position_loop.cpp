@@ -24,8 +24,48 @@ PositionLoop::PositionLoop(const PositionLoopParams& params, double Ts_s, const 
   setup_ = law_->setup(params_, Ts_s, drive);
 }
 
+namespace {
+
+bool smooths(const LawSetup& setup) { return setup.command_average_ticks > 1 || setup.command_lag_a > 0.0; }
+
+/// The reference through the moving average and the lag, one tick.
+double smooth_reference(const LawSetup& setup, double x_ref_mm, PositionLoopState& s) {
+  const int n = setup.command_average_ticks;
+  double x = x_ref_mm;
+  if (n > 1) {
+    s.ref_window_head = (s.ref_window_head + 1) % n;
+    s.ref_window[static_cast<std::size_t>(s.ref_window_head)] = x_ref_mm;
+    double sum = 0.0;
+    for (int j = 0; j < n; ++j) sum += s.ref_window[static_cast<std::size_t>(j)];
+    x = sum / n;
+  }
+  if (setup.command_lag_a > 0.0) {
+    s.ref_lagged_mm = setup.command_lag_a * s.ref_lagged_mm + (1.0 - setup.command_lag_a) * x;
+    x = s.ref_lagged_mm;
+  }
+  return x;
+}
+
+}  // namespace
+
+double prime_reference_smoothing(const LawSetup& setup, double x_ref_mm, double v_ref_mm_per_s,
+                                 PositionLoopState& s) noexcept {
+  const int n = setup.command_average_ticks;
+  const double step = v_ref_mm_per_s * setup.Ts_s;
+  // The window holds the ramp's last n references, the newest at the head.
+  s.ref_window_head = 0;
+  for (int j = 0; j < n; ++j) s.ref_window[static_cast<std::size_t>((n - j) % n)] = x_ref_mm - j * step;
+  const double averaged = x_ref_mm - 0.5 * (n - 1) * step;
+  // y = a y + (1 - a) u on a ramp of `step` a tick lags it by step a / (1 - a).
+  const double a = setup.command_lag_a;
+  s.ref_lagged_mm = a > 0.0 ? averaged - step * a / (1.0 - a) : averaged;
+  return s.ref_lagged_mm;
+}
+
 void PositionLoop::reset(double x_ref0_mm, double x_meas0_mm) noexcept {
   state_ = PositionLoopState{};
+  state_.ref_window.fill(x_ref0_mm);
+  state_.ref_lagged_mm = x_ref0_mm;
   state_.x_ref_prev_mm = x_ref0_mm;
   state_.e_prev_mm = x_ref0_mm - x_meas0_mm;
   state_.x_meas_prev_mm = x_meas0_mm;
@@ -38,6 +78,7 @@ PositionLoopOutput PositionLoop::step(std::int64_t k, double x_ref_mm, double x_
     throw InternalError(fmt::format("position loop stepped at tick {} after tick {}", k, state_.last_k));
   const double Ts = setup_.Ts_s;
   PositionLoopOutput out;
+  if (smooths(setup_)) x_ref_mm = smooth_reference(setup_, x_ref_mm, state_);
   out.e_mm = x_ref_mm - x_meas_mm;
   out.v_ref_mm_per_s = (x_ref_mm - state_.x_ref_prev_mm) / Ts;
   out.a_ref_mm_per_s2 = (out.v_ref_mm_per_s - state_.v_ref_prev_mm_per_s) / Ts;

@@ -7,6 +7,7 @@
 /// caller has none, the encoder's backward difference.
 ///
 /// u[k] is held by the drive until the next sample.
+#include <array>
 #include <cstdint>
 #include <limits>
 #include <optional>
@@ -35,7 +36,17 @@ struct CascadeGains {
   /// position loop (most drives: 125 to 250 us under a 1 ms position loop),
   /// Ts a whole multiple of it; 0: the position loop's Ts.
   double Tv_s{0.0};
+  /// The CNC's smoothing of the reference after its interpolator, before the
+  /// position loop (a log's reference is then ahead of what the loop
+  /// follows): a moving average over this window, a whole multiple of Ts
+  /// (0: none), then a first-order lag of command_lag_s (0: none). It lies
+  /// outside the feedback loop.
+  double command_average_s{0.0};
+  double command_lag_s{0.0};
 };
+
+/// The longest moving average of the reference, in periods.
+inline constexpr int kMaxCommandAverageTicks = 128;
 
 /// What the cascade needs of the drive it commands.
 struct DriveScale {
@@ -56,6 +67,10 @@ struct LawSetup {
   /// their period Ts / inner_ticks.
   int inner_ticks{1};
   double Tv_s{1e-4};
+  /// The reference's smoothing (CascadeGains::command_average_s, command_lag_s):
+  /// the moving average's periods (1: none) and exp(-Ts / command_lag) (0: none).
+  int command_average_ticks{1};
+  double command_lag_a{0.0};
 };
 
 /// The gains of every law; an axis uses those of its `law`.
@@ -84,8 +99,21 @@ struct PositionLoopState {
   double Iv_rad{0.0};
   double T_filtered{0.0};
   double x_meas_prev_mm{0.0};
+  // The reference's smoothing (LawSetup::command_average_ticks, command_lag_a):
+  // the last references, newest at ref_window_head, and the lag's output.
+  std::array<double, kMaxCommandAverageTicks> ref_window{};
+  int ref_window_head{0};
+  double ref_lagged_mm{0.0};
   std::int64_t last_k{-1};
 };
+
+/// The reference the loop follows once the law's smoothing (CascadeGains::
+/// command_average_s, command_lag_s) has been primed for steady motion at
+/// v_ref_mm_per_s through x_ref_mm at the tick: sets `s`'s smoothing state
+/// and returns the smoothed reference at the tick (x_ref_mm where there is
+/// no smoothing).
+double prime_reference_smoothing(const LawSetup& setup, double x_ref_mm, double v_ref_mm_per_s,
+                                 PositionLoopState& s) noexcept;
 
 /// One output of the law at a tick, with its terms (for traces and analysis).
 struct PositionLoopOutput {
@@ -124,6 +152,7 @@ class PositionLoop {
   /// position loop's output in `out` held; updates the command in `out`.
   void inner_step(int q, double v_meas_mm_per_s, PositionLoopOutput& out);
   const PositionLoopParams& params() const noexcept { return params_; }
+  const LawSetup& setup() const noexcept { return setup_; }
   double Ts_s() const noexcept { return setup_.Ts_s; }
   const PositionLoopState& state() const noexcept { return state_; }
   void set_state(const PositionLoopState& s) noexcept {

@@ -366,8 +366,11 @@ void Slave::check_state(const SavedState& s) const {
       if (!std::isfinite(u)) refuse("a non-finite delayed command");
   }
   for (const auto& l : c.loops) {
-    if (!finite_all({l.I_mm_s, l.e_prev_mm, l.x_ref_prev_mm, l.v_ref_prev_mm_per_s, l.Iv_rad, l.T_filtered, l.x_meas_prev_mm}))
+    if (!finite_all({l.I_mm_s, l.e_prev_mm, l.x_ref_prev_mm, l.v_ref_prev_mm_per_s, l.Iv_rad, l.T_filtered, l.x_meas_prev_mm,
+                     l.ref_lagged_mm}))
       refuse("a non-finite position-loop state");
+    for (double x : l.ref_window)
+      if (!std::isfinite(x)) refuse("a non-finite reference in the position loop's smoothing");
     if (l.last_k >= c.k || l.last_k < -1) refuse(fmt::format("position-loop tick {} with tick counter {}", l.last_k, c.k));
   }
   if (c.k > 0 && c.last.k != c.k - 1) refuse(fmt::format("last row of tick {} with tick counter {}", c.last.k, c.k));

@@ -13,7 +13,7 @@ namespace twin::fmu {
 
 namespace {
 
-constexpr char kMagic[8] = {'T', 'W', 'I', 'N', 'F', 'M', 'U', '2'};
+constexpr char kMagic[8] = {'T', 'W', 'I', 'N', 'F', 'M', 'U', '3'};
 
 class Writer {
  public:
@@ -149,8 +149,10 @@ std::vector<char> serialize_state(const SavedState& s) {
     w.put<std::uint64_t>(c.loops.size());
     for (const auto& l : c.loops) {
       for (double v : {l.I_mm_s, l.e_prev_mm, l.x_ref_prev_mm, l.v_ref_prev_mm_per_s, l.Iv_rad, l.T_filtered,
-                       l.x_meas_prev_mm})
+                       l.x_meas_prev_mm, l.ref_lagged_mm})
         w.put(v);
+      for (double v : l.ref_window) w.put(v);
+      w.put<std::int32_t>(l.ref_window_head);
       w.put(l.last_k);
     }
     put_snapshot(w, c.last);
@@ -202,8 +204,12 @@ SavedState deserialize_state(const char* data, std::size_t size) {
     c.loops.resize(nl);
     for (auto& l : c.loops) {
       for (double* v : {&l.I_mm_s, &l.e_prev_mm, &l.x_ref_prev_mm, &l.v_ref_prev_mm_per_s, &l.Iv_rad, &l.T_filtered,
-                        &l.x_meas_prev_mm})
+                        &l.x_meas_prev_mm, &l.ref_lagged_mm})
         *v = r.get<double>();
+      for (double& v : l.ref_window) v = r.get<double>();
+      l.ref_window_head = r.get<std::int32_t>();
+      if (l.ref_window_head < 0 || l.ref_window_head >= controller::kMaxCommandAverageTicks)
+        throw ConfigError(fmt::format("reference window at {}", l.ref_window_head));
       l.last_k = r.get<std::int64_t>();
     }
     c.last = get_snapshot(r);

@@ -19,7 +19,9 @@ void CascadeLaw::validate(const PositionLoopParams& g, std::string_view where) c
                          {"tau_i", c.tau_i_s},
                          {"T_max", c.T_max},
                          {"Jff", c.Jff_torque_s2_per_rad},
-                         {"Tv", c.Tv_s}});
+                         {"Tv", c.Tv_s},
+                         {"command_average", c.command_average_s},
+                         {"command_lag", c.command_lag_s}});
   if (!(c.Kv_per_s > 0.0)) throw ConfigError(fmt::format("{}: Kv = {} 1/s must be > 0", where, c.Kv_per_s));
   if (c.kff < 0.0 || c.kff > 1.5) throw ConfigError(fmt::format("{}: kff = {} must be in [0, 1.5]", where, c.kff));
   if (!(c.Kvp_torque_s_per_rad > 0.0))
@@ -28,6 +30,9 @@ void CascadeLaw::validate(const PositionLoopParams& g, std::string_view where) c
     throw ConfigError(fmt::format("{}: Tn, tau_i, Jff = {}, {}, {} must be >= 0", where, c.Tn_s, c.tau_i_s,
                                   c.Jff_torque_s2_per_rad));
   if (!(c.T_max > 0.0)) throw ConfigError(fmt::format("{}: T_max = {} must be > 0", where, c.T_max));
+  if (c.command_average_s < 0.0 || c.command_lag_s < 0.0)
+    throw ConfigError(fmt::format("{}: command_average, command_lag = {}, {} s must be >= 0", where,
+                                  c.command_average_s, c.command_lag_s));
   if (c.Tv_s < 0.0) throw ConfigError(fmt::format("{}: Tv = {} s must be >= 0 (0: the position loop's Ts)", where, c.Tv_s));
 }
 
@@ -48,6 +53,14 @@ LawSetup CascadeLaw::setup(const PositionLoopParams& g, double Ts_s, const Drive
   const int n = inner_ticks(g.cascade, Ts_s);
   LawSetup s{Ts_s, drive, 0.0, n, Ts_s / n};
   s.lag_a = g.cascade.tau_i_s > 0.0 ? std::exp(-s.Tv_s / g.cascade.tau_i_s) : 0.0;
+  const double avg = g.cascade.command_average_s / Ts_s;
+  if (avg > 0.0 && !(avg <= kMaxCommandAverageTicks + 1e-9 && std::abs(avg - std::round(avg)) <= 1e-6 * avg &&
+                     avg >= 1.0 - 1e-9))
+    throw ConfigError(fmt::format("position loop: the reference's moving average command_average = {} s must be 1 "
+                                  "to {} whole periods of Ts = {} s",
+                                  g.cascade.command_average_s, kMaxCommandAverageTicks, Ts_s));
+  s.command_average_ticks = avg > 0.0 ? static_cast<int>(std::lround(avg)) : 1;
+  s.command_lag_a = g.cascade.command_lag_s > 0.0 ? std::exp(-Ts_s / g.cascade.command_lag_s) : 0.0;
   return s;
 }
 

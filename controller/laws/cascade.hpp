@@ -10,6 +10,9 @@
 ///   Tf[k]    = a Tf[k-1] + (1 - a) Tc[k],  a = exp(-Ts / tau_i)     (current loop sampled at Ts)
 ///   u[k]     = Tf[k] / (Ka Kt)   so that the drive's i = Ka u = Tf / Kt and Tm = Tf.
 /// Tn = 0 switches the integral off; tau_i = 0 makes the current loop ideal.
+/// x_ref may first pass the CNC's smoothing (command_average_s, command_lag_s:
+/// PositionLoop applies it), outside the feedback loop; realise() is the loop
+/// from the smoothed reference on.
 /// Its linear controller has the state [Iv[k-1] (when Tn > 0), Tf[k-1] (when tau_i > 0),
 /// x_ref[k-1], v_ref[k-1]], its speed feedback the drive's own speed (rg w at the tick, as
 /// the co-simulation gives it). `twin tune` searches the feedback gains Kv, Kvp, Tn and

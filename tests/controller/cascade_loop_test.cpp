@@ -12,6 +12,7 @@
 #include <cmath>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -74,9 +75,22 @@ Exact exact_response(const sim::MachineDefinition& m, const std::vector<double>&
   A(1, 0) = rg;
   const Eigen::Matrix3d E = (A * Tv).exp();
   const double lag = g.tau_i_s > 0.0 ? std::exp(-Tv / g.tau_i_s) : 0.0;
+  // The reference the loop follows: the CNC's smoothing (command_average_s,
+  // command_lag_s) written again here: the mean of the last N references (the
+  // first one before the run), then y = a y + (1 - a) u.
+  std::vector<double> followed(r.size());
+  const int N = g.command_average_s > 0.0 ? static_cast<int>(std::lround(g.command_average_s / Ts)) : 1;
+  const double a_cmd = g.command_lag_s > 0.0 ? std::exp(-Ts / g.command_lag_s) : 0.0;
+  double y = r[0];
+  for (std::size_t k = 0; k < r.size(); ++k) {
+    double sum = 0.0;
+    for (int j = 0; j < N; ++j) sum += r[k >= static_cast<std::size_t>(j) ? k - static_cast<std::size_t>(j) : 0];
+    y = a_cmd * y + (1.0 - a_cmd) * sum / N;
+    followed[k] = y;
+  }
   Exact out;
   double w = 0.0, x = r[0], Iv = 0.0, Tf = 0.0, r_prev = r[0], v_prev = 0.0;
-  for (double rk : r) {
+  for (double rk : followed) {
     const double e = rk - x;
     const double v_ref = (rk - r_prev) / Ts;
     const double a_ref = (v_ref - v_prev) / Ts;
@@ -174,6 +188,64 @@ TEST(CascadeLoop, VelocityLoopFasterThanThePositionLoopMatchesTheExactDiscreteRe
   double apart = 0.0;
   for (std::size_t k = 0; k < n; ++k) apart = std::max(apart, std::abs(fast.x_mm[k] - slow.x_mm[k]));
   EXPECT_GT(apart, 1e-4) << "the velocity loop's period must show in the motion, mm";
+}
+
+// A CNC that smooths its reference after the interpolator (a moving average,
+// then a first-order lag) before the position loop: the same loop on the
+// smoothed reference, which the exact response computes apart. The
+// smoothing must move the motion by far more than the tolerance.
+TEST(CascadeLoop, SmoothedReferenceMatchesTheExactDiscreteResponse) {
+  controller::CascadeGains g{.Kv_per_s = 40.0, .kff = 0.9, .Kvp_torque_s_per_rad = 0.3, .Tn_s = 0.02, .tau_i_s = 5e-4};
+  g.command_average_s = 8e-3;
+  expect_matches_exact(g, 1e-3);
+  g.command_lag_s = 3e-3;
+  expect_matches_exact(g, 1e-3);
+  g.command_average_s = 0.0;
+  expect_matches_exact(g, 1e-4);
+
+  controller::CascadeGains plain = g;
+  plain.command_lag_s = 0.0;
+  const std::vector<double> r = reference(1e-4, 3000);
+  const Exact smoothed = exact_response(cascade_x(1e-4, g), r), not_smoothed = exact_response(cascade_x(1e-4, plain), r);
+  double apart = 0.0;
+  for (std::size_t k = 0; k < r.size(); ++k) apart = std::max(apart, std::abs(smoothed.x_mm[k] - not_smoothed.x_mm[k]));
+  EXPECT_GT(apart, 0.1) << "a 3 ms lag at 100 mm/s must show in the motion, mm";
+}
+
+// A moving average of N periods delays a ramp by (N - 1) Ts / 2, and the
+// discrete lag y = a y + (1 - a) u by Ts a / (1 - a): at constant speed the
+// error against the reference given settles to v times those plus the P
+// loop's (1 - kff) / Kv. A run started in that steady motion
+// (start_in_steady_motion) holds it from its first tick.
+TEST(CascadeLoop, ASmoothedReferenceAddsItsDelayToTheFollowingError) {
+  controller::CascadeGains g{.Kv_per_s = 50.0, .kff = 0.5, .Kvp_torque_s_per_rad = 0.5, .Tn_s = 0.01};
+  g.command_average_s = 5e-3;
+  g.command_lag_s = 2e-3;
+  const double Ts = 1e-3, v = 100.0;
+  const double a = std::exp(-Ts / g.command_lag_s);
+  const double e_steady = v * ((1.0 - g.kff) / g.Kv_per_s + 0.5 * (5 - 1) * Ts + Ts * a / (1.0 - a));
+  sim::MachineDefinition m = cascade_x(Ts, g);
+  const std::size_t n = 2000;
+  std::vector<double> r(n);
+  for (std::size_t k = 0; k < n; ++k) r[k] = v * static_cast<double>(k) * Ts;
+  AxisArray<std::vector<double>> ref;
+  ref[index(Axis::kX)] = r;
+  {
+    sim::CoSimulation cs(m, std::make_shared<sim::SampledReference>(ref, Ts), nullptr, {0, 0, 0});
+    sim::Snapshot last;
+    for (std::size_t k = 0; k < n; ++k) last = cs.step();
+    EXPECT_NEAR(last.axes[0].e_mm, e_steady, 1e-6);
+    EXPECT_NEAR(last.axes[0].vcmd_mm_per_s, v, 1e-3);
+  }
+  sim::CoSimulation cs(m, std::make_shared<sim::SampledReference>(ref, Ts), nullptr, {0, 0, 0});
+  const std::int64_t k0 = 500;
+  AxisArray<std::optional<sim::ReferenceAtStart>> at;
+  at[index(Axis::kX)] = sim::ReferenceAtStart{r[k0], r[k0 - 1], r[k0 - 2], v};
+  sim::start_in_steady_motion(cs, at, k0);
+  for (int k = 0; k < 50; ++k) {
+    const sim::Snapshot& s = cs.step();
+    ASSERT_NEAR(s.axes[0].e_mm, e_steady, 1e-6) << "tick " << k0 + k << " after a start in steady motion";
+  }
 }
 
 TEST(CascadeLoop, AVelocityLoopPeriodThatDoesNotDivideTsIsRefused) {

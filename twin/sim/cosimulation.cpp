@@ -110,7 +110,7 @@ const Snapshot& CoSimulation::step() {
     AxisSnapshot& s = row.axes[a];
     s.x_ref_mm = ref.x_mm[a];
     lo[i] = loops_[i].step(k_, s.x_ref_mm, s.x_mm, v_motor_mm_per_s[i]);
-    s.e_mm = lo[i].e_mm;
+    s.e_mm = s.x_ref_mm - s.x_mm;  // against the reference given (the loop's own may be smoothed)
     s.vcmd_mm_per_s = lo[i].vcmd_mm_per_s;
     s.u_V = lo[i].u_V;
     s.Tcmd_Nm = lo[i].torque_demand;
@@ -305,16 +305,19 @@ void start_in_steady_motion(CoSimulation& cosim, const AxisArray<std::optional<R
                                           controller::DriveScale{d.rg_mm_per_rad, d.Ka_A_per_V, d.Kt_Nm_per_A}};
     controller::PositionLoopState& ls = st.loops[i];
     ls = controller::PositionLoopState{};
-    const double e = controller::law_of(def.loop.law).steady_state(def.loop, motion, r->x_mm, ls);
+    // The reference the loop follows (behind the given one where the law smooths it), up to the tick before k0.
+    const double x_prev_loop = controller::prime_reference_smoothing(cosim.loop_setup(i), r->x_prev_mm, v, ls);
+    const double x_loop = x_prev_loop + (r->x_mm - r->x_prev_mm);
+    const double e = controller::law_of(def.loop.law).steady_state(def.loop, motion, x_loop, ls);
     feeddrive::DriveState& ds = st.drives[i];
-    ds.x_mm = r->x_mm - e;
+    ds.x_mm = x_loop - e;
     ds.w_rad_per_s = w;
     ds.stuck = w == 0.0;
     ds.x_load_mm = ds.x_mm;
     ds.w_load_rad_per_s = w;
     ds.x_table_mm = ds.x_mm;
     ds.load_stuck = ds.stuck;
-    ls.x_ref_prev_mm = r->x_prev_mm;
+    ls.x_ref_prev_mm = x_prev_loop;
     ls.v_ref_prev_mm_per_s = v;
     ls.last_k = k0 - 1;
   }

@@ -105,6 +105,8 @@ class CoSimulation {
   double time_s() const noexcept { return t0_s_ + static_cast<double>(k_) * machine_.Ts_s; }
   double Ts_s() const noexcept { return machine_.Ts_s; }
   const MachineDefinition& machine() const noexcept { return machine_; }
+  /// What the position loop of the i-th present axis computed from its law at construction.
+  const controller::LawSetup& loop_setup(std::size_t i) const { return loops_.at(i).setup(); }
   const std::vector<Axis>& axes() const noexcept { return axes_; }
 
   /// Runs tick k (steps 1-6 above) and returns its row; afterwards tick() == k + 1.

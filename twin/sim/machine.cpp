@@ -48,6 +48,15 @@ std::vector<AxisParamSpec> make_axis_specs() {
                      "cascade: the velocity and current loops' period where they run faster than the position "
                      "loop, Ts a whole multiple of it (0: Ts)",
                      a.loop.cascade.Tv_s, controller::LoopLaw::kCascade),
+      TWIN_LAW_PARAM("command_average", "s",
+                     "cascade: the reference's moving average over this window before the position loop (a CNC's "
+                     "smoothing after its interpolator, which a logged reference does not show), a whole multiple "
+                     "of Ts; 0: none",
+                     a.loop.cascade.command_average_s, controller::LoopLaw::kCascade),
+      TWIN_LAW_PARAM("command_lag", "s",
+                     "cascade: first-order lag of the reference after its moving average, before the position "
+                     "loop; 0: none",
+                     a.loop.cascade.command_lag_s, controller::LoopLaw::kCascade),
       TWIN_LAW_PARAM("torque_command_logged", "1",
                      "cascade: 1 where the log's torque or current is the velocity loop's command, before the "
                      "current loop and any delay; 0: the motor's",
