@@ -2833,6 +2833,86 @@ bool all_runs_log(const std::vector<RunData>& runs, const std::string& column) {
   return all;
 }
 
+/// The reference through a moving average of n periods of Ts and a
+/// first-order lag of lag_s, as controller::PositionLoop smooths it, each
+/// segment from its own first value (held before it); the log's rows are
+/// taken at the loop's period.
+std::vector<double> smooth_reference_in_segments(const std::vector<double>& ref, const std::vector<Segment>& segs,
+                                                 int n, double lag_s, double Ts) {
+  std::vector<double> out(ref);
+  const double a = lag_s > 0.0 ? std::exp(-Ts / lag_s) : 0.0;
+  const auto N = static_cast<std::size_t>(std::max(1, n));
+  for (const Segment& sg : segs) {
+    if (sg.end <= sg.begin) continue;
+    const double first = ref[sg.begin];
+    double sum = 0.0, y = first;  // sum: of ref - first over the window
+    for (std::size_t k = sg.begin; k < sg.end; ++k) {
+      sum += ref[k] - (k >= sg.begin + N ? ref[k - N] : first);
+      y = a * y + (1.0 - a) * (first + sum / static_cast<double>(N));
+      out[k] = y;
+    }
+  }
+  return out;
+}
+
+/// The reference's smoothing whose P law fits a logged velocity command best.
+struct ReferenceSmoothingFit {
+  int n{1};            ///< moving average, loop periods
+  double lag_s{0.0};   ///< first-order lag after it
+  double residual{std::numeric_limits<double>::infinity()};
+};
+
+/// The moving average (1 to controller::kMaxCommandAverageTicks periods of Ts) and lag
+/// (0 to 50 ms) whose `fit(n, lag_s)` leaves the least residual, no
+/// smoothing left out: a coarse grid (every n to 16, then steps of 4 to 16;
+/// 18 lags), every n about the best, then the lag by golden section between
+/// the grid's lags about the best.
+ReferenceSmoothingFit best_reference_smoothing(const std::function<LsqResult(int, double)>& fit, double Ts) {
+  ReferenceSmoothingFit best;
+  const auto take = [&](int n, double lag_s) {
+    if ((n == 1 && lag_s == 0.0) || (lag_s > 0.0 && lag_s < Ts)) return std::numeric_limits<double>::infinity();
+    const LsqResult trial = fit(n, lag_s);
+    const double r = trial.ok && trial.theta[0] > 0.0 ? trial.residual_rms : std::numeric_limits<double>::infinity();
+    if (r < best.residual) best = {n, lag_s, r};
+    return r;
+  };
+  const std::vector<double> lags_ms{0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0, 25.0, 32.0, 40.0, 50.0};
+  std::vector<int> ns;
+  for (int n = 1; n <= controller::kMaxCommandAverageTicks; n += n < 16 ? 1 : (n < 32 ? 4 : (n < 64 ? 8 : 16))) ns.push_back(n);
+  for (double lag_ms : lags_ms)
+    for (int n : ns) take(n, 1e-3 * lag_ms);
+  if (!std::isfinite(best.residual)) return best;
+  const int step = best.n < 16 ? 1 : (best.n < 32 ? 4 : (best.n < 64 ? 8 : 16));
+  const auto at = std::find(lags_ms.begin(), lags_ms.end(), 1e3 * best.lag_s);
+  const std::size_t li = at == lags_ms.end() ? 0 : static_cast<std::size_t>(at - lags_ms.begin());
+  const double lag_lo = 1e-3 * lags_ms[li > 0 ? li - 1 : 0], lag_hi = 1e-3 * lags_ms[std::min(li + 1, lags_ms.size() - 1)];
+  const double lag0 = best.lag_s;
+  for (int n = std::max(1, best.n - step + 1); n <= std::min(controller::kMaxCommandAverageTicks, best.n + step - 1); ++n)
+    for (double lag_s : {lag_lo, lag0, lag_hi}) take(n, lag_s);
+  // The lag between its grid neighbours at the best average.
+  const int n_best = best.n;
+  double lo = lag_lo, hi = lag_hi;
+  const double g = 0.5 * (std::sqrt(5.0) - 1.0);
+  double c = hi - g * (hi - lo), d = lo + g * (hi - lo);
+  double fc = take(n_best, c), fd = take(n_best, d);
+  for (int it = 0; it < 16 && hi - lo > 1e-5; ++it) {
+    if (fc < fd) {
+      hi = d;
+      d = c;
+      fd = fc;
+      c = hi - g * (hi - lo);
+      fc = take(n_best, c);
+    } else {
+      lo = c;
+      c = d;
+      fc = fd;
+      d = lo + g * (hi - lo);
+      fd = take(n_best, d);
+    }
+  }
+  return best;
+}
+
 /// Kv and kff from a logged velocity command against the following error and
 /// the command's speed.
 void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
@@ -2849,39 +2929,81 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
   // (zero phase, at the identification's 50 Hz) and the noise is left out.
   const double dt = f.r0.sample_period_s;
   const bool filter = f.position_quantum_mm > 0.001 + 1e-12 && dt <= 2e-3 + 1e-12;
-  std::vector<std::array<std::vector<double>, 3>> cols;  // e, v_ref, vcmd per run
-  for (const auto& rd : f.runs) {
-    const auto& t = rd.run->trace;
-    // Filtered here, the reference as logged (the rebuilt one is low-passed already).
-    const auto& ref = (filter ? *rd.run : *rd.smooth).trace.at(col(a, "_ref_mm"));
-    const auto& x = t.at(col(a, "_mm"));
-    std::array<std::vector<double>, 3> c;
-    c[0].resize(ref.size());
-    for (std::size_t k = 0; k < ref.size(); ++k) c[0][k] = ref[k] - x[k];
-    c[1] = loop_reference_speed(ref, rd.segments, rd.run->sample_period_s, f.Ts);
-    c[2] = t.at(velocity_command_column(t, a));
-    if (filter)
-      for (auto& y : c) y = lowpass_in_segments(y, rd.segments, rd.run->sample_period_s);
-    cols.push_back(std::move(c));
-  }
-  f.fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
-    e.push_back(cols[r][0][k]);
-    vr.push_back(cols[r][1][k]);
-    vc.push_back(cols[r][2][k]);
-    rows.push_back(rows.size());
-  });
-  const LsqResult ls = least_squares({&e, &vr}, vc, rows);
+  // The law fitted with the reference the loop follows taken as the logged
+  // one through a moving average of n loop periods and a lag of `lag_s`
+  // (a CNC's smoothing after its interpolator; 1 and 0: none).
+  const auto fit_with = [&](int n, double lag_s) {
+    e.clear();
+    vr.clear();
+    vc.clear();
+    rows.clear();
+    std::vector<std::array<std::vector<double>, 3>> cols;  // e, v_ref, vcmd per run
+    for (const auto& rd : f.runs) {
+      const auto& t = rd.run->trace;
+      // Filtered here, the reference as logged (the rebuilt one is low-passed already).
+      const auto& logged_ref = (filter ? *rd.run : *rd.smooth).trace.at(col(a, "_ref_mm"));
+      const std::vector<double> ref =
+          n > 1 || lag_s > 0.0 ? smooth_reference_in_segments(logged_ref, rd.segments, n, lag_s, f.Ts) : logged_ref;
+      const auto& x = t.at(col(a, "_mm"));
+      std::array<std::vector<double>, 3> c;
+      c[0].resize(ref.size());
+      for (std::size_t k = 0; k < ref.size(); ++k) c[0][k] = ref[k] - x[k];
+      c[1] = loop_reference_speed(ref, rd.segments, rd.run->sample_period_s, f.Ts);
+      c[2] = t.at(velocity_command_column(t, a));
+      if (filter)
+        for (auto& y : c) y = lowpass_in_segments(y, rd.segments, rd.run->sample_period_s);
+      cols.push_back(std::move(c));
+    }
+    f.fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
+      e.push_back(cols[r][0][k]);
+      vr.push_back(cols[r][1][k]);
+      vc.push_back(cols[r][2][k]);
+      rows.push_back(rows.size());
+    });
+    return least_squares({&e, &vr}, vc, rows);
+  };
+  LsqResult ls = fit_with(1, 0.0);
   if (!(ls.ok && ls.theta[0] > 0.0)) return;
+  // The smoothing: where the log samples at the loop's period, the grid of
+  // moving averages (1 to 64 periods) and lags (0 to 50 ms) whose law fits
+  // best, taken where it halves the residual of the law on the logged
+  // reference (the law is exact but for the encoder's steps there, so no
+  // smoothing comes near that on a log without one).
+  int best_n = 1;
+  double best_lag_s = 0.0;
+  if (std::abs(dt - f.Ts) <= 1e-6 * f.Ts) {
+    const ReferenceSmoothingFit sm = best_reference_smoothing(fit_with, f.Ts);
+    if (sm.residual < 0.5 * ls.residual_rms) {
+      best_n = sm.n;
+      best_lag_s = sm.lag_s;
+    }
+  }
+  const double residual_logged = ls.residual_rms;
+  if (best_n > 1 || best_lag_s > 0.0) ls = fit_with(best_n, best_lag_s);
+  ax.gains.command_average_s = best_n > 1 ? best_n * f.Ts : 0.0;
+  ax.gains.command_lag_s = best_lag_s;
   ax.gains.Kv_per_s = ls.theta[0];
   ax.gains.kff = std::clamp(ls.theta[1], 0.0, 1.5);
-  ax.lag_s = (1.0 - ax.gains.kff) / ax.gains.Kv_per_s;
+  ax.lag_s = (1.0 - ax.gains.kff) / ax.gains.Kv_per_s + 0.5 * (best_n - 1) * f.Ts + best_lag_s;
   double vrms = 0.0;
   for (double x : vc) vrms += x * x;
   vrms = std::sqrt(vrms / static_cast<double>(std::max<std::size_t>(1, vc.size())));
   const bool logged = f.r0.trace.find(col(a, "_vcmd_mm_s")) != nullptr;
+  const std::string smoothing =
+      best_n > 1 || best_lag_s > 0.0
+          ? fmt::format("; the loop follows the logged reference smoothed by {} (a CNC's smoothing after its "
+                        "interpolator, {:.4g} ms of delay), which fits the command with {:.3g} mm/s of residual "
+                        "against {:.3g} mm/s on the reference as logged",
+                        best_n > 1 && best_lag_s > 0.0
+                            ? fmt::format("a moving average over {:.4g} ms and a first-order lag of {:.4g} ms",
+                                          1e3 * best_n * f.Ts, 1e3 * best_lag_s)
+                            : (best_n > 1 ? fmt::format("a moving average over {:.4g} ms", 1e3 * best_n * f.Ts)
+                                          : fmt::format("a first-order lag of {:.4g} ms", 1e3 * best_lag_s)),
+                        1e3 * (0.5 * (best_n - 1) * f.Ts + best_lag_s), ls.residual_rms, residual_logged)
+          : std::string();
   ax.loop_source = logged ? fmt::format("the logged velocity command against the following error and the command's "
-                                        "speed (residual {:.3g} mm/s against an RMS of {:.3g} mm/s)",
-                                        ls.residual_rms, vrms)
+                                        "speed (residual {:.3g} mm/s against an RMS of {:.3g} mm/s){}",
+                                        ls.residual_rms, vrms, smoothing)
                           : std::string("the velocity command rebuilt from the logged torque and speed (see the "
                                         "notes: no velocity command is logged)");
 }
@@ -5769,6 +5891,28 @@ void align_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<Ru
       }
     }
     if (best == 0 || !(best_res < 0.5 * as_logged)) continue;
+    // A reference the loop follows smoothed (loop_from_vcmd) also looks like
+    // a late command: the skew is taken only where it fits better than the
+    // best smoothing of the reference with the command as logged.
+    if (std::abs(own.front().sample_period_s - Ts) <= 1e-6 * Ts) {
+      const auto smoothed_fit = [&](int n, double lag_s) {
+        std::vector<double> es, vs, vc;
+        for (std::size_t i = 0; i < own.size(); ++i) {
+          const std::vector<double> ref = smooth_reference_in_segments(runs[i].smooth->trace.at(col(a, "_ref_mm")),
+                                                                       runs[i].segments, n, lag_s, Ts);
+          const auto& x = own[i].trace.at(col(a, "_mm"));
+          const std::vector<double> speed = loop_reference_speed(ref, runs[i].segments, own[i].sample_period_s, Ts);
+          for (const auto& [run, k] : at)
+            if (run == i) {
+              es.push_back(ref[k] - x[k]);
+              vs.push_back(speed[k]);
+              vc.push_back((*logged[i])[k]);
+            }
+        }
+        return least_squares({&es, &vs}, vc, rows);
+      };
+      if (best_reference_smoothing(smoothed_fit, Ts).residual <= best_res) continue;
+    }
     for (std::size_t i = 0; i < own.size(); ++i) {
       auto& t = own[i].trace;
       for (const std::string& name : {vcmd, lowpassed(vcmd)}) {
@@ -6401,6 +6545,8 @@ nlohmann::json data_calibration_report_json(const DataCalibration& r) {
     p["lag_s"] = ax.lag_s;
     p["Kv"] = ax.gains.Kv_per_s;
     p["kff"] = ax.gains.kff;
+    if (ax.gains.command_average_s > 0.0) p["command_average_s"] = ax.gains.command_average_s;
+    if (ax.gains.command_lag_s > 0.0) p["command_lag_s"] = ax.gains.command_lag_s;
     p["loop_source"] = ax.loop_source;
     if (ax.identified) {
       p["Kvp"] = ax.gains.Kvp_torque_s_per_rad;

@@ -25,6 +25,8 @@
 
 #include "truth_sim.hpp"
 #include "twin/calibrate/machine_from_data.hpp"
+#include "twin/io/atomic_file.hpp"
+#include "twin/io/machine_file.hpp"
 
 namespace twin::analysis {
 namespace {
@@ -448,6 +450,48 @@ TEST(DataEffects, TheLawBehindADeadTimeIsFittedOnTheLogsOwnRowsUnderASlowerPosit
   EXPECT_NEAR(ax.gains_at_lag.Kvp_torque_s_per_rad, Kvp_raw, 0.01 * Kvp_raw) << *note;
   EXPECT_NEAR(ax.gains_at_lag.Tn_s, 0.008, 0.01 * 0.008) << *note;
   expect_held_out_machine_check(o);
+}
+
+// A CNC that smooths its reference after the interpolator (here an 8 ms
+// moving average, then a 3 ms first-order lag) before its position loop,
+// while the log holds the reference before it: on the law vcmd = Kv e +
+// kff v_ref fitted against the logged reference the command looked 2 rows
+// late, the skew was taken, and the other program tracked at 0.021 with
+// rising friction named. Oracles: the truth's smoothing (8 ms exactly; the
+// lag within 2 %: the golden-section search stops at 10 us) and its law (Kv
+// and kff to 1 %: the law is exact but for the encoder's 1 um), nothing
+// named, the held-out machine's check, and machine.yaml carrying the
+// smoothing to a machine read back. The same truth without the smoothing
+// gets none.
+TEST(DataEffects, AReferenceTheCncSmoothsIsFoundFromTheLoggedVelocityCommand) {
+  truth::RunSpec sp = cascade_spec_without_speed();
+  sp.cascade.command_average_ticks = 8;
+  sp.cascade.command_lag_s = 0.003;
+  const Outcome o = calibrate_spec("smoothed_reference", sp);
+  ASSERT_EQ(o.r.axis.size(), 1u);
+  const AxisFromData& ax = o.r.axis[0];
+  EXPECT_NEAR(ax.gains.command_average_s, 0.008, 1e-12) << ax.loop_source;
+  EXPECT_NEAR(ax.gains.command_lag_s, 0.003, 0.02 * 0.003) << ax.loop_source;
+  EXPECT_NEAR(ax.gains.Kv_per_s, 45.0, 0.01 * 45.0) << ax.loop_source;
+  EXPECT_NEAR(ax.gains.kff, 0.6, 0.01 * 0.6) << ax.loop_source;
+  EXPECT_THAT(ax.loop_source, ::testing::HasSubstr("smoothed by a moving average over 8 ms"));
+  EXPECT_TRUE(o.kept.empty()) << describe(o);
+  EXPECT_EQ(note_with(o, "rows after the following error"), o.r.notes.end()) << describe(o);
+  expect_held_out_machine_check(o);
+
+  const auto dir = std::filesystem::temp_directory_path() / "twin_data_effects_smoothed_yaml";
+  std::filesystem::create_directories(dir);
+  io::write_file_atomic(dir / "machine.yaml", io::machine_to_yaml(o.r.final_machine, "test"));
+  const sim::MachineDefinition back = io::load_machine(dir / "machine.yaml");
+  const controller::CascadeGains& g = back.axes[index(Axis::kX)].loop.cascade;
+  EXPECT_NEAR(g.command_average_s, ax.gains.command_average_s, 1e-12);
+  EXPECT_NEAR(g.command_lag_s, ax.gains.command_lag_s, 1e-9);
+  std::filesystem::remove_all(dir);
+
+  const Outcome plain = calibrate_spec("reference_as_logged", cascade_spec_without_speed());
+  ASSERT_EQ(plain.r.axis.size(), 1u);
+  EXPECT_EQ(plain.r.axis[0].gains.command_average_s, 0.0) << plain.r.axis[0].loop_source;
+  EXPECT_EQ(plain.r.axis[0].gains.command_lag_s, 0.0) << plain.r.axis[0].loop_source;
 }
 
 // Friction that creeps below 0.2 rad/s instead of sticking (the truth's own

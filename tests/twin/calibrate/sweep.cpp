@@ -11,6 +11,7 @@
 //                            [--torque-filter S] [--torque-mean]
 //                            [--kff K] [--jff J] [--friction load|sqrt|dahl] [--limit-on-command]
 //                            [--anti-windup] [--contour | --contour2] [--log-every M] [--velocity-ticks N]
+//                            [--command-average N] [--command-lag S] [--smooth-position-only]
 //                            [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
@@ -64,6 +65,12 @@
 // moves), the fitting program's arcs other than the validation's;
 // --contour2 takes other arcs, one turn each, so that the fitting part (the
 // program's first 60 %) holds five arcs where --contour's holds one.
+// --command-average N makes the truth's position loop follow the reference's
+// moving average over N periods, and --command-lag S its first-order lag of
+// S seconds after that (a CNC's smoothing after its interpolator), while the
+// log holds the reference before them; with --smooth-position-only the
+// feedforward takes the reference as logged, only the position loop's error
+// the smoothed one.
 // --velocity-ticks N runs the truth's velocity and current loops N times a
 // position-loop period (a 1 ms position loop over a 125 us velocity loop:
 // 8), the log at the position loop's ticks.
@@ -206,6 +213,9 @@ struct CascadeOptions {
   int velocity_ticks{1};           ///< the velocity loop's ticks per position-loop period
   int position_every{1};           ///< the position loop's period in logged periods (a log faster than it)
   bool vcmd_before_update{false};  ///< with position_every: the command logged before the loop updates it
+  int command_average_ticks{1};    ///< the loop follows the reference's moving average over this many periods
+  double command_lag_s{0.0};       ///< and then its first-order lag of this time constant
+  bool position_path_only{false};  ///< the smoothing on the position loop's error only, not the feedforward
   /// meta.json's controller period: the loop's, the log's own, or none.
   twin::truth::RunSpec::PeriodInMeta period_in_meta{twin::truth::RunSpec::PeriodInMeta::kLoop};
 };
@@ -260,6 +270,9 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     sp.cascade.velocity_ticks = loop.velocity_ticks;
     sp.cascade.position_every = loop.position_every;
     sp.cascade.log_vcmd_before_update = loop.vcmd_before_update;
+    sp.cascade.command_average_ticks = loop.command_average_ticks;
+    sp.cascade.command_lag_s = loop.command_lag_s;
+    sp.cascade.smooth_position_path_only = loop.position_path_only;
     sp.period_in_meta = loop.period_in_meta;
     const double load = sp.effects.load_Nm;
     c.set(sp.effects);
@@ -397,6 +410,17 @@ int main(int argc, char** argv) {
         return 2;
       }
       loop.position_every = static_cast<int>(n);
+    } else if (!std::strcmp(argv[i], "--command-average") && has_value) {
+      const long n = std::strtol(argv[++i], nullptr, 10);
+      if (n < 1 || n > 200) {
+        std::fprintf(stderr, "calibrate_sweep: --command-average takes a whole number of periods from 1 to 200\n");
+        return 2;
+      }
+      loop.command_average_ticks = static_cast<int>(n);
+    } else if (!std::strcmp(argv[i], "--command-lag") && has_value) {
+      if (!number_at_least_0("--command-lag", argv[++i], loop.command_lag_s)) return 2;
+    } else if (!std::strcmp(argv[i], "--smooth-position-only")) {
+      loop.position_path_only = true;
     } else if (!std::strcmp(argv[i], "--vcmd-before-update")) {
       loop.vcmd_before_update = true;
     } else if (!std::strcmp(argv[i], "--period-in-meta") && has_value) {

@@ -104,6 +104,23 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   const Effects& e = sp.effects;
   const double Ts = sp.Ts_s;
   const std::vector<double> ref = sp.reference_mm.empty() ? make_reference(Ts, sp.cycles) : sp.reference_mm;
+  // What the cascade's position loop follows: the reference, or its moving
+  // average (command_average_ticks), which the log does not show.
+  std::vector<double> ref_loop = ref;
+  if (sp.cascade.on && sp.cascade.command_average_ticks > 1) {
+    const std::size_t n = static_cast<std::size_t>(sp.cascade.command_average_ticks);
+    double sum = 0.0;
+    // sum: of ref - ref[0] over the window; before the first period the window holds ref[0].
+    for (std::size_t k = 0; k < ref.size(); ++k) {
+      sum += ref[k] - ref[k >= n ? k - n : 0];
+      ref_loop[k] = ref[0] + sum / static_cast<double>(n);
+    }
+  }
+  if (sp.cascade.on && sp.cascade.command_lag_s > 0.0) {
+    const double a = std::exp(-Ts / sp.cascade.command_lag_s);
+    double y = ref_loop[0];
+    for (double& r : ref_loop) r = y = a * y + (1.0 - a) * r;
+  }
   const bool coupling_gap = e.backlash_in_coupling && e.backlash_mm > 0.0;
   const bool two_mass = e.compliance_K > 0.0 || coupling_gap;
   const double K_c = e.compliance_K > 0.0 ? e.compliance_K : 20000.0;
@@ -294,10 +311,11 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     // The cascade's position loop: on its own ticks only (position_every).
     const double vcmd_before = vcmd;
     if (k % pe == 0) {
-      const double vref_p = k >= pe ? (ref[k] - ref[k - pe]) / (pe * Ts) : 0.0;
+      const std::vector<double>& ref_ff = cl.smooth_position_path_only ? ref : ref_loop;
+      const double vref_p = k >= pe ? (ref_ff[k] - ref_ff[k - pe]) / (pe * Ts) : 0.0;
       aref_p = (vref_p - vref_p_prev) / (pe * Ts);
       vref_p_prev = vref_p;
-      vcmd = cl.Kv * err + cl.kff * vref_p;
+      vcmd = cl.Kv * (ref_loop[k] - x_meas) + cl.kff * vref_p;
     }
     e_prev = err;
     vref_prev = vref;

@@ -134,6 +134,18 @@ struct CascadeLaw {
   /// the position loop updates it at its tick, so each new value shows a
   /// row after the tick (the rest of the row as at the tick).
   bool log_vcmd_before_update{false};
+  /// > 1: the position loop follows the reference's moving average over
+  /// this many periods (a CNC's smoothing after its interpolator, e.g. a
+  /// bell-shaped acceleration), while the log holds the reference before it.
+  int command_average_ticks{1};
+  /// > 0 (s): then a first-order lag of this time constant (a CNC's
+  /// setpoint filter), also not in the log.
+  double command_lag_s{0.0};
+  /// With the smoothing above: the velocity feedforward (and the torque
+  /// feedforward) taken from the reference as logged, only the position
+  /// loop's error from the smoothed one (a CNC that delays the position
+  /// setpoint to match its velocity loop while feeding the speed forward).
+  bool smooth_position_path_only{false};
 };
 
 struct RunSpec {
