@@ -78,13 +78,17 @@ PositionLoopOutput PositionLoop::step(std::int64_t k, double x_ref_mm, double x_
     throw InternalError(fmt::format("position loop stepped at tick {} after tick {}", k, state_.last_k));
   const double Ts = setup_.Ts_s;
   PositionLoopOutput out;
+  // The error from the reference the loop follows; the feedforward's speed
+  // from it too, or from the one given (LawSetup::feedforward_unsmoothed).
+  const double x_given_mm = x_ref_mm;
   if (smooths(setup_)) x_ref_mm = smooth_reference(setup_, x_ref_mm, state_);
+  const double x_ff_mm = setup_.feedforward_unsmoothed ? x_given_mm : x_ref_mm;
   out.e_mm = x_ref_mm - x_meas_mm;
-  out.v_ref_mm_per_s = (x_ref_mm - state_.x_ref_prev_mm) / Ts;
+  out.v_ref_mm_per_s = (x_ff_mm - state_.x_ref_prev_mm) / Ts;
   out.a_ref_mm_per_s2 = (out.v_ref_mm_per_s - state_.v_ref_prev_mm_per_s) / Ts;
   law_->step(params_, setup_, x_meas_mm, v_meas_mm_per_s, state_, out);
   state_.e_prev_mm = out.e_mm;
-  state_.x_ref_prev_mm = x_ref_mm;
+  state_.x_ref_prev_mm = x_ff_mm;
   state_.v_ref_prev_mm_per_s = out.v_ref_mm_per_s;
   state_.last_k = k;
   return out;

@@ -43,6 +43,11 @@ struct CascadeGains {
   /// outside the feedback loop.
   double command_average_s{0.0};
   double command_lag_s{0.0};
+  /// 1: the feedforward (kff, Jff) takes the reference as given and only the
+  /// position loop's error the smoothed one (a CNC that delays the position
+  /// setpoint to match its velocity loop while feeding the speed forward);
+  /// 0: both the smoothed one.
+  double feedforward_unsmoothed{0.0};
 };
 
 /// The longest moving average of the reference, in periods.
@@ -71,6 +76,7 @@ struct LawSetup {
   /// the moving average's periods (1: none) and exp(-Ts / command_lag) (0: none).
   int command_average_ticks{1};
   double command_lag_a{0.0};
+  bool feedforward_unsmoothed{false};
 };
 
 /// The gains of every law; an axis uses those of its `law`.
@@ -93,7 +99,7 @@ void validate_sample_period(std::string_view where, double Ts_s);
 struct PositionLoopState {
   double I_mm_s{0.0};
   double e_prev_mm{0.0};
-  double x_ref_prev_mm{0.0};
+  double x_ref_prev_mm{0.0};  ///< the reference the feedforward takes (smoothed or as given)
   double v_ref_prev_mm_per_s{0.0};
   // Cascade only.
   double Iv_rad{0.0};

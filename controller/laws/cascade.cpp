@@ -21,7 +21,8 @@ void CascadeLaw::validate(const PositionLoopParams& g, std::string_view where) c
                          {"Jff", c.Jff_torque_s2_per_rad},
                          {"Tv", c.Tv_s},
                          {"command_average", c.command_average_s},
-                         {"command_lag", c.command_lag_s}});
+                         {"command_lag", c.command_lag_s},
+                         {"feedforward_unsmoothed", c.feedforward_unsmoothed}});
   if (!(c.Kv_per_s > 0.0)) throw ConfigError(fmt::format("{}: Kv = {} 1/s must be > 0", where, c.Kv_per_s));
   if (c.kff < 0.0 || c.kff > 1.5) throw ConfigError(fmt::format("{}: kff = {} must be in [0, 1.5]", where, c.kff));
   if (!(c.Kvp_torque_s_per_rad > 0.0))
@@ -33,6 +34,8 @@ void CascadeLaw::validate(const PositionLoopParams& g, std::string_view where) c
   if (c.command_average_s < 0.0 || c.command_lag_s < 0.0)
     throw ConfigError(fmt::format("{}: command_average, command_lag = {}, {} s must be >= 0", where,
                                   c.command_average_s, c.command_lag_s));
+  if (c.feedforward_unsmoothed != 0.0 && c.feedforward_unsmoothed != 1.0)
+    throw ConfigError(fmt::format("{}: feedforward_unsmoothed = {} must be 0 or 1", where, c.feedforward_unsmoothed));
   if (c.Tv_s < 0.0) throw ConfigError(fmt::format("{}: Tv = {} s must be >= 0 (0: the position loop's Ts)", where, c.Tv_s));
 }
 
@@ -61,6 +64,7 @@ LawSetup CascadeLaw::setup(const PositionLoopParams& g, double Ts_s, const Drive
                                   g.cascade.command_average_s, kMaxCommandAverageTicks, Ts_s));
   s.command_average_ticks = avg > 0.0 ? static_cast<int>(std::lround(avg)) : 1;
   s.command_lag_a = g.cascade.command_lag_s > 0.0 ? std::exp(-Ts_s / g.cascade.command_lag_s) : 0.0;
+  s.feedforward_unsmoothed = g.cascade.feedforward_unsmoothed == 1.0;
   return s;
 }
 

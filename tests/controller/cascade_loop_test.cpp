@@ -90,8 +90,10 @@ Exact exact_response(const sim::MachineDefinition& m, const std::vector<double>&
   }
   Exact out;
   double w = 0.0, x = r[0], Iv = 0.0, Tf = 0.0, r_prev = r[0], v_prev = 0.0;
-  for (double rk : followed) {
-    const double e = rk - x;
+  for (std::size_t k = 0; k < r.size(); ++k) {
+    // The feedforward from the reference as given where the law says so.
+    const double rk = g.feedforward_unsmoothed == 1.0 ? r[k] : followed[k];
+    const double e = followed[k] - x;
     const double v_ref = (rk - r_prev) / Ts;
     const double a_ref = (v_ref - v_prev) / Ts;
     const double vcmd = g.Kv_per_s * e + g.kff * v_ref;
@@ -200,7 +202,11 @@ TEST(CascadeLoop, SmoothedReferenceMatchesTheExactDiscreteResponse) {
   expect_matches_exact(g, 1e-3);
   g.command_lag_s = 3e-3;
   expect_matches_exact(g, 1e-3);
+  g.feedforward_unsmoothed = 1.0;
+  expect_matches_exact(g, 1e-3);
   g.command_average_s = 0.0;
+  expect_matches_exact(g, 1e-4);
+  g.feedforward_unsmoothed = 0.0;
   expect_matches_exact(g, 1e-4);
 
   controller::CascadeGains plain = g;

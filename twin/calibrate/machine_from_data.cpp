@@ -259,7 +259,11 @@ RunData prepare_run(const MeasuredRun& run, const std::vector<Axis>& axes, const
   if (!seg_note.empty()) notes.push_back(fmt::format("{}: {}", run.dir.string(), seg_note));
   d.interior = interior_rows(d.n, d.segments);
   d.smooth = std::make_shared<MeasuredRun>(run);
-  // A log at 2 ms or faster rounded coarser than 1 um: several quanta a row,
+  // A log at 2 ms or faster with its reference rounded to 1 um or coarser
+  // (all positions agree with the rounding, so the command is rounded too:
+  // an interpolator's own is finer; at 1 um, 1 kHz and kff 0.6 the replay's
+  // torque error was 0.171 and tracking 0.0068 against 0.014 and 0.0019
+  // with the reference as computed): several quanta a row,
   // and the staircase's rebuild keeps the rows themselves there, whose steps
   // the replayed loop's velocity feedforward turns into torque (at 10 um and
   // 1 kHz, kff times 10 mm/s a row: the cascade sweep's runs validated at a
@@ -267,7 +271,7 @@ RunData prepare_run(const MeasuredRun& run, const std::vector<Axis>& axes, const
   // 50 Hz instead (torque 0.05 to 0.15 there; 25 to 200 Hz moved the
   // tracking error by under 5 %, and 50 Hz gave the lowest torque error).
   const bool fast = run.sample_period_s <= 2e-3 + 1e-12;
-  if (fast && rounding.kind != PositionRounding::Kind::kNone && rounding.quantum_mm > 0.001 + 1e-12) {
+  if (fast && rounding.kind != PositionRounding::Kind::kNone && rounding.quantum_mm >= 0.001 - 1e-12) {
     for (Axis a : axes) {
       const std::string name = col(a, "_ref_mm");
       auto it = std::find(d.smooth->trace.names.begin(), d.smooth->trace.names.end(), name);
@@ -2859,21 +2863,23 @@ std::vector<double> smooth_reference_in_segments(const std::vector<double>& ref,
 struct ReferenceSmoothingFit {
   int n{1};            ///< moving average, loop periods
   double lag_s{0.0};   ///< first-order lag after it
+  bool feedforward_as_given{false};  ///< the feedforward's speed from the reference as logged
   double residual{std::numeric_limits<double>::infinity()};
 };
 
-/// The moving average (1 to controller::kMaxCommandAverageTicks periods of Ts) and lag
-/// (0 to 50 ms) whose `fit(n, lag_s)` leaves the least residual, no
-/// smoothing left out: a coarse grid (every n to 16, then steps of 4 to 16;
-/// 18 lags), every n about the best, then the lag by golden section between
-/// the grid's lags about the best.
-ReferenceSmoothingFit best_reference_smoothing(const std::function<LsqResult(int, double)>& fit, double Ts) {
+/// The P law fitted with the loop's reference smoothed by (n, lag_s), its
+/// feedforward's speed from the reference as logged (true) or the smoothed one.
+using SmoothedLawFit = std::function<LsqResult(int n, double lag_s, bool feedforward_as_given)>;
+
+/// best_reference_smoothing with the feedforward taken one way.
+ReferenceSmoothingFit best_reference_smoothing_with(const SmoothedLawFit& fit, double Ts, bool ff_given) {
   ReferenceSmoothingFit best;
+  best.feedforward_as_given = ff_given;
   const auto take = [&](int n, double lag_s) {
     if ((n == 1 && lag_s == 0.0) || (lag_s > 0.0 && lag_s < Ts)) return std::numeric_limits<double>::infinity();
-    const LsqResult trial = fit(n, lag_s);
+    const LsqResult trial = fit(n, lag_s, ff_given);
     const double r = trial.ok && trial.theta[0] > 0.0 ? trial.residual_rms : std::numeric_limits<double>::infinity();
-    if (r < best.residual) best = {n, lag_s, r};
+    if (r < best.residual) best = {n, lag_s, ff_given, r};
     return r;
   };
   const std::vector<double> lags_ms{0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0, 25.0, 32.0, 40.0, 50.0};
@@ -2913,6 +2919,18 @@ ReferenceSmoothingFit best_reference_smoothing(const std::function<LsqResult(int
   return best;
 }
 
+/// The moving average (1 to controller::kMaxCommandAverageTicks periods of Ts) and lag
+/// (0 to 50 ms) whose `fit(n, lag_s)` leaves the least residual, no
+/// smoothing left out: a coarse grid (every n to 16, then steps of 4 to 16;
+/// 18 lags), every n about the best, then the lag by golden section between
+/// the grid's lags about the best; each with the feedforward from the
+/// smoothed reference and from the logged one.
+ReferenceSmoothingFit best_reference_smoothing(const SmoothedLawFit& fit, double Ts) {
+  const ReferenceSmoothingFit both = best_reference_smoothing_with(fit, Ts, false);
+  const ReferenceSmoothingFit error_only = best_reference_smoothing_with(fit, Ts, true);
+  return error_only.residual < both.residual ? error_only : both;
+}
+
 /// Kv and kff from a logged velocity command against the following error and
 /// the command's speed.
 void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
@@ -2922,35 +2940,41 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
   // The law's own speed: the backward difference of the reference over a
   // period, of the reference as rebuilt from a coarse rounding's staircase
   // (RunData::smooth).
-  // Positions rounded coarser than 1 um on a log at 2 ms or faster: the
-  // rounding's steps are noise on the error and on that speed, which a
-  // regression takes for signal (Kv 87 and kff 0.23 for 45 and 0.6 at 10 um
-  // and 1 kHz). The law is linear, so all three columns are low-passed alike
+  // Positions rounded to 1 um or coarser, the reference too (prepare_run),
+  // on a log at 2 ms or faster: the rounding's steps are noise on the error
+  // and on that speed, which a regression takes for signal (Kv 87 and kff
+  // 0.23 for 45 and 0.6 at 10 um and 1 kHz; 48.8 and 0.566 at 1 um). The law is linear, so all three columns are low-passed alike
   // (zero phase, at the identification's 50 Hz) and the noise is left out.
   const double dt = f.r0.sample_period_s;
-  const bool filter = f.position_quantum_mm > 0.001 + 1e-12 && dt <= 2e-3 + 1e-12;
+  const bool filter = f.position_quantum_mm >= 0.001 - 1e-12 && dt <= 2e-3 + 1e-12;
   // The law fitted with the reference the loop follows taken as the logged
   // one through a moving average of n loop periods and a lag of `lag_s`
-  // (a CNC's smoothing after its interpolator; 1 and 0: none).
-  const auto fit_with = [&](int n, double lag_s) {
+  // (a CNC's smoothing after its interpolator; 1 and 0: none), on each run's
+  // reference, position and command (`in`), the columns low-passed after
+  // where `lowpass_after`.
+  struct LawInputs {
+    const std::vector<double>* ref;
+    const std::vector<double>* x;
+    const std::vector<double>* vcmd;
+  };
+  const auto fit_on = [&](const std::vector<LawInputs>& in, bool lowpass_after, int n, double lag_s, bool ff_given) {
     e.clear();
     vr.clear();
     vc.clear();
     rows.clear();
     std::vector<std::array<std::vector<double>, 3>> cols;  // e, v_ref, vcmd per run
-    for (const auto& rd : f.runs) {
-      const auto& t = rd.run->trace;
-      // Filtered here, the reference as logged (the rebuilt one is low-passed already).
-      const auto& logged_ref = (filter ? *rd.run : *rd.smooth).trace.at(col(a, "_ref_mm"));
+    for (std::size_t i = 0; i < f.runs.size(); ++i) {
+      const auto& rd = f.runs[i];
+      const std::vector<double>& logged_ref = *in[i].ref;
       const std::vector<double> ref =
           n > 1 || lag_s > 0.0 ? smooth_reference_in_segments(logged_ref, rd.segments, n, lag_s, f.Ts) : logged_ref;
-      const auto& x = t.at(col(a, "_mm"));
+      const std::vector<double>& x = *in[i].x;
       std::array<std::vector<double>, 3> c;
       c[0].resize(ref.size());
       for (std::size_t k = 0; k < ref.size(); ++k) c[0][k] = ref[k] - x[k];
-      c[1] = loop_reference_speed(ref, rd.segments, rd.run->sample_period_s, f.Ts);
-      c[2] = t.at(velocity_command_column(t, a));
-      if (filter)
+      c[1] = loop_reference_speed(ff_given ? logged_ref : ref, rd.segments, rd.run->sample_period_s, f.Ts);
+      c[2] = *in[i].vcmd;
+      if (lowpass_after)
         for (auto& y : c) y = lowpass_in_segments(y, rd.segments, rd.run->sample_period_s);
       cols.push_back(std::move(c));
     }
@@ -2962,29 +2986,69 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
     });
     return least_squares({&e, &vr}, vc, rows);
   };
-  LsqResult ls = fit_with(1, 0.0);
+  // As logged (the rebuilt reference where the log is not filtered here; it
+  // is low-passed already), and all three low-passed alike (zero phase, 50
+  // Hz) for the smoothing's search: a reference logged to the encoder's
+  // resolution at 1 kHz steps its speed by a count a row, which a moving
+  // average of two rows halves, and the search would take that for a
+  // smoothing (2 ms on the truth's run with its reference rounded to 1 um,
+  // Kv 43.9 and kff 0.631 for 45 and 0.6). A smoothing the loop follows
+  // shows below 50 Hz (its delay of milliseconds times the speed); the
+  // smoothing is linear, so it is applied to the low-passed reference.
+  // The search runs where the log samples at the loop's period and fast
+  // enough for the 50 Hz low-pass (5 ms or faster).
+  const bool search = std::abs(dt - f.Ts) <= 1e-6 * f.Ts && dt <= 5e-3 + 1e-12;
+  std::vector<LawInputs> as_logged;
+  std::vector<std::array<std::vector<double>, 3>> lowpassed;
+  for (const auto& rd : f.runs) {
+    const auto& t = rd.run->trace;
+    const auto& ref = (filter ? *rd.run : *rd.smooth).trace.at(col(a, "_ref_mm"));
+    const auto& x = t.at(col(a, "_mm"));
+    const auto& vcmd = t.at(velocity_command_column(t, a));
+    as_logged.push_back({&ref, &x, &vcmd});
+    if (search)
+      lowpassed.push_back({lowpass_in_segments(ref, rd.segments, rd.run->sample_period_s),
+                           lowpass_in_segments(x, rd.segments, rd.run->sample_period_s),
+                           lowpass_in_segments(vcmd, rd.segments, rd.run->sample_period_s)});
+  }
+  std::vector<LawInputs> filtered;
+  for (const auto& c : lowpassed) filtered.push_back({&c[0], &c[1], &c[2]});
+  const auto fit_with = [&](int n, double lag_s, bool ff_given) {
+    return fit_on(as_logged, filter, n, lag_s, ff_given);
+  };
+  const auto search_fit = [&](int n, double lag_s, bool ff_given) {
+    return fit_on(filtered, false, n, lag_s, ff_given);
+  };
+  LsqResult ls = fit_with(1, 0.0, false);
   if (!(ls.ok && ls.theta[0] > 0.0)) return;
-  // The smoothing: where the log samples at the loop's period, the grid of
-  // moving averages (1 to 64 periods) and lags (0 to 50 ms) whose law fits
-  // best, taken where it halves the residual of the law on the logged
-  // reference (the law is exact but for the encoder's steps there, so no
-  // smoothing comes near that on a log without one).
+  // The smoothing: where the log samples at the loop's period, the one whose
+  // law fits best on the low-passed columns (best_reference_smoothing),
+  // taken where it halves the residual of the law on the logged reference
+  // low-passed alike (the law is exact but for the encoder's steps there,
+  // so no smoothing comes near that on a log without one).
   int best_n = 1;
   double best_lag_s = 0.0;
-  if (std::abs(dt - f.Ts) <= 1e-6 * f.Ts) {
-    const ReferenceSmoothingFit sm = best_reference_smoothing(fit_with, f.Ts);
-    if (sm.residual < 0.5 * ls.residual_rms) {
+  bool ff_given = false;
+  if (search) {
+    const LsqResult none = search_fit(1, 0.0, false);
+    const ReferenceSmoothingFit sm = best_reference_smoothing(search_fit, f.Ts);
+    if (none.ok && sm.residual < 0.5 * none.residual_rms) {
       best_n = sm.n;
       best_lag_s = sm.lag_s;
+      ff_given = sm.feedforward_as_given;
     }
   }
   const double residual_logged = ls.residual_rms;
-  if (best_n > 1 || best_lag_s > 0.0) ls = fit_with(best_n, best_lag_s);
+  if (best_n > 1 || best_lag_s > 0.0) ls = fit_with(best_n, best_lag_s, ff_given);
   ax.gains.command_average_s = best_n > 1 ? best_n * f.Ts : 0.0;
   ax.gains.command_lag_s = best_lag_s;
+  ax.gains.feedforward_unsmoothed = ff_given ? 1.0 : 0.0;
   ax.gains.Kv_per_s = ls.theta[0];
   ax.gains.kff = std::clamp(ls.theta[1], 0.0, 1.5);
-  ax.lag_s = (1.0 - ax.gains.kff) / ax.gains.Kv_per_s + 0.5 * (best_n - 1) * f.Ts + best_lag_s;
+  // The lag at constant speed: the P loop's plus the smoothing's delay
+  // (whichever reference the feedforward takes: its speed is the same there).
+  const double delay_s = 0.5 * (best_n - 1) * f.Ts + best_lag_s;
+  ax.lag_s = (1.0 - ax.gains.kff) / ax.gains.Kv_per_s + delay_s;
   double vrms = 0.0;
   for (double x : vc) vrms += x * x;
   vrms = std::sqrt(vrms / static_cast<double>(std::max<std::size_t>(1, vc.size())));
@@ -2992,14 +3056,17 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
   const std::string smoothing =
       best_n > 1 || best_lag_s > 0.0
           ? fmt::format("; the loop follows the logged reference smoothed by {} (a CNC's smoothing after its "
-                        "interpolator, {:.4g} ms of delay), which fits the command with {:.3g} mm/s of residual "
+                        "interpolator, {:.4g} ms of delay{}), which fits the command with {:.3g} mm/s of residual "
                         "against {:.3g} mm/s on the reference as logged",
                         best_n > 1 && best_lag_s > 0.0
                             ? fmt::format("a moving average over {:.4g} ms and a first-order lag of {:.4g} ms",
                                           1e3 * best_n * f.Ts, 1e3 * best_lag_s)
                             : (best_n > 1 ? fmt::format("a moving average over {:.4g} ms", 1e3 * best_n * f.Ts)
                                           : fmt::format("a first-order lag of {:.4g} ms", 1e3 * best_lag_s)),
-                        1e3 * (0.5 * (best_n - 1) * f.Ts + best_lag_s), ls.residual_rms, residual_logged)
+                        1e3 * delay_s,
+                        ff_given ? "; the feedforward takes the reference as logged, only the error the smoothed one"
+                                 : "",
+                        ls.residual_rms, residual_logged)
           : std::string();
   ax.loop_source = logged ? fmt::format("the logged velocity command against the following error and the command's "
                                         "speed (residual {:.3g} mm/s against an RMS of {:.3g} mm/s){}",
@@ -5893,25 +5960,38 @@ void align_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<Ru
     if (best == 0 || !(best_res < 0.5 * as_logged)) continue;
     // A reference the loop follows smoothed (loop_from_vcmd) also looks like
     // a late command: the skew is taken only where it fits better than the
-    // best smoothing of the reference with the command as logged.
-    if (std::abs(own.front().sample_period_s - Ts) <= 1e-6 * Ts) {
-      const auto smoothed_fit = [&](int n, double lag_s) {
+    // best smoothing of the reference with the command as logged. Both on
+    // the columns low-passed alike (zero phase, 50 Hz), as loop_from_vcmd
+    // searches: a smoothing of two rows halves the steps of a reference
+    // logged to the encoder's count at 1 kHz, which is no smoothing.
+    if (std::abs(own.front().sample_period_s - Ts) <= 1e-6 * Ts && own.front().sample_period_s <= 5e-3 + 1e-12) {
+      std::vector<std::array<std::vector<double>, 3>> lp;  // reference, position, command per run
+      for (std::size_t i = 0; i < own.size(); ++i) {
+        const double dt = own[i].sample_period_s;
+        lp.push_back({lowpass_in_segments(runs[i].smooth->trace.at(col(a, "_ref_mm")), runs[i].segments, dt),
+                      lowpass_in_segments(own[i].trace.at(col(a, "_mm")), runs[i].segments, dt),
+                      lowpass_in_segments(*logged[i], runs[i].segments, dt)});
+      }
+      const auto law_fit = [&](int n, double lag_s, bool ff_given, int skew) {
         std::vector<double> es, vs, vc;
         for (std::size_t i = 0; i < own.size(); ++i) {
-          const std::vector<double> ref = smooth_reference_in_segments(runs[i].smooth->trace.at(col(a, "_ref_mm")),
-                                                                       runs[i].segments, n, lag_s, Ts);
-          const auto& x = own[i].trace.at(col(a, "_mm"));
-          const std::vector<double> speed = loop_reference_speed(ref, runs[i].segments, own[i].sample_period_s, Ts);
+          const std::vector<double>& logged_ref = lp[i][0];
+          const std::vector<double> ref =
+              n > 1 || lag_s > 0.0 ? smooth_reference_in_segments(logged_ref, runs[i].segments, n, lag_s, Ts) : logged_ref;
+          const std::vector<double> speed =
+              loop_reference_speed(ff_given ? logged_ref : ref, runs[i].segments, own[i].sample_period_s, Ts);
           for (const auto& [run, k] : at)
             if (run == i) {
-              es.push_back(ref[k] - x[k]);
+              es.push_back(ref[k] - lp[i][1][k]);
               vs.push_back(speed[k]);
-              vc.push_back((*logged[i])[k]);
+              vc.push_back(lp[i][2][static_cast<std::size_t>(static_cast<std::ptrdiff_t>(k) + skew)]);
             }
         }
         return least_squares({&es, &vs}, vc, rows);
       };
-      if (best_reference_smoothing(smoothed_fit, Ts).residual <= best_res) continue;
+      const LsqResult skewed = law_fit(1, 0.0, false, best);
+      const auto smoothed_fit = [&](int n, double lag_s, bool ff_given) { return law_fit(n, lag_s, ff_given, 0); };
+      if (!skewed.ok || best_reference_smoothing(smoothed_fit, Ts).residual <= skewed.residual_rms) continue;
     }
     for (std::size_t i = 0; i < own.size(); ++i) {
       auto& t = own[i].trace;
@@ -6547,6 +6627,7 @@ nlohmann::json data_calibration_report_json(const DataCalibration& r) {
     p["kff"] = ax.gains.kff;
     if (ax.gains.command_average_s > 0.0) p["command_average_s"] = ax.gains.command_average_s;
     if (ax.gains.command_lag_s > 0.0) p["command_lag_s"] = ax.gains.command_lag_s;
+    if (ax.gains.feedforward_unsmoothed == 1.0) p["feedforward_unsmoothed"] = true;
     p["loop_source"] = ax.loop_source;
     if (ax.identified) {
       p["Kvp"] = ax.gains.Kvp_torque_s_per_rad;

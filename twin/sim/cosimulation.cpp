@@ -317,7 +317,7 @@ void start_in_steady_motion(CoSimulation& cosim, const AxisArray<std::optional<R
     ds.w_load_rad_per_s = w;
     ds.x_table_mm = ds.x_mm;
     ds.load_stuck = ds.stuck;
-    ls.x_ref_prev_mm = x_prev_loop;
+    ls.x_ref_prev_mm = cosim.loop_setup(i).feedforward_unsmoothed ? r->x_prev_mm : x_prev_loop;
     ls.v_ref_prev_mm_per_s = v;
     ls.last_k = k0 - 1;
   }

@@ -57,6 +57,10 @@ std::vector<AxisParamSpec> make_axis_specs() {
                      "cascade: first-order lag of the reference after its moving average, before the position "
                      "loop; 0: none",
                      a.loop.cascade.command_lag_s, controller::LoopLaw::kCascade),
+      TWIN_LAW_PARAM("feedforward_unsmoothed", "1",
+                     "cascade: 1 where the velocity and torque feedforward take the reference as given and only the "
+                     "position loop's error the smoothed one (command_average, command_lag); 0: both the smoothed one",
+                     a.loop.cascade.feedforward_unsmoothed, controller::LoopLaw::kCascade),
       TWIN_LAW_PARAM("torque_command_logged", "1",
                      "cascade: 1 where the log's torque or current is the velocity loop's command, before the "
                      "current loop and any delay; 0: the motor's",

@@ -11,7 +11,7 @@
 //                            [--torque-filter S] [--torque-mean]
 //                            [--kff K] [--jff J] [--friction load|sqrt|dahl] [--limit-on-command]
 //                            [--anti-windup] [--contour | --contour2] [--log-every M] [--velocity-ticks N]
-//                            [--command-average N] [--command-lag S] [--smooth-position-only]
+//                            [--command-average N] [--command-lag S] [--smooth-position-only] [--ref-mm Q]
 //                            [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
@@ -70,7 +70,8 @@
 // S seconds after that (a CNC's smoothing after its interpolator), while the
 // log holds the reference before them; with --smooth-position-only the
 // feedforward takes the reference as logged, only the position loop's error
-// the smoothed one.
+// the smoothed one. --ref-mm Q logs the reference rounded to Q mm (a trace
+// that shows the command at the display's resolution).
 // --velocity-ticks N runs the truth's velocity and current loops N times a
 // position-loop period (a 1 ms position loop over a 125 us velocity loop:
 // 8), the log at the position loop's ticks.
@@ -216,6 +217,7 @@ struct CascadeOptions {
   int command_average_ticks{1};    ///< the loop follows the reference's moving average over this many periods
   double command_lag_s{0.0};       ///< and then its first-order lag of this time constant
   bool position_path_only{false};  ///< the smoothing on the position loop's error only, not the feedforward
+  double reference_quantum_mm{0.0};  ///< the logged reference rounded to this (0: as computed)
   /// meta.json's controller period: the loop's, the log's own, or none.
   twin::truth::RunSpec::PeriodInMeta period_in_meta{twin::truth::RunSpec::PeriodInMeta::kLoop};
 };
@@ -273,6 +275,7 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     sp.cascade.command_average_ticks = loop.command_average_ticks;
     sp.cascade.command_lag_s = loop.command_lag_s;
     sp.cascade.smooth_position_path_only = loop.position_path_only;
+    sp.log_reference_quantum_mm = loop.reference_quantum_mm;
     sp.period_in_meta = loop.period_in_meta;
     const double load = sp.effects.load_Nm;
     c.set(sp.effects);
@@ -419,6 +422,8 @@ int main(int argc, char** argv) {
       loop.command_average_ticks = static_cast<int>(n);
     } else if (!std::strcmp(argv[i], "--command-lag") && has_value) {
       if (!number_at_least_0("--command-lag", argv[++i], loop.command_lag_s)) return 2;
+    } else if (!std::strcmp(argv[i], "--ref-mm") && has_value) {
+      if (!number_at_least_0("--ref-mm", argv[++i], loop.reference_quantum_mm)) return 2;
     } else if (!std::strcmp(argv[i], "--smooth-position-only")) {
       loop.position_path_only = true;
     } else if (!std::strcmp(argv[i], "--vcmd-before-update")) {

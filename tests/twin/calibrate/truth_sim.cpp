@@ -354,7 +354,10 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
         const double i_logged = e.delay_after_current ? p.Ka * u : i;
         const double i_measured = i_logged + noise(rng);
         if (k % every == 0 && cl.on) {
-          std::fprintf(f, "%.4f,%.10g,%.10g", static_cast<double>(k) * Ts, pos(ref[k]), pos(x_meas));
+          const double ref_logged = sp.log_reference_quantum_mm > 0.0
+                                        ? std::round(ref[k] / sp.log_reference_quantum_mm) * sp.log_reference_quantum_mm
+                                        : pos(ref[k]);
+          std::fprintf(f, "%.4f,%.10g,%.10g", static_cast<double>(k) * Ts, ref_logged, pos(x_meas));
           if (cl.log_velocities) std::fprintf(f, ",%.6f", cl.log_vcmd_before_update ? vcmd_before : vcmd);
           if (cl.log_velocities && cl.log_motor_speed) std::fprintf(f, ",%.6f", v_motor);
           const double T_logged = cl.log_torque_mean ? T_period_mean : T_monitor;

@@ -154,6 +154,9 @@ struct RunSpec {
   /// > 0: logged positions rounded to this many significant figures (as some
   /// CNCs export them); 0: to the encoder's resolution.
   int log_significant_figures{0};
+  /// > 0: the logged reference rounded to this (mm), as a trace that shows
+  /// the command at the display's resolution; the loop follows it unrounded.
+  double log_reference_quantum_mm{0.0};
   Effects effects;
   double Ts_s{1e-4};
   double resolution_mm{0.001};
