@@ -26,9 +26,11 @@ PositionLoop::PositionLoop(const PositionLoopParams& params, double Ts_s, const 
 
 namespace {
 
-bool smooths(const LawSetup& setup) { return setup.command_average_ticks > 1 || setup.command_lag_a > 0.0; }
+bool smooths(const LawSetup& setup) {
+  return setup.command_average_ticks > 1 || setup.command_lag_a > 0.0 || setup.command_delay_ticks > 0;
+}
 
-/// The reference through the moving average and the lag, one tick.
+/// The reference through the moving average, the lag and the dead time, one tick.
 double smooth_reference(const LawSetup& setup, double x_ref_mm, PositionLoopState& s) {
   const int n = setup.command_average_ticks;
   double x = x_ref_mm;
@@ -42,6 +44,11 @@ double smooth_reference(const LawSetup& setup, double x_ref_mm, PositionLoopStat
   if (setup.command_lag_a > 0.0) {
     s.ref_lagged_mm = setup.command_lag_a * s.ref_lagged_mm + (1.0 - setup.command_lag_a) * x;
     x = s.ref_lagged_mm;
+  }
+  if (const int d = setup.command_delay_ticks; d > 0) {
+    s.ref_delay_head = (s.ref_delay_head + 1) % (d + 1);
+    s.ref_delay_line[static_cast<std::size_t>(s.ref_delay_head)] = x;
+    x = s.ref_delay_line[static_cast<std::size_t>((s.ref_delay_head + 1) % (d + 1))];  // written d ticks ago
   }
   return x;
 }
@@ -59,13 +66,18 @@ double prime_reference_smoothing(const LawSetup& setup, double x_ref_mm, double 
   // y = a y + (1 - a) u on a ramp of `step` a tick lags it by step a / (1 - a).
   const double a = setup.command_lag_a;
   s.ref_lagged_mm = a > 0.0 ? averaged - step * a / (1.0 - a) : averaged;
-  return s.ref_lagged_mm;
+  // The dead time's line holds the lag's last d + 1 outputs, newest at the head.
+  const int d = setup.command_delay_ticks;
+  s.ref_delay_head = 0;
+  for (int j = 0; j <= d; ++j) s.ref_delay_line[static_cast<std::size_t>((d + 1 - j) % (d + 1))] = s.ref_lagged_mm - j * step;
+  return s.ref_lagged_mm - d * step;
 }
 
 void PositionLoop::reset(double x_ref0_mm, double x_meas0_mm) noexcept {
   state_ = PositionLoopState{};
   state_.ref_window.fill(x_ref0_mm);
   state_.ref_lagged_mm = x_ref0_mm;
+  state_.ref_delay_line.fill(x_ref0_mm);
   state_.x_ref_prev_mm = x_ref0_mm;
   state_.e_prev_mm = x_ref0_mm - x_meas0_mm;
   state_.x_meas_prev_mm = x_meas0_mm;

@@ -43,6 +43,11 @@ struct CascadeGains {
   /// outside the feedback loop.
   double command_average_s{0.0};
   double command_lag_s{0.0};
+  /// A dead time of whole periods after the smoothing, before the position
+  /// loop (a CNC that holds an axis's setpoint back to match a slower axis's
+  /// response, or hands it to the drive some cycles after the interpolator);
+  /// 0: none.
+  double command_delay_s{0.0};
   /// 1: the feedforward (kff, Jff) takes the reference as given and only the
   /// position loop's error the smoothed one (a CNC that delays the position
   /// setpoint to match its velocity loop while feeding the speed forward);
@@ -52,6 +57,8 @@ struct CascadeGains {
 
 /// The longest moving average of the reference, in periods.
 inline constexpr int kMaxCommandAverageTicks = 128;
+/// The longest dead time of the reference, in periods.
+inline constexpr int kMaxCommandDelayTicks = 128;
 
 /// What the cascade needs of the drive it commands.
 struct DriveScale {
@@ -76,6 +83,7 @@ struct LawSetup {
   /// the moving average's periods (1: none) and exp(-Ts / command_lag) (0: none).
   int command_average_ticks{1};
   double command_lag_a{0.0};
+  int command_delay_ticks{0};  ///< CascadeGains::command_delay_s in periods
   bool feedforward_unsmoothed{false};
 };
 
@@ -110,11 +118,15 @@ struct PositionLoopState {
   std::array<double, kMaxCommandAverageTicks> ref_window{};
   int ref_window_head{0};
   double ref_lagged_mm{0.0};
+  // The dead time (LawSetup::command_delay_ticks = d): the last d + 1
+  // smoothed references, newest at ref_delay_head.
+  std::array<double, kMaxCommandDelayTicks + 1> ref_delay_line{};
+  int ref_delay_head{0};
   std::int64_t last_k{-1};
 };
 
 /// The reference the loop follows once the law's smoothing (CascadeGains::
-/// command_average_s, command_lag_s) has been primed for steady motion at
+/// command_average_s, command_lag_s, command_delay_s) has been primed for steady motion at
 /// v_ref_mm_per_s through x_ref_mm at the tick: sets `s`'s smoothing state
 /// and returns the smoothed reference at the tick (x_ref_mm where there is
 /// no smoothing).

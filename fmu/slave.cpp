@@ -371,6 +371,8 @@ void Slave::check_state(const SavedState& s) const {
       refuse("a non-finite position-loop state");
     for (double x : l.ref_window)
       if (!std::isfinite(x)) refuse("a non-finite reference in the position loop's smoothing");
+    for (double x : l.ref_delay_line)
+      if (!std::isfinite(x)) refuse("a non-finite reference in the position loop's dead time");
     if (l.last_k >= c.k || l.last_k < -1) refuse(fmt::format("position-loop tick {} with tick counter {}", l.last_k, c.k));
   }
   if (c.k > 0 && c.last.k != c.k - 1) refuse(fmt::format("last row of tick {} with tick counter {}", c.last.k, c.k));

@@ -13,7 +13,7 @@ namespace twin::fmu {
 
 namespace {
 
-constexpr char kMagic[8] = {'T', 'W', 'I', 'N', 'F', 'M', 'U', '3'};
+constexpr char kMagic[8] = {'T', 'W', 'I', 'N', 'F', 'M', 'U', '4'};
 
 class Writer {
  public:
@@ -153,6 +153,8 @@ std::vector<char> serialize_state(const SavedState& s) {
         w.put(v);
       for (double v : l.ref_window) w.put(v);
       w.put<std::int32_t>(l.ref_window_head);
+      for (double v : l.ref_delay_line) w.put(v);
+      w.put<std::int32_t>(l.ref_delay_head);
       w.put(l.last_k);
     }
     put_snapshot(w, c.last);
@@ -210,6 +212,10 @@ SavedState deserialize_state(const char* data, std::size_t size) {
       l.ref_window_head = r.get<std::int32_t>();
       if (l.ref_window_head < 0 || l.ref_window_head >= controller::kMaxCommandAverageTicks)
         throw ConfigError(fmt::format("reference window at {}", l.ref_window_head));
+      for (double& v : l.ref_delay_line) v = r.get<double>();
+      l.ref_delay_head = r.get<std::int32_t>();
+      if (l.ref_delay_head < 0 || l.ref_delay_head > controller::kMaxCommandDelayTicks)
+        throw ConfigError(fmt::format("reference delay line at {}", l.ref_delay_head));
       l.last_k = r.get<std::int64_t>();
     }
     c.last = get_snapshot(r);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string_view>
 
 #include <fmt/format.h>
 
@@ -22,6 +23,7 @@ void CascadeLaw::validate(const PositionLoopParams& g, std::string_view where) c
                          {"Tv", c.Tv_s},
                          {"command_average", c.command_average_s},
                          {"command_lag", c.command_lag_s},
+                         {"command_delay", c.command_delay_s},
                          {"feedforward_unsmoothed", c.feedforward_unsmoothed}});
   if (!(c.Kv_per_s > 0.0)) throw ConfigError(fmt::format("{}: Kv = {} 1/s must be > 0", where, c.Kv_per_s));
   if (c.kff < 0.0 || c.kff > 1.5) throw ConfigError(fmt::format("{}: kff = {} must be in [0, 1.5]", where, c.kff));
@@ -31,9 +33,9 @@ void CascadeLaw::validate(const PositionLoopParams& g, std::string_view where) c
     throw ConfigError(fmt::format("{}: Tn, tau_i, Jff = {}, {}, {} must be >= 0", where, c.Tn_s, c.tau_i_s,
                                   c.Jff_torque_s2_per_rad));
   if (!(c.T_max > 0.0)) throw ConfigError(fmt::format("{}: T_max = {} must be > 0", where, c.T_max));
-  if (c.command_average_s < 0.0 || c.command_lag_s < 0.0)
-    throw ConfigError(fmt::format("{}: command_average, command_lag = {}, {} s must be >= 0", where,
-                                  c.command_average_s, c.command_lag_s));
+  if (c.command_average_s < 0.0 || c.command_lag_s < 0.0 || c.command_delay_s < 0.0)
+    throw ConfigError(fmt::format("{}: command_average, command_lag, command_delay = {}, {}, {} s must be >= 0", where,
+                                  c.command_average_s, c.command_lag_s, c.command_delay_s));
   if (c.feedforward_unsmoothed != 0.0 && c.feedforward_unsmoothed != 1.0)
     throw ConfigError(fmt::format("{}: feedforward_unsmoothed = {} must be 0 or 1", where, c.feedforward_unsmoothed));
   if (c.Tv_s < 0.0) throw ConfigError(fmt::format("{}: Tv = {} s must be >= 0 (0: the position loop's Ts)", where, c.Tv_s));
@@ -49,6 +51,21 @@ int CascadeLaw::inner_ticks(const CascadeGains& g, double Ts_s) {
   return static_cast<int>(std::lround(n));
 }
 
+namespace {
+
+/// `value_s` in periods of Ts: 0 for 0, else 1 to `max_ticks` whole periods
+/// (a ConfigError naming `what` otherwise).
+int whole_periods(double value_s, double Ts_s, int max_ticks, std::string_view what) {
+  const double n = value_s / Ts_s;
+  if (!(n > 0.0)) return 0;
+  if (!(n <= max_ticks + 1e-9 && std::abs(n - std::round(n)) <= 1e-6 * n && n >= 1.0 - 1e-9))
+    throw ConfigError(fmt::format("position loop: {} = {} s must be 1 to {} whole periods of Ts = {} s", what, value_s,
+                                  max_ticks, Ts_s));
+  return static_cast<int>(std::lround(n));
+}
+
+}  // namespace
+
 LawSetup CascadeLaw::setup(const PositionLoopParams& g, double Ts_s, const DriveScale& drive) const {
   if (!(drive.rg_mm_per_rad > 0.0) || !(drive.Ka_A_per_V > 0.0) || !(drive.Kt_Nm_per_A > 0.0))
     throw ConfigError(fmt::format("position loop: the cascade needs rg, Ka, Kt > 0 (got {}, {}, {})",
@@ -56,14 +73,12 @@ LawSetup CascadeLaw::setup(const PositionLoopParams& g, double Ts_s, const Drive
   const int n = inner_ticks(g.cascade, Ts_s);
   LawSetup s{Ts_s, drive, 0.0, n, Ts_s / n};
   s.lag_a = g.cascade.tau_i_s > 0.0 ? std::exp(-s.Tv_s / g.cascade.tau_i_s) : 0.0;
-  const double avg = g.cascade.command_average_s / Ts_s;
-  if (avg > 0.0 && !(avg <= kMaxCommandAverageTicks + 1e-9 && std::abs(avg - std::round(avg)) <= 1e-6 * avg &&
-                     avg >= 1.0 - 1e-9))
-    throw ConfigError(fmt::format("position loop: the reference's moving average command_average = {} s must be 1 "
-                                  "to {} whole periods of Ts = {} s",
-                                  g.cascade.command_average_s, kMaxCommandAverageTicks, Ts_s));
-  s.command_average_ticks = avg > 0.0 ? static_cast<int>(std::lround(avg)) : 1;
+  s.command_average_ticks =
+      std::max(1, whole_periods(g.cascade.command_average_s, Ts_s, kMaxCommandAverageTicks,
+                                "the reference's moving average command_average"));
   s.command_lag_a = g.cascade.command_lag_s > 0.0 ? std::exp(-Ts_s / g.cascade.command_lag_s) : 0.0;
+  s.command_delay_ticks =
+      whole_periods(g.cascade.command_delay_s, Ts_s, kMaxCommandDelayTicks, "the reference's dead time command_delay");
   s.feedforward_unsmoothed = g.cascade.feedforward_unsmoothed == 1.0;
   return s;
 }

@@ -76,17 +76,20 @@ Exact exact_response(const sim::MachineDefinition& m, const std::vector<double>&
   const Eigen::Matrix3d E = (A * Tv).exp();
   const double lag = g.tau_i_s > 0.0 ? std::exp(-Tv / g.tau_i_s) : 0.0;
   // The reference the loop follows: the CNC's smoothing (command_average_s,
-  // command_lag_s) written again here: the mean of the last N references (the
-  // first one before the run), then y = a y + (1 - a) u.
-  std::vector<double> followed(r.size());
+  // command_lag_s) and dead time (command_delay_s) written again here: the
+  // mean of the last N references (the first one before the run), then
+  // y = a y + (1 - a) u, then y as it was D ticks before (the first before the run).
+  std::vector<double> smoothed(r.size()), followed(r.size());
   const int N = g.command_average_s > 0.0 ? static_cast<int>(std::lround(g.command_average_s / Ts)) : 1;
   const double a_cmd = g.command_lag_s > 0.0 ? std::exp(-Ts / g.command_lag_s) : 0.0;
+  const auto D = static_cast<std::size_t>(std::lround(g.command_delay_s / Ts));
   double y = r[0];
   for (std::size_t k = 0; k < r.size(); ++k) {
     double sum = 0.0;
     for (int j = 0; j < N; ++j) sum += r[k >= static_cast<std::size_t>(j) ? k - static_cast<std::size_t>(j) : 0];
     y = a_cmd * y + (1.0 - a_cmd) * sum / N;
-    followed[k] = y;
+    smoothed[k] = y;
+    followed[k] = smoothed[k >= D ? k - D : 0];
   }
   Exact out;
   double w = 0.0, x = r[0], Iv = 0.0, Tf = 0.0, r_prev = r[0], v_prev = 0.0;
@@ -208,6 +211,19 @@ TEST(CascadeLoop, SmoothedReferenceMatchesTheExactDiscreteResponse) {
   expect_matches_exact(g, 1e-4);
   g.feedforward_unsmoothed = 0.0;
   expect_matches_exact(g, 1e-4);
+  // A dead time after the smoothing, alone and behind both.
+  g.command_delay_s = 6e-3;
+  expect_matches_exact(g, 1e-3);
+  g.command_average_s = 4e-3;
+  g.feedforward_unsmoothed = 1.0;
+  expect_matches_exact(g, 1e-3);
+  g.command_lag_s = 0.0;
+  g.command_average_s = 0.0;
+  g.feedforward_unsmoothed = 0.0;
+  g.command_delay_s = 3e-4;
+  expect_matches_exact(g, 1e-4);
+  g.command_delay_s = 0.0;
+  g.command_lag_s = 3e-3;
 
   controller::CascadeGains plain = g;
   plain.command_lag_s = 0.0;
@@ -216,10 +232,17 @@ TEST(CascadeLoop, SmoothedReferenceMatchesTheExactDiscreteResponse) {
   double apart = 0.0;
   for (std::size_t k = 0; k < r.size(); ++k) apart = std::max(apart, std::abs(smoothed.x_mm[k] - not_smoothed.x_mm[k]));
   EXPECT_GT(apart, 0.1) << "a 3 ms lag at 100 mm/s must show in the motion, mm";
+  controller::CascadeGains delayed = plain;
+  delayed.command_delay_s = 3e-3;
+  const Exact late = exact_response(cascade_x(1e-4, delayed), r);
+  apart = 0.0;
+  for (std::size_t k = 0; k < r.size(); ++k) apart = std::max(apart, std::abs(late.x_mm[k] - not_smoothed.x_mm[k]));
+  EXPECT_GT(apart, 0.1) << "a 3 ms dead time at 100 mm/s must show in the motion, mm";
 }
 
-// A moving average of N periods delays a ramp by (N - 1) Ts / 2, and the
-// discrete lag y = a y + (1 - a) u by Ts a / (1 - a): at constant speed the
+// A moving average of N periods delays a ramp by (N - 1) Ts / 2, the
+// discrete lag y = a y + (1 - a) u by Ts a / (1 - a), and a dead time of D
+// periods by D Ts: at constant speed the
 // error against the reference given settles to v times those plus the P
 // loop's (1 - kff) / Kv. A run started in that steady motion
 // (start_in_steady_motion) holds it from its first tick.
@@ -227,9 +250,11 @@ TEST(CascadeLoop, ASmoothedReferenceAddsItsDelayToTheFollowingError) {
   controller::CascadeGains g{.Kv_per_s = 50.0, .kff = 0.5, .Kvp_torque_s_per_rad = 0.5, .Tn_s = 0.01};
   g.command_average_s = 5e-3;
   g.command_lag_s = 2e-3;
+  g.command_delay_s = 3e-3;
   const double Ts = 1e-3, v = 100.0;
   const double a = std::exp(-Ts / g.command_lag_s);
-  const double e_steady = v * ((1.0 - g.kff) / g.Kv_per_s + 0.5 * (5 - 1) * Ts + Ts * a / (1.0 - a));
+  // The dead time of 3 periods adds v 3 Ts.
+  const double e_steady = v * ((1.0 - g.kff) / g.Kv_per_s + 0.5 * (5 - 1) * Ts + Ts * a / (1.0 - a) + 3 * Ts);
   sim::MachineDefinition m = cascade_x(Ts, g);
   const std::size_t n = 2000;
   std::vector<double> r(n);

@@ -2837,12 +2837,12 @@ bool all_runs_log(const std::vector<RunData>& runs, const std::string& column) {
   return all;
 }
 
-/// The reference through a moving average of n periods of Ts and a
-/// first-order lag of lag_s, as controller::PositionLoop smooths it, each
-/// segment from its own first value (held before it); the log's rows are
-/// taken at the loop's period.
+/// The reference through a moving average of n periods of Ts, a first-order
+/// lag of lag_s and a dead time of `delay` periods, as controller::PositionLoop
+/// smooths it, each segment from its own first value (held before it); the
+/// log's rows are taken at the loop's period.
 std::vector<double> smooth_reference_in_segments(const std::vector<double>& ref, const std::vector<Segment>& segs,
-                                                 int n, double lag_s, double Ts) {
+                                                 int n, double lag_s, double Ts, int delay = 0) {
   std::vector<double> out(ref);
   const double a = lag_s > 0.0 ? std::exp(-Ts / lag_s) : 0.0;
   const auto N = static_cast<std::size_t>(std::max(1, n));
@@ -2855,6 +2855,11 @@ std::vector<double> smooth_reference_in_segments(const std::vector<double>& ref,
       y = a * y + (1.0 - a) * (first + sum / static_cast<double>(N));
       out[k] = y;
     }
+    // The dead time, from the segment's end back (each row then reads one not yet moved).
+    if (delay > 0) {
+      const auto d = static_cast<std::size_t>(delay);
+      for (std::size_t k = sg.end; k-- > sg.begin;) out[k] = k >= sg.begin + d ? out[k - d] : first;
+    }
   }
   return out;
 }
@@ -2863,23 +2868,28 @@ std::vector<double> smooth_reference_in_segments(const std::vector<double>& ref,
 struct ReferenceSmoothingFit {
   int n{1};            ///< moving average, loop periods
   double lag_s{0.0};   ///< first-order lag after it
+  int delay{0};        ///< dead time after both, loop periods
   bool feedforward_as_given{false};  ///< the feedforward's speed from the reference as logged
   double residual{std::numeric_limits<double>::infinity()};
 };
 
-/// The P law fitted with the loop's reference smoothed by (n, lag_s), its
-/// feedforward's speed from the reference as logged (true) or the smoothed one.
-using SmoothedLawFit = std::function<LsqResult(int n, double lag_s, bool feedforward_as_given)>;
+/// The P law fitted with the loop's reference smoothed by (n, lag_s) and
+/// held back by `delay` periods, its feedforward's speed from the reference
+/// as logged (true) or the smoothed one.
+using SmoothedLawFit = std::function<LsqResult(int n, double lag_s, int delay, bool feedforward_as_given)>;
 
-/// best_reference_smoothing with the feedforward taken one way.
-ReferenceSmoothingFit best_reference_smoothing_with(const SmoothedLawFit& fit, double Ts, bool ff_given) {
+/// best_reference_smoothing with the feedforward taken one way, at a given
+/// dead time (0: none, and then some smoothing).
+ReferenceSmoothingFit best_reference_smoothing_with(const SmoothedLawFit& fit, double Ts, bool ff_given, int delay) {
   ReferenceSmoothingFit best;
   best.feedforward_as_given = ff_given;
+  best.delay = delay;
   const auto take = [&](int n, double lag_s) {
-    if ((n == 1 && lag_s == 0.0) || (lag_s > 0.0 && lag_s < Ts)) return std::numeric_limits<double>::infinity();
-    const LsqResult trial = fit(n, lag_s, ff_given);
+    if ((n == 1 && lag_s == 0.0 && delay == 0) || (lag_s > 0.0 && lag_s < Ts))
+      return std::numeric_limits<double>::infinity();
+    const LsqResult trial = fit(n, lag_s, delay, ff_given);
     const double r = trial.ok && trial.theta[0] > 0.0 ? trial.residual_rms : std::numeric_limits<double>::infinity();
-    if (r < best.residual) best = {n, lag_s, ff_given, r};
+    if (r < best.residual) best = {n, lag_s, delay, ff_given, r};
     return r;
   };
   const std::vector<double> lags_ms{0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0, 25.0, 32.0, 40.0, 50.0};
@@ -2919,15 +2929,73 @@ ReferenceSmoothingFit best_reference_smoothing_with(const SmoothedLawFit& fit, d
   return best;
 }
 
-/// The moving average (1 to controller::kMaxCommandAverageTicks periods of Ts) and lag
-/// (0 to 50 ms) whose `fit(n, lag_s)` leaves the least residual, no
-/// smoothing left out: a coarse grid (every n to 16, then steps of 4 to 16;
-/// 18 lags), every n about the best, then the lag by golden section between
-/// the grid's lags about the best; each with the feedforward from the
-/// smoothed reference and from the logged one.
+/// A dead time is a third parameter beside the smoothing's two: it is kept
+/// only where it leaves at most this share of the best smoothing's residual
+/// without it. On the tests' runs whose truth has no dead time the best one
+/// fitted no better than none (1.0 to 6.4 times the residual; with the
+/// feedforward from the reference as logged, a dead time of one period spans
+/// the same columns as a moving average of two); on those with one, 0.40
+/// and 0.54 of it.
+constexpr double kDelayResidualShare = 0.8;
+
+/// best_reference_smoothing with the feedforward taken one way: the
+/// smoothing without a dead time; then dead times of 1 to
+/// controller::kMaxCommandDelayTicks periods (every one to 16, then a grid,
+/// refined about the best), each alone, behind that smoothing, and behind
+/// the part of it that the dead time leaves of the smoothing's delay at
+/// constant speed (as a moving average, and as a lag); where one fits better,
+/// the smoothing searched again behind the best dead time and the dead time
+/// again about it behind that smoothing, until neither moves (three rounds
+/// at most).
+ReferenceSmoothingFit best_reference_smoothing_way(const SmoothedLawFit& fit, double Ts, bool ff_given) {
+  const ReferenceSmoothingFit plain = best_reference_smoothing_with(fit, Ts, ff_given, 0);
+  ReferenceSmoothingFit delayed;
+  delayed.feedforward_as_given = ff_given;
+  const auto take = [&](int n, double lag_s, int d) {
+    if (d < 1 || d > controller::kMaxCommandDelayTicks || n < 1 || n > controller::kMaxCommandAverageTicks ||
+        (lag_s > 0.0 && lag_s < Ts))
+      return;
+    const LsqResult trial = fit(n, lag_s, d, ff_given);
+    if (trial.ok && trial.theta[0] > 0.0 && trial.residual_rms < delayed.residual)
+      delayed = {n, lag_s, d, ff_given, trial.residual_rms};
+  };
+  // The smoothing's delay at constant speed, in periods.
+  const double total = std::isfinite(plain.residual) ? 0.5 * (plain.n - 1) + plain.lag_s / Ts : 0.0;
+  std::vector<int> ds;
+  for (int d = 1; d <= controller::kMaxCommandDelayTicks; d += d < 16 ? 1 : (d < 32 ? 4 : (d < 64 ? 8 : 16))) ds.push_back(d);
+  for (int d : ds) {
+    take(1, 0.0, d);
+    if (!std::isfinite(plain.residual)) continue;
+    take(plain.n, plain.lag_s, d);
+    const double left = total - d;
+    if (left <= 0.0) continue;
+    take(static_cast<int>(std::lround(2.0 * left + 1.0)), 0.0, d);
+    take(1, left * Ts, d);
+  }
+  if (!std::isfinite(delayed.residual)) return plain;
+  const int step = delayed.delay < 16 ? 1 : (delayed.delay < 32 ? 4 : (delayed.delay < 64 ? 8 : 16));
+  for (int d = delayed.delay - step + 1; d < delayed.delay + step; ++d) take(delayed.n, delayed.lag_s, d);
+  if (!(delayed.residual < kDelayResidualShare * plain.residual)) return plain;
+  for (int round = 0; round < 3; ++round) {
+    const int d0 = delayed.delay;
+    const ReferenceSmoothingFit behind = best_reference_smoothing_with(fit, Ts, ff_given, d0);
+    if (behind.residual < delayed.residual) delayed = behind;
+    for (int d = d0 - 3; d <= d0 + 3; ++d) take(delayed.n, delayed.lag_s, d);
+    if (delayed.delay == d0) break;
+  }
+  return delayed;
+}
+
+/// The moving average (1 to controller::kMaxCommandAverageTicks periods of
+/// Ts), lag (0 to 50 ms) and dead time (best_reference_smoothing_way) whose
+/// `fit(n, lag_s, delay)` leaves the least residual, no smoothing left out:
+/// a coarse grid (every n to 16, then steps of 4 to 16; 18 lags), every n
+/// about the best, then the lag by golden section between the grid's lags
+/// about the best; each with the feedforward from the smoothed reference and
+/// from the logged one.
 ReferenceSmoothingFit best_reference_smoothing(const SmoothedLawFit& fit, double Ts) {
-  const ReferenceSmoothingFit both = best_reference_smoothing_with(fit, Ts, false);
-  const ReferenceSmoothingFit error_only = best_reference_smoothing_with(fit, Ts, true);
+  const ReferenceSmoothingFit both = best_reference_smoothing_way(fit, Ts, false);
+  const ReferenceSmoothingFit error_only = best_reference_smoothing_way(fit, Ts, true);
   return error_only.residual < both.residual ? error_only : both;
 }
 
@@ -2957,7 +3025,8 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
     const std::vector<double>* x;
     const std::vector<double>* vcmd;
   };
-  const auto fit_on = [&](const std::vector<LawInputs>& in, bool lowpass_after, int n, double lag_s, bool ff_given) {
+  const auto fit_on = [&](const std::vector<LawInputs>& in, bool lowpass_after, int n, double lag_s, int delay,
+                          bool ff_given) {
     e.clear();
     vr.clear();
     vc.clear();
@@ -2966,8 +3035,9 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
     for (std::size_t i = 0; i < f.runs.size(); ++i) {
       const auto& rd = f.runs[i];
       const std::vector<double>& logged_ref = *in[i].ref;
-      const std::vector<double> ref =
-          n > 1 || lag_s > 0.0 ? smooth_reference_in_segments(logged_ref, rd.segments, n, lag_s, f.Ts) : logged_ref;
+      const std::vector<double> ref = n > 1 || lag_s > 0.0 || delay > 0
+                                          ? smooth_reference_in_segments(logged_ref, rd.segments, n, lag_s, f.Ts, delay)
+                                          : logged_ref;
       const std::vector<double>& x = *in[i].x;
       std::array<std::vector<double>, 3> c;
       c[0].resize(ref.size());
@@ -3013,57 +3083,63 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
   }
   std::vector<LawInputs> filtered;
   for (const auto& c : lowpassed) filtered.push_back({&c[0], &c[1], &c[2]});
-  const auto fit_with = [&](int n, double lag_s, bool ff_given) {
-    return fit_on(as_logged, filter, n, lag_s, ff_given);
+  const auto fit_with = [&](int n, double lag_s, int delay, bool ff_given) {
+    return fit_on(as_logged, filter, n, lag_s, delay, ff_given);
   };
-  const auto search_fit = [&](int n, double lag_s, bool ff_given) {
-    return fit_on(filtered, false, n, lag_s, ff_given);
+  const auto search_fit = [&](int n, double lag_s, int delay, bool ff_given) {
+    return fit_on(filtered, false, n, lag_s, delay, ff_given);
   };
-  LsqResult ls = fit_with(1, 0.0, false);
+  LsqResult ls = fit_with(1, 0.0, 0, false);
   if (!(ls.ok && ls.theta[0] > 0.0)) return;
   // The smoothing: where the log samples at the loop's period, the one whose
   // law fits best on the low-passed columns (best_reference_smoothing),
   // taken where it halves the residual of the law on the logged reference
   // low-passed alike (the law is exact but for the encoder's steps there,
   // so no smoothing comes near that on a log without one).
-  int best_n = 1;
+  int best_n = 1, best_delay = 0;
   double best_lag_s = 0.0;
   bool ff_given = false;
   if (search) {
-    const LsqResult none = search_fit(1, 0.0, false);
+    const LsqResult none = search_fit(1, 0.0, 0, false);
     const ReferenceSmoothingFit sm = best_reference_smoothing(search_fit, f.Ts);
     if (none.ok && sm.residual < 0.5 * none.residual_rms) {
       best_n = sm.n;
       best_lag_s = sm.lag_s;
+      best_delay = sm.delay;
       ff_given = sm.feedforward_as_given;
     }
   }
   const double residual_logged = ls.residual_rms;
-  if (best_n > 1 || best_lag_s > 0.0) ls = fit_with(best_n, best_lag_s, ff_given);
+  const bool smoothed = best_n > 1 || best_lag_s > 0.0 || best_delay > 0;
+  if (smoothed) ls = fit_with(best_n, best_lag_s, best_delay, ff_given);
   ax.gains.command_average_s = best_n > 1 ? best_n * f.Ts : 0.0;
   ax.gains.command_lag_s = best_lag_s;
+  ax.gains.command_delay_s = best_delay * f.Ts;
   ax.gains.feedforward_unsmoothed = ff_given ? 1.0 : 0.0;
   ax.gains.Kv_per_s = ls.theta[0];
   ax.gains.kff = std::clamp(ls.theta[1], 0.0, 1.5);
   // The lag at constant speed: the P loop's plus the smoothing's delay
   // (whichever reference the feedforward takes: its speed is the same there).
-  const double delay_s = 0.5 * (best_n - 1) * f.Ts + best_lag_s;
+  const double delay_s = 0.5 * (best_n - 1) * f.Ts + best_lag_s + best_delay * f.Ts;
   ax.lag_s = (1.0 - ax.gains.kff) / ax.gains.Kv_per_s + delay_s;
   double vrms = 0.0;
   for (double x : vc) vrms += x * x;
   vrms = std::sqrt(vrms / static_cast<double>(std::max<std::size_t>(1, vc.size())));
   const bool logged = f.r0.trace.find(col(a, "_vcmd_mm_s")) != nullptr;
+  std::vector<std::string> parts;
+  if (best_n > 1) parts.push_back(fmt::format("a moving average over {:.4g} ms", 1e3 * best_n * f.Ts));
+  if (best_lag_s > 0.0) parts.push_back(fmt::format("a first-order lag of {:.4g} ms", 1e3 * best_lag_s));
+  if (best_delay > 0)
+    parts.push_back(fmt::format("a dead time of {:.4g} ms ({} loop periods)", 1e3 * best_delay * f.Ts, best_delay));
+  std::string how;
+  for (std::size_t i = 0; i < parts.size(); ++i)
+    how += (i == 0 ? "" : (i + 1 == parts.size() ? " and " : ", ")) + parts[i];
   const std::string smoothing =
-      best_n > 1 || best_lag_s > 0.0
-          ? fmt::format("; the loop follows the logged reference smoothed by {} (a CNC's smoothing after its "
+      smoothed
+          ? fmt::format("; the loop follows the logged reference {} {} (a CNC's smoothing after its "
                         "interpolator, {:.4g} ms of delay{}), which fits the command with {:.3g} mm/s of residual "
                         "against {:.3g} mm/s on the reference as logged",
-                        best_n > 1 && best_lag_s > 0.0
-                            ? fmt::format("a moving average over {:.4g} ms and a first-order lag of {:.4g} ms",
-                                          1e3 * best_n * f.Ts, 1e3 * best_lag_s)
-                            : (best_n > 1 ? fmt::format("a moving average over {:.4g} ms", 1e3 * best_n * f.Ts)
-                                          : fmt::format("a first-order lag of {:.4g} ms", 1e3 * best_lag_s)),
-                        1e3 * delay_s,
+                        best_n > 1 || best_lag_s > 0.0 ? "smoothed by" : "held back by", how, 1e3 * delay_s,
                         ff_given ? "; the feedforward takes the reference as logged, only the error the smoothed one"
                                  : "",
                         ls.residual_rms, residual_logged)
@@ -5972,12 +6048,14 @@ void align_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<Ru
                       lowpass_in_segments(own[i].trace.at(col(a, "_mm")), runs[i].segments, dt),
                       lowpass_in_segments(*logged[i], runs[i].segments, dt)});
       }
-      const auto law_fit = [&](int n, double lag_s, bool ff_given, int skew) {
+      const auto law_fit = [&](int n, double lag_s, int delay, bool ff_given, int skew) {
         std::vector<double> es, vs, vc;
         for (std::size_t i = 0; i < own.size(); ++i) {
           const std::vector<double>& logged_ref = lp[i][0];
           const std::vector<double> ref =
-              n > 1 || lag_s > 0.0 ? smooth_reference_in_segments(logged_ref, runs[i].segments, n, lag_s, Ts) : logged_ref;
+              n > 1 || lag_s > 0.0 || delay > 0
+                  ? smooth_reference_in_segments(logged_ref, runs[i].segments, n, lag_s, Ts, delay)
+                  : logged_ref;
           const std::vector<double> speed =
               loop_reference_speed(ff_given ? logged_ref : ref, runs[i].segments, own[i].sample_period_s, Ts);
           for (const auto& [run, k] : at)
@@ -5989,8 +6067,10 @@ void align_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<Ru
         }
         return least_squares({&es, &vs}, vc, rows);
       };
-      const LsqResult skewed = law_fit(1, 0.0, false, best);
-      const auto smoothed_fit = [&](int n, double lag_s, bool ff_given) { return law_fit(n, lag_s, ff_given, 0); };
+      const LsqResult skewed = law_fit(1, 0.0, 0, false, best);
+      const auto smoothed_fit = [&](int n, double lag_s, int delay, bool ff_given) {
+        return law_fit(n, lag_s, delay, ff_given, 0);
+      };
       if (!skewed.ok || best_reference_smoothing(smoothed_fit, Ts).residual <= skewed.residual_rms) continue;
     }
     for (std::size_t i = 0; i < own.size(); ++i) {
@@ -6627,6 +6707,7 @@ nlohmann::json data_calibration_report_json(const DataCalibration& r) {
     p["kff"] = ax.gains.kff;
     if (ax.gains.command_average_s > 0.0) p["command_average_s"] = ax.gains.command_average_s;
     if (ax.gains.command_lag_s > 0.0) p["command_lag_s"] = ax.gains.command_lag_s;
+    if (ax.gains.command_delay_s > 0.0) p["command_delay_s"] = ax.gains.command_delay_s;
     if (ax.gains.feedforward_unsmoothed == 1.0) p["feedforward_unsmoothed"] = true;
     p["loop_source"] = ax.loop_source;
     if (ax.identified) {

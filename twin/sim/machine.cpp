@@ -57,9 +57,13 @@ std::vector<AxisParamSpec> make_axis_specs() {
                      "cascade: first-order lag of the reference after its moving average, before the position "
                      "loop; 0: none",
                      a.loop.cascade.command_lag_s, controller::LoopLaw::kCascade),
+      TWIN_LAW_PARAM("command_delay", "s",
+                     "cascade: dead time of the reference after its smoothing, before the position loop (a CNC "
+                     "that holds an axis's setpoint back to match a slower axis), a whole multiple of Ts; 0: none",
+                     a.loop.cascade.command_delay_s, controller::LoopLaw::kCascade),
       TWIN_LAW_PARAM("feedforward_unsmoothed", "1",
                      "cascade: 1 where the velocity and torque feedforward take the reference as given and only the "
-                     "position loop's error the smoothed one (command_average, command_lag); 0: both the smoothed one",
+                     "position loop's error the smoothed one (command_average, command_lag, command_delay); 0: both the smoothed one",
                      a.loop.cascade.feedforward_unsmoothed, controller::LoopLaw::kCascade),
       TWIN_LAW_PARAM("torque_command_logged", "1",
                      "cascade: 1 where the log's torque or current is the velocity loop's command, before the "

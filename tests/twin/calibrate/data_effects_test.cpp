@@ -475,6 +475,7 @@ TEST(DataEffects, AReferenceTheCncSmoothsIsFoundFromTheLoggedVelocityCommand) {
   EXPECT_NEAR(ax.gains.Kv_per_s, 45.0, 0.01 * 45.0) << ax.loop_source;
   EXPECT_NEAR(ax.gains.kff, 0.6, 0.01 * 0.6) << ax.loop_source;
   EXPECT_EQ(ax.gains.feedforward_unsmoothed, 0.0) << ax.loop_source;
+  EXPECT_EQ(ax.gains.command_delay_s, 0.0) << ax.loop_source;
   EXPECT_THAT(ax.loop_source, ::testing::HasSubstr("smoothed by a moving average over 8 ms"));
   EXPECT_TRUE(o.kept.empty()) << describe(o);
   EXPECT_EQ(note_with(o, "rows after the following error"), o.r.notes.end()) << describe(o);
@@ -493,6 +494,7 @@ TEST(DataEffects, AReferenceTheCncSmoothsIsFoundFromTheLoggedVelocityCommand) {
   ASSERT_EQ(plain.r.axis.size(), 1u);
   EXPECT_EQ(plain.r.axis[0].gains.command_average_s, 0.0) << plain.r.axis[0].loop_source;
   EXPECT_EQ(plain.r.axis[0].gains.command_lag_s, 0.0) << plain.r.axis[0].loop_source;
+  EXPECT_EQ(plain.r.axis[0].gains.command_delay_s, 0.0) << plain.r.axis[0].loop_source;
 }
 
 // A CNC that delays only its position loop's reference (a 4 ms first-order
@@ -511,12 +513,63 @@ TEST(DataEffects, AReferenceSmoothedForThePositionErrorAloneIsToldFromOneSmoothe
   const AxisFromData& ax = o.r.axis[0];
   EXPECT_EQ(ax.gains.feedforward_unsmoothed, 1.0) << ax.loop_source;
   EXPECT_EQ(ax.gains.command_average_s, 0.0) << ax.loop_source;
+  EXPECT_EQ(ax.gains.command_delay_s, 0.0) << ax.loop_source;
   EXPECT_NEAR(ax.gains.command_lag_s, 0.004, 0.02 * 0.004) << ax.loop_source;
   EXPECT_NEAR(ax.gains.Kv_per_s, 45.0, 0.01 * 45.0) << ax.loop_source;
   EXPECT_NEAR(ax.gains.kff, 0.6, 0.01 * 0.6) << ax.loop_source;
   EXPECT_TRUE(o.kept.empty()) << describe(o);
   expect_held_out_machine_check(o);
   EXPECT_LT(o.r.validation_runs[0].calibrated.nrms.at("x_torque_raw"), 0.03) << describe(o);
+}
+
+// A CNC that hands the reference to the position loop some periods after
+// its interpolator (a 5 ms dead time, as one that holds a fast axis back to
+// match a slower one), the log holding the reference before it; then the
+// same behind a 4 ms moving average (a bell-shaped acceleration and a bus
+// delay). Searched as a smoothing alone, the 5 ms dead time was taken for a
+// 9 ms moving average and a 1.8 ms lag (about the same delay at constant
+// speed, not the same response in a start or stop), which fit the command
+// with 2.5 times the dead time's residual. Oracles: the truth's dead time
+// (whole periods, exactly) and its average (exactly), no lag (the search's
+// finest lag is a period, so a lag under 1 ms is no lag), Kv and kff to 1 %
+// (the law is exact but for the encoder's 1 um), nothing named, the
+// held-out machine's check, and machine.yaml carrying the dead time to a
+// machine read back.
+TEST(DataEffects, ADeadTimeBeforeThePositionLoopIsFoundFromTheLoggedVelocityCommand) {
+  truth::RunSpec sp = cascade_spec_without_speed();
+  sp.cascade.command_delay_ticks = 5;
+  const Outcome o = calibrate_spec("delayed_reference", sp);
+  ASSERT_EQ(o.r.axis.size(), 1u);
+  const AxisFromData& ax = o.r.axis[0];
+  EXPECT_NEAR(ax.gains.command_delay_s, 0.005, 1e-12) << ax.loop_source;
+  EXPECT_EQ(ax.gains.command_average_s, 0.0) << ax.loop_source;
+  EXPECT_LT(ax.gains.command_lag_s, 1e-3) << ax.loop_source;
+  EXPECT_NEAR(ax.gains.Kv_per_s, 45.0, 0.01 * 45.0) << ax.loop_source;
+  EXPECT_NEAR(ax.gains.kff, 0.6, 0.01 * 0.6) << ax.loop_source;
+  EXPECT_THAT(ax.loop_source, ::testing::HasSubstr("a dead time of 5 ms (5 loop periods)"));
+  EXPECT_TRUE(o.kept.empty()) << describe(o);
+  expect_held_out_machine_check(o);
+
+  const auto dir = std::filesystem::temp_directory_path() / "twin_data_effects_delayed_yaml";
+  std::filesystem::create_directories(dir);
+  io::write_file_atomic(dir / "machine.yaml", io::machine_to_yaml(o.r.final_machine, "test"));
+  const sim::MachineDefinition back = io::load_machine(dir / "machine.yaml");
+  EXPECT_NEAR(back.axes[index(Axis::kX)].loop.cascade.command_delay_s, ax.gains.command_delay_s, 1e-12);
+  std::filesystem::remove_all(dir);
+
+  truth::RunSpec both = cascade_spec_without_speed();
+  both.cascade.command_average_ticks = 4;
+  both.cascade.command_delay_ticks = 3;
+  const Outcome ob = calibrate_spec("averaged_and_delayed_reference", both);
+  ASSERT_EQ(ob.r.axis.size(), 1u);
+  const AxisFromData& axb = ob.r.axis[0];
+  EXPECT_NEAR(axb.gains.command_delay_s, 0.003, 1e-12) << axb.loop_source;
+  EXPECT_NEAR(axb.gains.command_average_s, 0.004, 1e-12) << axb.loop_source;
+  EXPECT_LT(axb.gains.command_lag_s, 1e-3) << axb.loop_source;
+  EXPECT_NEAR(axb.gains.Kv_per_s, 45.0, 0.01 * 45.0) << axb.loop_source;
+  EXPECT_NEAR(axb.gains.kff, 0.6, 0.01 * 0.6) << axb.loop_source;
+  EXPECT_TRUE(ob.kept.empty()) << describe(ob);
+  expect_held_out_machine_check(ob);
 }
 
 // Friction that creeps below 0.2 rad/s instead of sticking (the truth's own

@@ -11,7 +11,7 @@
 //                            [--torque-filter S] [--torque-mean]
 //                            [--kff K] [--jff J] [--friction load|sqrt|dahl] [--limit-on-command]
 //                            [--anti-windup] [--contour | --contour2] [--log-every M] [--velocity-ticks N]
-//                            [--command-average N] [--command-lag S] [--smooth-position-only] [--ref-mm Q]
+//                            [--command-average N] [--command-lag S] [--command-delay N] [--smooth-position-only] [--ref-mm Q]
 //                            [--keep DIR]
 //
 // With --example, further motion programs are the x and y reference of that
@@ -67,8 +67,9 @@
 // program's first 60 %) holds five arcs where --contour's holds one.
 // --command-average N makes the truth's position loop follow the reference's
 // moving average over N periods, and --command-lag S its first-order lag of
-// S seconds after that (a CNC's smoothing after its interpolator), while the
-// log holds the reference before them; with --smooth-position-only the
+// S seconds after that (a CNC's smoothing after its interpolator), and
+// --command-delay N a dead time of N periods after both, while the log holds
+// the reference before them; with --smooth-position-only the
 // feedforward takes the reference as logged, only the position loop's error
 // the smoothed one. --ref-mm Q logs the reference rounded to Q mm (a trace
 // that shows the command at the display's resolution).
@@ -216,6 +217,7 @@ struct CascadeOptions {
   bool vcmd_before_update{false};  ///< with position_every: the command logged before the loop updates it
   int command_average_ticks{1};    ///< the loop follows the reference's moving average over this many periods
   double command_lag_s{0.0};       ///< and then its first-order lag of this time constant
+  int command_delay_ticks{0};      ///< and then this many periods' dead time
   bool position_path_only{false};  ///< the smoothing on the position loop's error only, not the feedforward
   double reference_quantum_mm{0.0};  ///< the logged reference rounded to this (0: as computed)
   /// meta.json's controller period: the loop's, the log's own, or none.
@@ -274,6 +276,7 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     sp.cascade.log_vcmd_before_update = loop.vcmd_before_update;
     sp.cascade.command_average_ticks = loop.command_average_ticks;
     sp.cascade.command_lag_s = loop.command_lag_s;
+    sp.cascade.command_delay_ticks = loop.command_delay_ticks;
     sp.cascade.smooth_position_path_only = loop.position_path_only;
     sp.log_reference_quantum_mm = loop.reference_quantum_mm;
     sp.period_in_meta = loop.period_in_meta;
@@ -422,6 +425,13 @@ int main(int argc, char** argv) {
       loop.command_average_ticks = static_cast<int>(n);
     } else if (!std::strcmp(argv[i], "--command-lag") && has_value) {
       if (!number_at_least_0("--command-lag", argv[++i], loop.command_lag_s)) return 2;
+    } else if (!std::strcmp(argv[i], "--command-delay") && has_value) {
+      const long n = std::strtol(argv[++i], nullptr, 10);
+      if (n < 1 || n > 200) {
+        std::fprintf(stderr, "calibrate_sweep: --command-delay takes a whole number of periods from 1 to 200\n");
+        return 2;
+      }
+      loop.command_delay_ticks = static_cast<int>(n);
     } else if (!std::strcmp(argv[i], "--ref-mm") && has_value) {
       if (!number_at_least_0("--ref-mm", argv[++i], loop.reference_quantum_mm)) return 2;
     } else if (!std::strcmp(argv[i], "--smooth-position-only")) {

@@ -121,6 +121,11 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
     double y = ref_loop[0];
     for (double& r : ref_loop) r = y = a * y + (1.0 - a) * r;
   }
+  if (sp.cascade.on && sp.cascade.command_delay_ticks > 0) {
+    const std::size_t d = static_cast<std::size_t>(sp.cascade.command_delay_ticks);
+    const std::vector<double> undelayed = ref_loop;
+    for (std::size_t k = 0; k < ref_loop.size(); ++k) ref_loop[k] = undelayed[k >= d ? k - d : 0];
+  }
   const bool coupling_gap = e.backlash_in_coupling && e.backlash_mm > 0.0;
   const bool two_mass = e.compliance_K > 0.0 || coupling_gap;
   const double K_c = e.compliance_K > 0.0 ? e.compliance_K : 20000.0;

@@ -141,6 +141,11 @@ struct CascadeLaw {
   /// > 0 (s): then a first-order lag of this time constant (a CNC's
   /// setpoint filter), also not in the log.
   double command_lag_s{0.0};
+  /// > 0: the position loop follows the reference this many periods late (a
+  /// CNC that delays an axis's setpoint to match a slower axis's response,
+  /// or hands it to the drive a few cycles after the interpolator), also not
+  /// in the log.
+  int command_delay_ticks{0};
   /// With the smoothing above: the velocity feedforward (and the torque
   /// feedforward) taken from the reference as logged, only the position
   /// loop's error from the smoothed one (a CNC that delays the position
