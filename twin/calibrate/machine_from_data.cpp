@@ -2878,6 +2878,17 @@ struct ReferenceSmoothingFit {
 /// as logged (true) or the smoothed one.
 using SmoothedLawFit = std::function<LsqResult(int n, double lag_s, int delay, bool feedforward_as_given)>;
 
+/// The step of the grid of periods the smoothing's search tries about k:
+/// every period to 16, then 4, 8 and 16 from 16, 32 and 64.
+int period_grid_step(int k) { return k < 16 ? 1 : (k < 32 ? 4 : (k < 64 ? 8 : 16)); }
+
+/// That grid from 1 to max_periods.
+std::vector<int> period_grid(int max_periods) {
+  std::vector<int> grid;
+  for (int k = 1; k <= max_periods; k += period_grid_step(k)) grid.push_back(k);
+  return grid;
+}
+
 /// best_reference_smoothing with the feedforward taken one way, at a given
 /// dead time (0: none, and then some smoothing).
 ReferenceSmoothingFit best_reference_smoothing_with(const SmoothedLawFit& fit, double Ts, bool ff_given, int delay) {
@@ -2893,12 +2904,11 @@ ReferenceSmoothingFit best_reference_smoothing_with(const SmoothedLawFit& fit, d
     return r;
   };
   const std::vector<double> lags_ms{0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0, 25.0, 32.0, 40.0, 50.0};
-  std::vector<int> ns;
-  for (int n = 1; n <= controller::kMaxCommandAverageTicks; n += n < 16 ? 1 : (n < 32 ? 4 : (n < 64 ? 8 : 16))) ns.push_back(n);
+  const std::vector<int> ns = period_grid(controller::kMaxCommandAverageTicks);
   for (double lag_ms : lags_ms)
     for (int n : ns) take(n, 1e-3 * lag_ms);
   if (!std::isfinite(best.residual)) return best;
-  const int step = best.n < 16 ? 1 : (best.n < 32 ? 4 : (best.n < 64 ? 8 : 16));
+  const int step = period_grid_step(best.n);
   const auto at = std::find(lags_ms.begin(), lags_ms.end(), 1e3 * best.lag_s);
   const std::size_t li = at == lags_ms.end() ? 0 : static_cast<std::size_t>(at - lags_ms.begin());
   const double lag_lo = 1e-3 * lags_ms[li > 0 ? li - 1 : 0], lag_hi = 1e-3 * lags_ms[std::min(li + 1, lags_ms.size() - 1)];
@@ -2961,9 +2971,7 @@ ReferenceSmoothingFit best_reference_smoothing_way(const SmoothedLawFit& fit, do
   };
   // The smoothing's delay at constant speed, in periods.
   const double total = std::isfinite(plain.residual) ? 0.5 * (plain.n - 1) + plain.lag_s / Ts : 0.0;
-  std::vector<int> ds;
-  for (int d = 1; d <= controller::kMaxCommandDelayTicks; d += d < 16 ? 1 : (d < 32 ? 4 : (d < 64 ? 8 : 16))) ds.push_back(d);
-  for (int d : ds) {
+  for (int d : period_grid(controller::kMaxCommandDelayTicks)) {
     take(1, 0.0, d);
     if (!std::isfinite(plain.residual)) continue;
     take(plain.n, plain.lag_s, d);
@@ -2973,7 +2981,7 @@ ReferenceSmoothingFit best_reference_smoothing_way(const SmoothedLawFit& fit, do
     take(1, left * Ts, d);
   }
   if (!std::isfinite(delayed.residual)) return plain;
-  const int step = delayed.delay < 16 ? 1 : (delayed.delay < 32 ? 4 : (delayed.delay < 64 ? 8 : 16));
+  const int step = period_grid_step(delayed.delay);
   for (int d = delayed.delay - step + 1; d < delayed.delay + step; ++d) take(delayed.n, delayed.lag_s, d);
   if (!(delayed.residual < kDelayResidualShare * plain.residual)) return plain;
   for (int round = 0; round < 3; ++round) {
