@@ -6,7 +6,8 @@
 //
 //   calibrate_sweep [--example RUN_DIR] [--filter NAME] [--program NAME] [--magnitudes 0.5,1,2]
 //                   [--log-every M] [--current-only] [--keep DIR] [--verbose]
-//   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed]
+//   calibrate_sweep --cascade [--filter NAME] [--magnitudes 0.5,1,2] [--noise A] [--no-motor-speed] [--no-velocities]
+//                            [--no-velocity-command]
 //                            [--encoder-mm Q] [--current-lag S] [--torque-command] [--torque-step R]
 //                            [--torque-filter S] [--torque-mean]
 //                            [--kff K] [--jff J] [--friction load|sqrt|dahl] [--limit-on-command]
@@ -72,7 +73,10 @@
 // the reference before them; with --smooth-position-only the
 // feedforward takes the reference as logged, only the position loop's error
 // the smoothed one. --ref-mm Q logs the reference rounded to Q mm (a trace
-// that shows the command at the display's resolution).
+// that shows the command at the display's resolution). --no-velocities
+// leaves the velocity command and the motor's speed out of the log (a trace
+// of positions and torque alone), --no-velocity-command the command alone
+// (the motor's speed logged).
 // --velocity-ticks N runs the truth's velocity and current loops N times a
 // position-loop period (a 1 ms position loop over a 125 us velocity loop:
 // 8), the log at the position loop's ticks.
@@ -215,6 +219,8 @@ struct CascadeOptions {
   int velocity_ticks{1};           ///< the velocity loop's ticks per position-loop period
   int position_every{1};           ///< the position loop's period in logged periods (a log faster than it)
   bool vcmd_before_update{false};  ///< with position_every: the command logged before the loop updates it
+  bool log_velocities{true};       ///< false: neither the velocity command nor the speed in the log
+  bool log_velocity_command{true};  ///< false: the velocity command not in the log
   int command_average_ticks{1};    ///< the loop follows the reference's moving average over this many periods
   double command_lag_s{0.0};       ///< and then its first-order lag of this time constant
   int command_delay_ticks{0};      ///< and then this many periods' dead time
@@ -274,6 +280,8 @@ int cascade_sweep(const std::vector<double>& magnitudes, const std::string& filt
     sp.cascade.velocity_ticks = loop.velocity_ticks;
     sp.cascade.position_every = loop.position_every;
     sp.cascade.log_vcmd_before_update = loop.vcmd_before_update;
+    sp.cascade.log_velocities = loop.log_velocities;
+    sp.cascade.log_velocity_command = loop.log_velocity_command;
     sp.cascade.command_average_ticks = loop.command_average_ticks;
     sp.cascade.command_lag_s = loop.command_lag_s;
     sp.cascade.command_delay_ticks = loop.command_delay_ticks;
@@ -504,6 +512,10 @@ int main(int argc, char** argv) {
       loop.torque_mean = true;
     } else if (!std::strcmp(argv[i], "--torque-command")) {
       loop.log_torque_command = true;
+    } else if (!std::strcmp(argv[i], "--no-velocity-command")) {
+      loop.log_velocity_command = false;
+    } else if (!std::strcmp(argv[i], "--no-velocities")) {
+      loop.log_velocities = false;
     } else if (!std::strcmp(argv[i], "--no-motor-speed")) {
       log_motor_speed = false;
     } else if (!std::strcmp(argv[i], "--current-only")) {

@@ -187,7 +187,7 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
   };
   if (cl.on) {
     std::fprintf(f, "t_s,%s_ref_mm,%s_mm", a, a);
-    if (cl.log_velocities) std::fprintf(f, ",%s_vcmd_mm_s", a);
+    if (cl.log_velocities && cl.log_velocity_command) std::fprintf(f, ",%s_vcmd_mm_s", a);
     if (cl.log_velocities && cl.log_motor_speed) std::fprintf(f, ",%s_v_mm_s", a);
     std::fprintf(f, cl.raw_per_Nm > 0.0 ? ",%s_torque_raw\n" : ",%s_i_A\n", a);
   } else if (sp.log_current_only)
@@ -363,7 +363,8 @@ std::size_t write_truth_run(const std::filesystem::path& out_dir, const RunSpec&
                                         ? std::round(ref[k] / sp.log_reference_quantum_mm) * sp.log_reference_quantum_mm
                                         : pos(ref[k]);
           std::fprintf(f, "%.4f,%.10g,%.10g", static_cast<double>(k) * Ts, ref_logged, pos(x_meas));
-          if (cl.log_velocities) std::fprintf(f, ",%.6f", cl.log_vcmd_before_update ? vcmd_before : vcmd);
+          if (cl.log_velocities && cl.log_velocity_command)
+            std::fprintf(f, ",%.6f", cl.log_vcmd_before_update ? vcmd_before : vcmd);
           if (cl.log_velocities && cl.log_motor_speed) std::fprintf(f, ",%.6f", v_motor);
           const double T_logged = cl.log_torque_mean ? T_period_mean : T_monitor;
           double raw = cl.raw_per_Nm * (T_logged + noise(rng));

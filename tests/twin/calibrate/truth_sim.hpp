@@ -103,6 +103,9 @@ struct CascadeLaw {
   /// command alone, as a CNC that traces its loop's output but not the
   /// speed it feeds back).
   bool log_motor_speed{true};
+  /// With log_velocities: also the velocity command (false: the motor's
+  /// speed alone, as a CNC that traces the speed but not its loop's output).
+  bool log_velocity_command{true};
   /// Where the torque is logged raw: log the velocity loop's torque command
   /// (the current loop's input, as many drives trace it) in place of the
   /// torque the motor makes after the current loop's lag, any dead time and
