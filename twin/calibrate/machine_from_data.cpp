@@ -2873,6 +2873,15 @@ struct ReferenceSmoothingFit {
   double residual{std::numeric_limits<double>::infinity()};
 };
 
+/// The reference a loop follows: the logged one through `sm` (its moving
+/// average, lag and dead time; none by default).
+std::vector<double> followed_reference(const std::vector<double>& ref, const std::vector<Segment>& segs,
+                                       const ReferenceSmoothingFit& sm, double Ts) {
+  return sm.n > 1 || sm.lag_s > 0.0 || sm.delay > 0
+             ? smooth_reference_in_segments(ref, segs, sm.n, sm.lag_s, Ts, sm.delay)
+             : ref;
+}
+
 /// The smoothing in words: "a moving average over 8 ms and a dead time of
 /// 3 ms (3 loop periods)"; empty where there is none.
 std::string smoothing_words(int n, double lag_s, int delay, double Ts) {
@@ -2966,11 +2975,13 @@ constexpr double kDelayResidualShare = 0.8;
 /// controller::kMaxCommandDelayTicks periods (every one to 16, then a grid,
 /// refined about the best), each alone, behind that smoothing, and behind
 /// the part of it that the dead time leaves of the smoothing's delay at
-/// constant speed (as a moving average, and as a lag); where one fits better,
+/// constant speed (as a moving average, and as a lag); where one fits better
+/// (leaves under delay_share of the residual without it),
 /// the smoothing searched again behind the best dead time and the dead time
 /// again about it behind that smoothing, until neither moves (three rounds
 /// at most).
-ReferenceSmoothingFit best_reference_smoothing_way(const SmoothedLawFit& fit, double Ts, bool ff_given) {
+ReferenceSmoothingFit best_reference_smoothing_way(const SmoothedLawFit& fit, double Ts, bool ff_given,
+                                                   double delay_share = kDelayResidualShare) {
   const ReferenceSmoothingFit plain = best_reference_smoothing_with(fit, Ts, ff_given, 0);
   ReferenceSmoothingFit delayed;
   delayed.feedforward_as_given = ff_given;
@@ -2996,7 +3007,7 @@ ReferenceSmoothingFit best_reference_smoothing_way(const SmoothedLawFit& fit, do
   if (!std::isfinite(delayed.residual)) return plain;
   const int step = period_grid_step(delayed.delay);
   for (int d = delayed.delay - step + 1; d < delayed.delay + step; ++d) take(delayed.n, delayed.lag_s, d);
-  if (!(delayed.residual < kDelayResidualShare * plain.residual)) return plain;
+  if (!(delayed.residual < delay_share * plain.residual)) return plain;
   for (int round = 0; round < 3; ++round) {
     const int d0 = delayed.delay;
     const ReferenceSmoothingFit behind = best_reference_smoothing_with(fit, Ts, ff_given, d0);
@@ -3014,9 +3025,10 @@ ReferenceSmoothingFit best_reference_smoothing_way(const SmoothedLawFit& fit, do
 /// about the best, then the lag by golden section between the grid's lags
 /// about the best; each with the feedforward from the smoothed reference and
 /// from the logged one.
-ReferenceSmoothingFit best_reference_smoothing(const SmoothedLawFit& fit, double Ts) {
-  const ReferenceSmoothingFit both = best_reference_smoothing_way(fit, Ts, false);
-  const ReferenceSmoothingFit error_only = best_reference_smoothing_way(fit, Ts, true);
+ReferenceSmoothingFit best_reference_smoothing(const SmoothedLawFit& fit, double Ts,
+                                               double delay_share = kDelayResidualShare) {
+  const ReferenceSmoothingFit both = best_reference_smoothing_way(fit, Ts, false, delay_share);
+  const ReferenceSmoothingFit error_only = best_reference_smoothing_way(fit, Ts, true, delay_share);
   return error_only.residual < both.residual ? error_only : both;
 }
 
@@ -3056,9 +3068,7 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
     for (std::size_t i = 0; i < f.runs.size(); ++i) {
       const auto& rd = f.runs[i];
       const std::vector<double>& logged_ref = *in[i].ref;
-      const std::vector<double> ref = n > 1 || lag_s > 0.0 || delay > 0
-                                          ? smooth_reference_in_segments(logged_ref, rd.segments, n, lag_s, f.Ts, delay)
-                                          : logged_ref;
+      const std::vector<double> ref = followed_reference(logged_ref, rd.segments, {n, lag_s, delay}, f.Ts);
       const std::vector<double>& x = *in[i].x;
       std::array<std::vector<double>, 3> c;
       c[0].resize(ref.size());
@@ -6066,10 +6076,7 @@ void align_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<Ru
         std::vector<double> es, vs, vc;
         for (std::size_t i = 0; i < own.size(); ++i) {
           const std::vector<double>& logged_ref = lp[i][0];
-          const std::vector<double> ref =
-              n > 1 || lag_s > 0.0 || delay > 0
-                  ? smooth_reference_in_segments(logged_ref, runs[i].segments, n, lag_s, Ts, delay)
-                  : logged_ref;
+          const std::vector<double> ref = followed_reference(logged_ref, runs[i].segments, {n, lag_s, delay}, Ts);
           const std::vector<double> speed =
               loop_reference_speed(ff_given ? logged_ref : ref, runs[i].segments, own[i].sample_period_s, Ts);
           for (const auto& [run, k] : at)
@@ -6111,22 +6118,18 @@ void align_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<Ru
   }
 }
 
-/// The reference a loop follows: the logged one through `sm` (its moving
-/// average, lag and dead time; none by default).
-std::vector<double> followed_reference(const std::vector<double>& ref, const std::vector<Segment>& segs,
-                                       const ReferenceSmoothingFit& sm, double Ts) {
-  return sm.n > 1 || sm.lag_s > 0.0 || sm.delay > 0
-             ? smooth_reference_in_segments(ref, segs, sm.n, sm.lag_s, Ts, sm.delay)
-             : ref;
-}
-
+/// The law's six columns and a seventh, the lead of the logged reference
+/// over the one the loop follows, fitted only where the feedforward takes
+/// the reference as logged on a law that is exact (see
+/// rebuild_velocity_commands).
 constexpr std::size_t kLawColumns = 6;
-using LawColumns = std::vector<std::array<std::vector<double>, kLawColumns>>;
+constexpr std::size_t kLeadColumn = kLawColumns;
+using LawColumns = std::vector<std::array<std::vector<double>, kLawColumns + 1>>;
 
-/// The columns of the law that follow the reference (e, v_ref and Ie) of
-/// one run into L[0], L[1] and L[3].
+/// The columns of the law that follow the reference (e, v_ref, Ie and the
+/// lead) of one run into L[0], L[1], L[3] and L[kLeadColumn].
 void reference_law_columns(const RunData& rd, Axis a, double Ts, bool filtered, const ReferenceSmoothingFit& sm,
-                           std::array<std::vector<double>, kLawColumns>& L) {
+                           std::array<std::vector<double>, kLawColumns + 1>& L) {
   // Filtered here, the reference as logged (a rebuilt one may be low-passed already).
   const auto& logged_ref = (filtered ? *rd.run : *rd.smooth).trace.at(col(a, "_ref_mm"));
   const std::vector<double> ref = followed_reference(logged_ref, rd.segments, sm, Ts);
@@ -6134,6 +6137,7 @@ void reference_law_columns(const RunData& rd, Axis a, double Ts, bool filtered, 
   const double dt = rd.run->sample_period_s;
   L[0].assign(ref.size(), 0.0);
   L[3].assign(ref.size(), 0.0);
+  L[kLeadColumn].assign(ref.size(), 0.0);
   L[1] = loop_reference_speed(sm.feedforward_as_given ? logged_ref : ref, rd.segments, dt, Ts);
   for (const Segment& sg : rd.segments) {
     double ie = 0.0;
@@ -6142,10 +6146,11 @@ void reference_law_columns(const RunData& rd, Axis a, double Ts, bool filtered, 
       ie += dt * e;
       L[0][k] = e;
       L[3][k] = ie;
+      L[kLeadColumn][k] = logged_ref[k] - ref[k];
     }
   }
   if (filtered)
-    for (std::size_t c : {0UL, 1UL, 3UL}) L[c] = lowpass_in_segments(L[c], rd.segments, dt);
+    for (std::size_t c : {0UL, 1UL, 3UL, kLeadColumn}) L[c] = lowpass_in_segments(L[c], rd.segments, dt);
 }
 
 /// The six columns of the command's law (rebuild_velocity_commands) per run:
@@ -6224,8 +6229,9 @@ struct CommandLawFit {
   double T_rms{0.0};
 };
 CommandLawFit fit_command_law(const std::vector<RunData>& runs, const LawColumns& law, const std::string& channel,
-                              std::size_t lag, double held_from) {
-  std::array<std::vector<double>, kLawColumns> X;
+                              std::size_t lag, double held_from, bool with_lead = false) {
+  const std::size_t n_col = with_lead ? kLawColumns + 1 : kLawColumns;
+  std::array<std::vector<double>, kLawColumns + 1> X;
   std::vector<double> T;
   std::vector<std::size_t> seg_of_row;
   std::size_t g = 0;
@@ -6238,7 +6244,7 @@ CommandLawFit fit_command_law(const std::vector<RunData>& runs, const LawColumns
       if (end < sg.begin + 3 + lag) continue;
       for (std::size_t k = sg.begin + 2 + lag; k < end; ++k) {
         if (std::abs(ch_logged[k]) >= held_from) continue;
-        for (std::size_t c = 0; c < kLawColumns; ++c) X[c].push_back(law[i][c][k - lag]);
+        for (std::size_t c = 0; c < n_col; ++c) X[c].push_back(law[i][c][k - lag]);
         T.push_back(ch[k]);
         seg_of_row.push_back(g);
       }
@@ -6247,12 +6253,12 @@ CommandLawFit fit_command_law(const std::vector<RunData>& runs, const LawColumns
   }
   // Each segment's means taken off: its constant without a column.
   std::vector<double> n_seg(g, 0.0);
-  std::vector<std::array<double, kLawColumns + 1>> mean(g, std::array<double, kLawColumns + 1>{});
+  std::vector<std::array<double, kLawColumns + 2>> mean(g, std::array<double, kLawColumns + 2>{});
   for (std::size_t k = 0; k < T.size(); ++k) {
     const std::size_t sg = seg_of_row[k];
     n_seg[sg] += 1.0;
-    for (std::size_t c = 0; c < kLawColumns; ++c) mean[sg][c] += X[c][k];
-    mean[sg][kLawColumns] += T[k];
+    for (std::size_t c = 0; c < n_col; ++c) mean[sg][c] += X[c][k];
+    mean[sg][kLawColumns + 1] += T[k];
   }
   CommandLawFit lf;
   lf.lag = lag;
@@ -6260,12 +6266,14 @@ CommandLawFit fit_command_law(const std::vector<RunData>& runs, const LawColumns
   for (std::size_t k = 0; k < T.size(); ++k) {
     const std::size_t sg = seg_of_row[k];
     t2 += T[k] * T[k];
-    for (std::size_t c = 0; c < kLawColumns; ++c) X[c][k] -= mean[sg][c] / n_seg[sg];
-    T[k] -= mean[sg][kLawColumns] / n_seg[sg];
+    for (std::size_t c = 0; c < n_col; ++c) X[c][k] -= mean[sg][c] / n_seg[sg];
+    T[k] -= mean[sg][kLawColumns + 1] / n_seg[sg];
   }
   std::vector<std::size_t> rows(T.size());
   std::iota(rows.begin(), rows.end(), std::size_t{0});
-  lf.ls = least_squares({&X[0], &X[1], &X[2], &X[3], &X[4], &X[5]}, T, rows);
+  std::vector<const std::vector<double>*> cols;
+  for (std::size_t c = 0; c < n_col; ++c) cols.push_back(&X[c]);
+  lf.ls = least_squares(cols, T, rows);
   lf.T_rms = T.empty() ? 0.0 : std::sqrt(t2 / static_cast<double>(T.size()));
   return lf;
 }
@@ -6281,6 +6289,7 @@ struct CommandGains {
 /// position, eps holds only what the filter and the difference leave, and
 /// its coefficient says nothing of Ki.
 std::vector<CommandGains> command_gains(const CommandLawFit& f, double dt, bool speed_logged, double noise_rms) {
+  if (!f.ls.ok || f.ls.theta.size() < kLawColumns) return {};
   const auto& th = f.ls.theta;
   const auto& se = f.ls.stderr_theta;
   const auto less_noise = [&](double rms) { return std::sqrt(std::max(rms * rms - noise_rms * noise_rms, 0.0)); };
@@ -6349,6 +6358,190 @@ void write_rebuilt_command(std::vector<MeasuredRun>& own, const std::vector<RunD
 /// best smoothing of the runs without one 0.1 % (0.556 -> 0.555).
 constexpr double kSmoothingShareOfTorque = 0.005;
 
+/// Smoothings of one delay whose command laws leave residuals within this
+/// factor of the least are told apart by their two Kv: without the speed
+/// the law's floor leaves the shape unresolved (the truth's 8 ms average
+/// against a 6 ms average and a 1.2 ms lag: residual 0.559 against 0.556,
+/// Kv 44.8 and 44.9 against 50.6 and 47.1).
+constexpr double kSmoothingResidualTie = 1.02;
+
+/// The coarse look before the smoothing's full search must find a smoothing
+/// that leaves under this share of the law's residual: without the speed,
+/// on the sweep's runs without a smoothing the best left 0.997 to 0.999 of
+/// it; behind the truth's 8 ms average, 4 ms dead time and 5 ms lag, 0.23,
+/// 0.49 and 0.90.
+constexpr double kSmoothingLook = 0.97;
+
+/// The fitting context of the command's law (rebuild_velocity_commands):
+/// the runs and axis, the loop's and the log's periods, whether the columns
+/// are low-passed, the torque channel, the level a limit holds it from, and
+/// its noise.
+struct CommandLaw {
+  const std::vector<RunData>& runs;
+  Axis a;
+  double Ts{0.0}, dt{0.0};
+  bool filtered{false};
+  std::string channel;
+  double held_from{0.0};
+  double noise_rms{0.0};
+  /// Whether the law of a smoothing `sm` has the lead column: where the
+  /// feedforward takes the reference as logged, on a law that is exact (the
+  /// speed logged or read from the law; against the low-passed encoder's
+  /// speed the column takes up any smoothing).
+  bool with_lead(const ReferenceSmoothingFit& sm) const { return sm.feedforward_as_given && !filtered; }
+  /// The torque's largest lag behind the law tried, in rows (10 ms, 1 to 10).
+  std::size_t max_lag() const { return static_cast<std::size_t>(std::clamp(std::lround(0.01 / dt), 1L, 10L)); }
+  /// The law fitted at the torque's lag (0 to max_lag) that leaves the least residual.
+  CommandLawFit best_lag(const LawColumns& columns, bool with_lead = false) const {
+    CommandLawFit best = fit_command_law(runs, columns, channel, 0, held_from, with_lead);
+    for (std::size_t lag = 1; lag <= max_lag(); ++lag) {
+      CommandLawFit f = fit_command_law(runs, columns, channel, lag, held_from, with_lead);
+      if (f.ls.ok && (!best.ls.ok || f.ls.residual_rms < best.ls.residual_rms)) best = std::move(f);
+    }
+    return best;
+  }
+};
+
+/// The reference's smoothing (a CNC's after its interpolator), searched as
+/// on a logged command (best_reference_smoothing) where the log samples at
+/// the loop's period, with the law's torque lag as found without it, and
+/// the lag then found again behind it. Taken where it explains a part of
+/// the law's residual (in quadrature) of at least kSmoothingShareOfTorque
+/// of the torque's RMS and leaves at most 0.9 of it.
+/// `law` and `best` are the columns and fit without a smoothing on entry,
+/// and those with the smoothing returned (none: unchanged).
+ReferenceSmoothingFit command_law_smoothing(const CommandLaw& cl, LawColumns& law, CommandLawFit& best) {
+  ReferenceSmoothingFit smoothing;
+  const double residual_unsmoothed = best.ls.residual_rms;
+  const auto explained = [&](double residual) {
+    return residual < 0.9 * residual_unsmoothed &&
+           std::sqrt(residual_unsmoothed * residual_unsmoothed - residual * residual) >=
+               kSmoothingShareOfTorque * best.T_rms;
+  };
+  // Where the law leaves less than that share, there is nothing for it to explain.
+  if (std::abs(cl.dt - cl.Ts) <= 1e-6 * cl.Ts && residual_unsmoothed >= kSmoothingShareOfTorque * best.T_rms) {
+    // Searched twice on the same fits: with a dead time kept as on a logged
+    // command (where it leaves 0.8 of the residual without it) and with
+    // one kept wherever it fits better; both go to the choice below.
+    std::vector<std::map<std::tuple<int, double, int, bool>, LsqResult>> fitted(cl.max_lag() + 1);
+    const auto fit_at = [&](std::size_t lag) -> SmoothedLawFit {
+      return [&, lag](int n, double lag_s, int delay, bool ff_given) {
+        const auto key = std::make_tuple(n, lag_s, delay, ff_given);
+        if (const auto it = fitted[lag].find(key); it != fitted[lag].end()) return it->second;
+        LsqResult r = fit_command_law(cl.runs,
+                                      command_law_columns(cl.runs, cl.a, cl.Ts, cl.filtered,
+                                                          {n, lag_s, delay, ff_given}, &law),
+                                      cl.channel, lag, cl.held_from,
+                                      cl.with_lead({n, lag_s, delay, ff_given}))
+                          .ls;
+        fitted[lag].emplace(key, r);
+        return r;
+      };
+    };
+    // A coarse look first (plain averages, lags and dead times of about 1 to
+    // 30 ms of delay, both ways of taking the feedforward): the full search
+    // only where one of them leaves under kSmoothingLook of the residual.
+    // The search then runs at every torque lag up to the larger of the
+    // unsmoothed law's and the best look's (a dead time in the torque's path
+    // behind a smoothing: a law without the smoothing may take up the dead
+    // time in its delay, and the search would take the dead time for more
+    // smoothing).
+    ReferenceSmoothingFit looked;
+    double looked_residual = kSmoothingLook * residual_unsmoothed;
+    for (std::size_t lag = 0; lag <= best.lag; ++lag) {
+      const SmoothedLawFit fit = fit_at(lag);
+      for (const bool ff_given : {false, true}) {
+        std::vector<ReferenceSmoothingFit> look;
+        for (int n : {3, 5, 9, 17, 33, 65}) look.push_back({n, 0.0, 0, ff_given});
+        for (double lag_s : {0.002, 0.005, 0.01, 0.02}) look.push_back({1, lag_s, 0, ff_given});
+        for (int d : {1, 2, 4, 8, 16, 32}) look.push_back({1, 0.0, d, ff_given});
+        for (const ReferenceSmoothingFit& c : look) {
+          if (c.n > controller::kMaxCommandAverageTicks || (c.lag_s > 0.0 && c.lag_s < cl.Ts)) continue;
+          const LsqResult r = fit(c.n, c.lag_s, c.delay, c.feedforward_as_given);
+          if (r.ok && r.residual_rms < looked_residual) {
+            looked = c;
+            looked_residual = r.residual_rms;
+          }
+        }
+      }
+    }
+    const bool worth = looked.n > 1 || looked.lag_s > 0.0 || looked.delay > 0;
+    std::size_t search_lags = best.lag;
+    if (worth)
+      search_lags = std::max(search_lags, cl.best_lag(command_law_columns(cl.runs, cl.a, cl.Ts, cl.filtered, looked, &law),
+                                                      cl.with_lead(looked))
+                                              .lag);
+    ReferenceSmoothingFit sm, sm_any_delay;
+    for (std::size_t lag = 0; worth && lag <= search_lags; ++lag) {
+      const SmoothedLawFit fit = fit_at(lag);
+      const ReferenceSmoothingFit at = best_reference_smoothing(fit, cl.Ts);
+      if (at.residual < sm.residual) sm = at;
+      const ReferenceSmoothingFit any = best_reference_smoothing(fit, cl.Ts, 1.0);
+      if (any.residual < sm_any_delay.residual) sm_any_delay = any;
+    }
+    if (explained(std::min(sm.residual, sm_any_delay.residual))) {
+      // The search's best, the plain average, lag and dead time of the same
+      // delay at constant speed, and each part of the best alone, each at its
+      // best torque lag; of those within kSmoothingResidualTie of the least
+      // residual, the one whose law gives the two Kv closest (they agree on
+      // the reference the loop follows, see command_gains).
+      std::vector<ReferenceSmoothingFit> candidates;
+      const auto add = [&](const ReferenceSmoothingFit& c) {
+        if (c.n < 1 || c.n > controller::kMaxCommandAverageTicks || c.delay > controller::kMaxCommandDelayTicks ||
+            (c.lag_s > 0.0 && c.lag_s < cl.Ts) || (c.n == 1 && c.lag_s == 0.0 && c.delay == 0))
+          return;
+        for (const ReferenceSmoothingFit& o : candidates)
+          if (o.n == c.n && o.lag_s == c.lag_s && o.delay == c.delay &&
+              o.feedforward_as_given == c.feedforward_as_given)
+            return;
+        candidates.push_back(c);
+      };
+      add(sm);
+      add(sm_any_delay);
+      for (const ReferenceSmoothingFit& found : {sm, sm_any_delay}) {
+        const double delay_periods = 0.5 * (found.n - 1) + found.lag_s / cl.Ts + found.delay;
+        const bool ffg = found.feedforward_as_given;
+        add({static_cast<int>(std::lround(2.0 * delay_periods + 1.0)), 0.0, 0, ffg});
+        add({1, delay_periods * cl.Ts, 0, ffg});
+        add({1, 0.0, static_cast<int>(std::lround(delay_periods)), ffg});
+        // Each part of a combination alone (against the floor a combination
+        // may carry a part the loop does not have).
+        add({found.n, 0.0, 0, ffg});
+        add({1, found.lag_s, 0, ffg});
+        add({1, 0.0, found.delay, ffg});
+      }
+      struct Tried {
+        LawColumns law;
+        CommandLawFit fit;
+        double disagreement;
+      };
+      std::vector<Tried> tried;
+      double least = std::numeric_limits<double>::infinity();
+      for (const ReferenceSmoothingFit& c : candidates) {
+        LawColumns L = command_law_columns(cl.runs, cl.a, cl.Ts, cl.filtered, c);
+        CommandLawFit f = cl.best_lag(L, cl.with_lead(c));
+        const std::vector<CommandGains> g = command_gains(f, cl.dt, !cl.filtered, cl.noise_rms);
+        const double disagreement = g.size() == 2 ? std::abs(g[0].Kv - g[1].Kv) / std::max(g[0].Kv, g[1].Kv)
+                                                  : std::numeric_limits<double>::infinity();
+        if (f.ls.ok) least = std::min(least, f.ls.residual_rms);
+        tried.push_back({std::move(L), std::move(f), disagreement});
+      }
+      std::size_t chosen = 0;
+      for (std::size_t j = 1; j < tried.size(); ++j)
+        if (tried[j].fit.ls.ok && tried[j].fit.ls.residual_rms <= kSmoothingResidualTie * least &&
+            (tried[j].disagreement < tried[chosen].disagreement ||
+             !(tried[chosen].fit.ls.residual_rms <= kSmoothingResidualTie * least)))
+          chosen = j;
+      if (tried[chosen].fit.ls.ok && explained(tried[chosen].fit.ls.residual_rms)) {
+        smoothing = candidates[chosen];
+        law = std::move(tried[chosen].law);
+        best = std::move(tried[chosen].fit);
+      }
+    }
+  }
+  return smoothing;
+}
+
 /// The cascade's position loop where a log at 2 ms or faster has the axis's
 /// speed (logged, or taken from the position) and a torque channel but no
 /// velocity command (a CNC whose trace leaves the position loop's output
@@ -6377,7 +6570,14 @@ constexpr double kSmoothingShareOfTorque = 0.005;
 /// reference before its loop (a moving average, a lag, a dead time), e, v_ref
 /// and Ie are those of the smoothed reference: the smoothing is searched on
 /// the law's columns as on a logged command, and the command rebuilt on it,
-/// so that loop_from_vcmd finds it again. The position alone shows only the
+/// so that loop_from_vcmd finds it again. Where the feedforward takes the
+/// reference as logged and only the error the smoothed one, the sum of the
+/// feedforward's speed is the logged reference, not Ix + e: the lead of the
+/// logged reference over the followed one is a seventh column (its
+/// coefficient Ki kff). Only on an exact law: without the speed the floor
+/// the encoder's low-passed speed leaves lets that column take up any
+/// smoothing (the truth's 8 ms average was read as such a lag, tracking
+/// 0.037 where it was 0.0013). The position alone shows only the
 /// lag (1 - kff) / Kv: how the error settles after a change of speed tells
 /// Kv from kff, but there the velocity loop's own error is as large (on the
 /// position and speed of the truth runs of the tests, Kv came out at 14 to
@@ -6393,63 +6593,16 @@ void rebuild_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<
                r.trace.find(col(a, "_v_mm_s")) != nullptr && r.trace.find(col(a, "_mm")) != nullptr;
     if (!usable) continue;
     const bool filtered = has_lowpassed_twin(own.front().trace, channel);
-    LawColumns law = command_law_columns(runs, a, Ts, filtered);
     const TorqueTop top = torque_top(runs, channel);
-    const auto max_lag =
-        static_cast<std::size_t>(std::clamp(std::lround(0.01 / own.front().sample_period_s), 1L, 10L));
-    const auto best_lag = [&](const LawColumns& columns) {
-      CommandLawFit best = fit_command_law(runs, columns, channel, 0, top.held_from);
-      for (std::size_t lag = 1; lag <= max_lag; ++lag) {
-        CommandLawFit f = fit_command_law(runs, columns, channel, lag, top.held_from);
-        if (f.ls.ok && (!best.ls.ok || f.ls.residual_rms < best.ls.residual_rms)) best = std::move(f);
-      }
-      return best;
-    };
-    CommandLawFit best = best_lag(law);
+    const double dt = own.front().sample_period_s;
+    const CommandLaw cl{runs, a, Ts, dt, filtered, channel, top.held_from,
+                        filtered ? top.noise_rms * lowpass_noise_gain(dt) : top.noise_rms};
+    LawColumns law = command_law_columns(runs, a, Ts, filtered);
+    CommandLawFit best = cl.best_lag(law);
     if (!best.ls.ok) continue;
-    // The reference's smoothing (a CNC's after its interpolator), searched as
-    // on a logged command (best_reference_smoothing) where the log samples at
-    // the loop's period, with the law's torque lag as found without it, and
-    // the lag then found again behind it. Taken where it explains a part of
-    // the law's residual (in quadrature) of at least kSmoothingShareOfTorque
-    // of the torque's RMS and leaves at most 0.9 of it.
-    ReferenceSmoothingFit smoothing;
     const double residual_unsmoothed = best.ls.residual_rms;
-    const auto explained = [&](double residual) {
-      return residual < 0.9 * residual_unsmoothed &&
-             std::sqrt(residual_unsmoothed * residual_unsmoothed - residual * residual) >=
-                 kSmoothingShareOfTorque * best.T_rms;
-    };
-    // (Where the law leaves less than that share, there is nothing for it to explain.)
-    if (std::abs(own.front().sample_period_s - Ts) <= 1e-6 * Ts &&
-        residual_unsmoothed >= kSmoothingShareOfTorque * best.T_rms) {
-      // The smoothing's delay is partly taken up by the torque's lag behind
-      // the law fitted without it, so the search runs at every lag up to that.
-      ReferenceSmoothingFit sm;
-      for (std::size_t lag = 0; lag <= best.lag; ++lag) {
-        const ReferenceSmoothingFit at = best_reference_smoothing(
-            [&](int n, double lag_s, int delay, bool ff_given) {
-              return fit_command_law(runs,
-                                     command_law_columns(runs, a, Ts, filtered, {n, lag_s, delay, ff_given}, &law),
-                                     channel, lag, top.held_from)
-                  .ls;
-            },
-            Ts);
-        if (at.residual < sm.residual) sm = at;
-      }
-      if (explained(sm.residual)) {
-        LawColumns smoothed = command_law_columns(runs, a, Ts, filtered, sm);
-        CommandLawFit f = best_lag(smoothed);
-        if (f.ls.ok && explained(f.ls.residual_rms)) {
-          smoothing = sm;
-          law = std::move(smoothed);
-          best = std::move(f);
-        }
-      }
-    }
-    const std::vector<CommandGains> gains =
-        command_gains(best, own.front().sample_period_s, !filtered,
-                      filtered ? top.noise_rms * lowpass_noise_gain(own.front().sample_period_s) : top.noise_rms);
+    const ReferenceSmoothingFit smoothing = command_law_smoothing(cl, law, best);
+    const std::vector<CommandGains> gains = command_gains(best, dt, !filtered, cl.noise_rms);
     if (gains.empty()) continue;
     // Of two, the one whose command the PI law fits better.
     std::size_t chosen = 0;
