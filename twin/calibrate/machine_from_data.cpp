@@ -3172,7 +3172,8 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
                                         "speed (residual {:.3g} mm/s against an RMS of {:.3g} mm/s){}",
                                         ls.residual_rms, vrms, smoothing)
                           : std::string("the velocity command rebuilt from the logged torque and speed (see the "
-                                        "notes: no velocity command is logged)");
+                                        "notes: no velocity command is logged)") +
+                                smoothing;
 }
 
 /// Kv from the lag of the position behind the command (a P loop without feedforward).
