@@ -2871,24 +2871,27 @@ struct ReferenceSmoothingFit {
   int delay{0};        ///< dead time after both, loop periods
   bool feedforward_as_given{false};  ///< the feedforward's speed from the reference as logged
   double residual{std::numeric_limits<double>::infinity()};
+  /// Whether the reference is smoothed or held back at all.
+  bool any() const { return n > 1 || lag_s > 0.0 || delay > 0; }
+  /// The delay at constant speed, in loop periods of Ts.
+  double delay_periods(double Ts) const { return 0.5 * (n - 1) + lag_s / Ts + delay; }
 };
 
 /// The reference a loop follows: the logged one through `sm` (its moving
 /// average, lag and dead time; none by default).
 std::vector<double> followed_reference(const std::vector<double>& ref, const std::vector<Segment>& segs,
                                        const ReferenceSmoothingFit& sm, double Ts) {
-  return sm.n > 1 || sm.lag_s > 0.0 || sm.delay > 0
-             ? smooth_reference_in_segments(ref, segs, sm.n, sm.lag_s, Ts, sm.delay)
-             : ref;
+  return sm.any() ? smooth_reference_in_segments(ref, segs, sm.n, sm.lag_s, Ts, sm.delay) : ref;
 }
 
 /// The smoothing in words: "a moving average over 8 ms and a dead time of
 /// 3 ms (3 loop periods)"; empty where there is none.
-std::string smoothing_words(int n, double lag_s, int delay, double Ts) {
+std::string smoothing_words(const ReferenceSmoothingFit& sm, double Ts) {
   std::vector<std::string> parts;
-  if (n > 1) parts.push_back(fmt::format("a moving average over {:.4g} ms", 1e3 * n * Ts));
-  if (lag_s > 0.0) parts.push_back(fmt::format("a first-order lag of {:.4g} ms", 1e3 * lag_s));
-  if (delay > 0) parts.push_back(fmt::format("a dead time of {:.4g} ms ({} loop periods)", 1e3 * delay * Ts, delay));
+  if (sm.n > 1) parts.push_back(fmt::format("a moving average over {:.4g} ms", 1e3 * sm.n * Ts));
+  if (sm.lag_s > 0.0) parts.push_back(fmt::format("a first-order lag of {:.4g} ms", 1e3 * sm.lag_s));
+  if (sm.delay > 0)
+    parts.push_back(fmt::format("a dead time of {:.4g} ms ({} loop periods)", 1e3 * sm.delay * Ts, sm.delay));
   std::string how;
   for (std::size_t i = 0; i < parts.size(); ++i)
     how += (i == 0 ? "" : (i + 1 == parts.size() ? " and " : ", ")) + parts[i];
@@ -2918,7 +2921,7 @@ ReferenceSmoothingFit best_reference_smoothing_with(const SmoothedLawFit& fit, d
   best.feedforward_as_given = ff_given;
   best.delay = delay;
   const auto take = [&](int n, double lag_s) {
-    if ((n == 1 && lag_s == 0.0 && delay == 0) || (lag_s > 0.0 && lag_s < Ts))
+    if (!ReferenceSmoothingFit{n, lag_s, delay}.any() || (lag_s > 0.0 && lag_s < Ts))
       return std::numeric_limits<double>::infinity();
     const LsqResult trial = fit(n, lag_s, delay, ff_given);
     const double r = trial.ok && trial.theta[0] > 0.0 ? trial.residual_rms : std::numeric_limits<double>::infinity();
@@ -2994,7 +2997,7 @@ ReferenceSmoothingFit best_reference_smoothing_way(const SmoothedLawFit& fit, do
       delayed = {n, lag_s, d, ff_given, trial.residual_rms};
   };
   // The smoothing's delay at constant speed, in periods.
-  const double total = std::isfinite(plain.residual) ? 0.5 * (plain.n - 1) + plain.lag_s / Ts : 0.0;
+  const double total = std::isfinite(plain.residual) ? plain.delay_periods(Ts) : 0.0;
   for (int d : period_grid(controller::kMaxCommandDelayTicks)) {
     take(1, 0.0, d);
     if (!std::isfinite(plain.residual)) continue;
@@ -3127,44 +3130,37 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
   // taken where it halves the residual of the law on the logged reference
   // low-passed alike (the law is exact but for the encoder's steps there,
   // so no smoothing comes near that on a log without one).
-  int best_n = 1, best_delay = 0;
-  double best_lag_s = 0.0;
-  bool ff_given = false;
+  ReferenceSmoothingFit best;  // none unless the search finds one
   if (search) {
     const LsqResult none = search_fit(1, 0.0, 0, false);
     const ReferenceSmoothingFit sm = best_reference_smoothing(search_fit, f.Ts);
-    if (none.ok && sm.residual < 0.5 * none.residual_rms) {
-      best_n = sm.n;
-      best_lag_s = sm.lag_s;
-      best_delay = sm.delay;
-      ff_given = sm.feedforward_as_given;
-    }
+    if (none.ok && sm.residual < 0.5 * none.residual_rms) best = sm;
   }
   const double residual_logged = ls.residual_rms;
-  const bool smoothed = best_n > 1 || best_lag_s > 0.0 || best_delay > 0;
-  if (smoothed) ls = fit_with(best_n, best_lag_s, best_delay, ff_given);
-  ax.gains.command_average_s = best_n > 1 ? best_n * f.Ts : 0.0;
-  ax.gains.command_lag_s = best_lag_s;
-  ax.gains.command_delay_s = best_delay * f.Ts;
-  ax.gains.feedforward_unsmoothed = ff_given ? 1.0 : 0.0;
+  const bool smoothed = best.any();
+  if (smoothed) ls = fit_with(best.n, best.lag_s, best.delay, best.feedforward_as_given);
+  ax.gains.command_average_s = best.n > 1 ? best.n * f.Ts : 0.0;
+  ax.gains.command_lag_s = best.lag_s;
+  ax.gains.command_delay_s = best.delay * f.Ts;
+  ax.gains.feedforward_unsmoothed = best.feedforward_as_given ? 1.0 : 0.0;
   ax.gains.Kv_per_s = ls.theta[0];
   ax.gains.kff = std::clamp(ls.theta[1], 0.0, 1.5);
   // The lag at constant speed: the P loop's plus the smoothing's delay
   // (whichever reference the feedforward takes: its speed is the same there).
-  const double delay_s = 0.5 * (best_n - 1) * f.Ts + best_lag_s + best_delay * f.Ts;
+  const double delay_s = best.delay_periods(f.Ts) * f.Ts;
   ax.lag_s = (1.0 - ax.gains.kff) / ax.gains.Kv_per_s + delay_s;
   double vrms = 0.0;
   for (double x : vc) vrms += x * x;
   vrms = std::sqrt(vrms / static_cast<double>(std::max<std::size_t>(1, vc.size())));
   const bool logged = f.r0.trace.find(col(a, "_vcmd_mm_s")) != nullptr;
-  const std::string how = smoothing_words(best_n, best_lag_s, best_delay, f.Ts);
+  const std::string how = smoothing_words(best, f.Ts);
   const std::string smoothing =
       smoothed
           ? fmt::format("; the loop follows the logged reference {} {} (a CNC's smoothing after its "
                         "interpolator, {:.4g} ms of delay{}), which fits the command with {:.3g} mm/s of residual "
                         "against {:.3g} mm/s on the reference as logged",
-                        best_n > 1 || best_lag_s > 0.0 ? "smoothed by" : "held back by", how, 1e3 * delay_s,
-                        ff_given ? "; the feedforward takes the reference as logged, only the error the smoothed one"
+                        best.n > 1 || best.lag_s > 0.0 ? "smoothed by" : "held back by", how, 1e3 * delay_s,
+                        best.feedforward_as_given ? "; the feedforward takes the reference as logged, only the error the smoothed one"
                                  : "",
                         ls.residual_rms, residual_logged)
           : std::string();
@@ -6466,7 +6462,7 @@ ReferenceSmoothingFit command_law_smoothing(const CommandLaw& cl, LawColumns& la
         }
       }
     }
-    const bool worth = looked.n > 1 || looked.lag_s > 0.0 || looked.delay > 0;
+    const bool worth = looked.any();
     std::size_t search_lags = best.lag;
     if (worth)
       search_lags = std::max(search_lags, cl.best_lag(command_law_columns(cl.runs, cl.a, cl.Ts, cl.filtered, looked, &law),
@@ -6489,7 +6485,7 @@ ReferenceSmoothingFit command_law_smoothing(const CommandLaw& cl, LawColumns& la
       std::vector<ReferenceSmoothingFit> candidates;
       const auto add = [&](const ReferenceSmoothingFit& c) {
         if (c.n < 1 || c.n > controller::kMaxCommandAverageTicks || c.delay > controller::kMaxCommandDelayTicks ||
-            (c.lag_s > 0.0 && c.lag_s < cl.Ts) || (c.n == 1 && c.lag_s == 0.0 && c.delay == 0))
+            (c.lag_s > 0.0 && c.lag_s < cl.Ts) || !c.any())
           return;
         for (const ReferenceSmoothingFit& o : candidates)
           if (o.n == c.n && o.lag_s == c.lag_s && o.delay == c.delay &&
@@ -6500,7 +6496,7 @@ ReferenceSmoothingFit command_law_smoothing(const CommandLaw& cl, LawColumns& la
       add(sm);
       add(sm_any_delay);
       for (const ReferenceSmoothingFit& found : {sm, sm_any_delay}) {
-        const double delay_periods = 0.5 * (found.n - 1) + found.lag_s / cl.Ts + found.delay;
+        const double delay_periods = found.delay_periods(cl.Ts);
         const bool ffg = found.feedforward_as_given;
         add({static_cast<int>(std::lround(2.0 * delay_periods + 1.0)), 0.0, 0, ffg});
         add({1, delay_periods * cl.Ts, 0, ffg});
@@ -6519,7 +6515,7 @@ ReferenceSmoothingFit command_law_smoothing(const CommandLaw& cl, LawColumns& la
       std::vector<Tried> tried;
       double least = std::numeric_limits<double>::infinity();
       for (const ReferenceSmoothingFit& c : candidates) {
-        LawColumns L = command_law_columns(cl.runs, cl.a, cl.Ts, cl.filtered, c);
+        LawColumns L = command_law_columns(cl.runs, cl.a, cl.Ts, cl.filtered, c, &law);
         CommandLawFit f = cl.best_lag(L, cl.with_lead(c));
         const std::vector<CommandGains> g = command_gains(f, cl.dt, !cl.filtered, cl.noise_rms);
         const double disagreement = g.size() == 2 ? std::abs(g[0].Kv - g[1].Kv) / std::max(g[0].Kv, g[1].Kv)
@@ -6629,10 +6625,10 @@ void rebuild_velocity_commands(std::vector<MeasuredRun>& own, const std::vector<
                                         chosen == 0 ? "integral part" : "proportional part")
                           : std::string(),
         gains[chosen].kff,
-        smoothing.n > 1 || smoothing.lag_s > 0.0 || smoothing.delay > 0
+        smoothing.any()
             ? fmt::format("; the law holds on the logged reference through {} (a CNC's smoothing after its "
                           "interpolator; residual {:.3g} on the reference as logged)",
-                          smoothing_words(smoothing.n, smoothing.lag_s, smoothing.delay, Ts), residual_unsmoothed)
+                          smoothing_words(smoothing, Ts), residual_unsmoothed)
             : std::string()));
   }
 }

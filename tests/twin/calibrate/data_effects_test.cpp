@@ -160,6 +160,17 @@ void expect_held_out_machine_check(const Outcome& o) {
   EXPECT_LT(v.calibrated.nrms.at("x_torque_raw"), v.regression.nrms.at("x_torque_raw")) << describe(o);
 }
 
+/// The x axis's cascade gains of the calibrated machine written to
+/// machine.yaml (in a folder named after `name`) and read back.
+controller::CascadeGains x_cascade_read_back(const Outcome& o, const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() / ("twin_data_effects_" + name + "_yaml");
+  std::filesystem::create_directories(dir);
+  io::write_file_atomic(dir / "machine.yaml", io::machine_to_yaml(o.r.final_machine, "test"));
+  const sim::MachineDefinition back = io::load_machine(dir / "machine.yaml");
+  std::filesystem::remove_all(dir);
+  return back.axes[index(Axis::kX)].loop.cascade;
+}
+
 // The validation run (another program, never fitted) improves: the sum of
 // the NRMS of the channels where the effect shows (the torque, or the
 // tracking error for a lead error or lost motion) of the final machine is
@@ -481,14 +492,9 @@ TEST(DataEffects, AReferenceTheCncSmoothsIsFoundFromTheLoggedVelocityCommand) {
   EXPECT_EQ(note_with(o, "rows after the following error"), o.r.notes.end()) << describe(o);
   expect_held_out_machine_check(o);
 
-  const auto dir = std::filesystem::temp_directory_path() / "twin_data_effects_smoothed_yaml";
-  std::filesystem::create_directories(dir);
-  io::write_file_atomic(dir / "machine.yaml", io::machine_to_yaml(o.r.final_machine, "test"));
-  const sim::MachineDefinition back = io::load_machine(dir / "machine.yaml");
-  const controller::CascadeGains& g = back.axes[index(Axis::kX)].loop.cascade;
+  const controller::CascadeGains g = x_cascade_read_back(o, "smoothed");
   EXPECT_NEAR(g.command_average_s, ax.gains.command_average_s, 1e-12);
   EXPECT_NEAR(g.command_lag_s, ax.gains.command_lag_s, 1e-9);
-  std::filesystem::remove_all(dir);
 
   const Outcome plain = calibrate_spec("reference_as_logged", cascade_spec_without_speed());
   ASSERT_EQ(plain.r.axis.size(), 1u);
@@ -649,12 +655,7 @@ TEST(DataEffects, ADeadTimeBeforeThePositionLoopIsFoundFromTheLoggedVelocityComm
   EXPECT_TRUE(o.kept.empty()) << describe(o);
   expect_held_out_machine_check(o);
 
-  const auto dir = std::filesystem::temp_directory_path() / "twin_data_effects_delayed_yaml";
-  std::filesystem::create_directories(dir);
-  io::write_file_atomic(dir / "machine.yaml", io::machine_to_yaml(o.r.final_machine, "test"));
-  const sim::MachineDefinition back = io::load_machine(dir / "machine.yaml");
-  EXPECT_NEAR(back.axes[index(Axis::kX)].loop.cascade.command_delay_s, ax.gains.command_delay_s, 1e-12);
-  std::filesystem::remove_all(dir);
+  EXPECT_NEAR(x_cascade_read_back(o, "delayed").command_delay_s, ax.gains.command_delay_s, 1e-12);
 
   truth::RunSpec both = cascade_spec_without_speed();
   both.cascade.command_average_ticks = 4;
