@@ -503,10 +503,10 @@ TEST(RealLogs, ALogSlowerThanTheLoopIsFittedAtTheLoopsPeriod) {
 // drifts over a segment by more than the level test allows at 20 ms, and
 // the first coefficient, Kvp less Ki (dt - Ts) / 2, is negative there.
 // Oracles: the truth's Kvp (5 %) and Tn (10 %) as for the faster logs; Kv
-// and kff to 1 % at 10 ms, and at 20 ms to 2 % and 0.012 (the P law there
-// comes out 1.6 % high: the reference's speed over the loop's period is
-// read off the cubic between rows 20 ms apart); the held-out machine's
-// check on the other program (0.0037 and 0.0076 tracking).
+// and kff to 1 % at both rates (the P law at 20 ms came out 1.6 % high on
+// every row, the reference's speed over the loop's period read off the
+// cubic between rows 20 ms apart; it is fitted on the rows where that
+// speed is exact now); the held-out machine's check on the other program.
 TEST(RealLogs, ALogOfTenOrTwentyMillisecondsShowsTheVelocityLoop) {
   truth::RunSpec sp = cascade_spec_with_stribeck(1e-3);
   for (const int every : {10, 20}) {
@@ -517,15 +517,7 @@ TEST(RealLogs, ALogOfTenOrTwentyMillisecondsShowsTheVelocityLoop) {
     ASSERT_EQ(r.axis.size(), 1u);
     const AxisFromData& ax = r.axis[0];
     ASSERT_TRUE(ax.identified) << ax.note;
-    if (every == 10) {
-      expect_truth_gains(ax, sp);
-    } else {
-      EXPECT_NEAR(ax.gains.Kv_per_s, 45.0, 0.9);
-      EXPECT_NEAR(ax.gains.kff, 0.6, 0.012);
-      EXPECT_TRUE(ax.velocity_loop_from_data) << ax.loop_source;
-      EXPECT_NEAR(ax.gains.Kvp_torque_s_per_rad, 0.5 / sp.plant.rg * 40.0, 0.05 * 0.5 / sp.plant.rg * 40.0);
-      EXPECT_NEAR(ax.gains.Tn_s, 0.008, 0.0008);
-    }
+    expect_truth_gains(ax, sp);
     expect_held_out_check(r);
   }
 }
