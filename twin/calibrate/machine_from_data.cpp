@@ -3067,11 +3067,36 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
     vr.clear();
     vc.clear();
     rows.clear();
+    // On a log slower than 5 ms the reference's speed over the loop's period
+    // is read off the cubic between rows, which misses it where the speed
+    // changes within a row: the law there came out at Kv 59.8 and kff 0.473
+    // for 45 and 0.6 at 50 ms (46.0 and 0.592 at 20 ms). Where the rebuilt
+    // reference is a straight line over the rows about a row and the one
+    // before (second differences within the position's rounding), the cubic's
+    // speed at the row is exact, and the law is fitted on those rows where
+    // they are at least a fifth of the fitting rows (the loop still settling
+    // after each change of speed parts Kv from kff): 45.00 and 0.600 at 20
+    // and 50 ms. Only up to the 20 ms the velocity loop is read at: at 50 ms
+    // the loop chosen blind and the drive fitted there are further off, and
+    // with the exact P law the other program tracked worse (median 0.12
+    // against 0.073 on the sweep; the truth's velocity loop on that drive:
+    // 0.043).
+    const bool straight_only = !resolves_velocity_loop(dt) && dt <= kLawFitMaxPeriod_s + 1e-12 && !lowpass_after;
+    const double straight_tol_mm = 2.5 * std::max(f.position_quantum_mm, 1e-9);
+    std::vector<std::vector<char>> line(f.runs.size());
     std::vector<std::array<std::vector<double>, 3>> cols;  // e, v_ref, vcmd per run
     for (std::size_t i = 0; i < f.runs.size(); ++i) {
       const auto& rd = f.runs[i];
       const std::vector<double>& logged_ref = *in[i].ref;
       const std::vector<double> ref = followed_reference(logged_ref, rd.segments, {n, lag_s, delay}, f.Ts);
+      if (straight_only) {
+        // The cubic over the row before a row takes its slopes from the rows
+        // about both ends: straight about the row and the one before it.
+        line[i].assign(ref.size(), 0);
+        for (std::size_t k = 2; k + 1 < ref.size(); ++k)
+          line[i][k] = static_cast<char>(std::abs(ref[k + 1] - 2.0 * ref[k] + ref[k - 1]) <= straight_tol_mm &&
+                                         std::abs(ref[k] - 2.0 * ref[k - 1] + ref[k - 2]) <= straight_tol_mm);
+      }
       const std::vector<double>& x = *in[i].x;
       std::array<std::vector<double>, 3> c;
       c[0].resize(ref.size());
@@ -3082,37 +3107,12 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
         for (auto& y : c) y = lowpass_in_segments(y, rd.segments, rd.run->sample_period_s);
       cols.push_back(std::move(c));
     }
-    // On a log slower than 5 ms the reference's speed over the loop's period
-    // is read off the cubic between rows, which misses it where the speed
-    // changes within a row: the law there came out at Kv 59.8 and kff 0.473
-    // for 45 and 0.6 at 50 ms (46.0 and 0.592 at 20 ms). Where the rebuilt
-    // reference is a straight line over the rows about a row and the one
-    // before (second differences within the position's rounding), the cubic's
-    // speed at the row is
-    // exact, and the law is fitted on those rows where they are at least a
-    // fifth of the fitting rows (the loop still settling after each change of
-    // speed parts Kv from kff): 45.00 and 0.600 at 20 and 50 ms. Only up to
-    // the 20 ms the velocity loop is read at: at 50 ms the loop chosen
-    // blind and the drive fitted there are further off, and with the exact
-    // P law the other program tracked worse (median 0.12 against 0.073 on
-    // the sweep; the truth's velocity loop on that drive: 0.043).
-    const bool straight_only = !resolves_velocity_loop(dt) && dt <= kLawFitMaxPeriod_s + 1e-12 && !lowpass_after;
-    const double straight_tol_mm = 2.5 * std::max(f.position_quantum_mm, 1e-9);
     std::size_t straight = 0, all = 0;
-    f.fitter.for_fit_rows([&](std::size_t, std::size_t) { ++all; });
-    std::vector<std::vector<char>> line(f.runs.size());
-    if (straight_only) {
-      for (std::size_t i = 0; i < f.runs.size(); ++i) {
-        const std::vector<double> ref = followed_reference(*in[i].ref, f.runs[i].segments, {n, lag_s, delay}, f.Ts);
-        line[i].assign(ref.size(), 0);
-        // The cubic over the row before a row takes its slopes from the rows
-        // about both ends: straight about the row and the one before it.
-        for (std::size_t k = 2; k + 1 < ref.size(); ++k)
-          line[i][k] = static_cast<char>(std::abs(ref[k + 1] - 2.0 * ref[k] + ref[k - 1]) <= straight_tol_mm &&
-                                         std::abs(ref[k] - 2.0 * ref[k - 1] + ref[k - 2]) <= straight_tol_mm);
-      }
-      f.fitter.for_fit_rows([&](std::size_t r, std::size_t k) { straight += line[r][k] ? 1 : 0; });
-    }
+    if (straight_only)
+      f.fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
+        ++all;
+        straight += line[r][k] ? 1 : 0;
+      });
     const bool on_lines = straight_only && straight >= std::max<std::size_t>(30, all / 5);
     f.fitter.for_fit_rows([&](std::size_t r, std::size_t k) {
       if (on_lines && !line[r][k]) return;
@@ -4746,6 +4746,16 @@ ChannelErrors pooled_on_fit_runs(DataCalibration& out, const std::vector<RunData
 /// The best of 16 velocity loops per axis where `on`: bandwidths 0.25 to 2
 /// times the default's, integral times 0 (none) to 16 over the bandwidth,
 /// each replayed on `base` and scored on the fitting rows.
+/// The NRMS of channel `k` in `e`, 1e300 where there is no figure (a replay
+/// that failed, or a channel it does not give).
+double nrms_or_none(const ChannelErrors& e, const std::string& k) {
+  const auto it = e.nrms.find(k);
+  return it == e.nrms.end() ? 1e300 : it->second;
+}
+double nrms_or_none(const std::optional<ChannelErrors>& e, const std::string& k) {
+  return e ? nrms_or_none(*e, k) : 1e300;
+}
+
 struct LoopChoice {
   double score{1e300};
   double Kvp{0.0}, Tn{0.0};
@@ -4772,8 +4782,7 @@ AxisArray<LoopChoice> best_velocity_loops(DataCalibration& out, const std::vecto
         const auto it = e.nrms.find(ax.channel.column);
         if (it == e.nrms.end() || !(it->second < best[index(ax.axis)].score)) continue;
         const auto& g = trial.axes[index(ax.axis)].loop.cascade;
-        const auto tr = e.nrms.find(col(ax.axis, "_err_mm"));
-        best[index(ax.axis)] = {it->second, g.Kvp_torque_s_per_rad, g.Tn_s, tr == e.nrms.end() ? 1e300 : tr->second};
+        best[index(ax.axis)] = {it->second, g.Kvp_torque_s_per_rad, g.Tn_s, nrms_or_none(e, col(ax.axis, "_err_mm"))};
       }
     }
   }
@@ -4791,8 +4800,8 @@ AxisArray<LoopChoice> best_velocity_loops(DataCalibration& out, const std::vecto
 /// to 1 %, on the fitting rows' torque and tracking NRMS, each over its
 /// value with the law (the two outputs weighed alike: on the torque alone
 /// the search trades the tracking for a drive the effects have not yet
-/// completed). Kept where that sum falls by at least kPolishGain and both
-/// outputs fall: gains that trade one for the other stand in for an effect
+/// completed). Kept where that sum (2 before) falls by at least
+/// kPolishGain and both outputs fall: gains that trade one for the other stand in for an effect
 /// the drive does not have yet (a 10 ms log of a torque limit the law had
 /// found took Kvp 6 % and Tn 18 % off the truth's for 6 % less tracking
 /// error and 2 % more torque error, and the other program then tracked at
@@ -4816,10 +4825,6 @@ AxisArray<std::string> polish_velocity_loops(DataCalibration& out, const std::ve
   };
   AxisArray<State> st{}, first{};
   AxisArray<std::string> said{};
-  auto nrms_of = [](const ChannelErrors& e, const std::string& k) {
-    const auto it = e.nrms.find(k);
-    return it == e.nrms.end() ? 1e300 : it->second;
-  };
   auto score_of = [&](const State& s0, double torque, double track) {
     return torque < 1e300 && track < 1e300 ? torque / s0.torque + track / s0.track : 1e300;
   };
@@ -4830,8 +4835,8 @@ AxisArray<std::string> polish_velocity_loops(DataCalibration& out, const std::ve
     const controller::CascadeGains& g = machine.axes[index(ax.axis)].loop.cascade;
     s.Kvp = g.Kvp_torque_s_per_rad;
     s.Ki = g.Tn_s > 0.0 ? s.Kvp / g.Tn_s : 0.0;
-    s.torque = nrms_of(start, ax.channel.column);
-    s.track = nrms_of(start, col(ax.axis, "_err_mm"));
+    s.torque = nrms_or_none(start, ax.channel.column);
+    s.track = nrms_or_none(start, col(ax.axis, "_err_mm"));
     if (!(s.torque > 0.0 && s.torque < 1e300 && s.track > 0.0 && s.track < 1e300)) continue;
     s.score = 2.0;
     if (s.Ki == 0.0) s.step[1] = 0.0;
@@ -4867,8 +4872,8 @@ AxisArray<std::string> polish_velocity_loops(DataCalibration& out, const std::ve
         for (const AxisFromData& ax : out.axis) {
           if (!tried[index(ax.axis)]) continue;
           State t = *tried[index(ax.axis)];
-          t.torque = nrms_of(e, ax.channel.column);
-          t.track = nrms_of(e, col(ax.axis, "_err_mm"));
+          t.torque = nrms_or_none(e, ax.channel.column);
+          t.track = nrms_or_none(e, col(ax.axis, "_err_mm"));
           t.score = score_of(first[index(ax.axis)], t.torque, t.track);
           if (!(t.score < st[index(ax.axis)].score)) continue;
           st[index(ax.axis)] = t;
@@ -4888,7 +4893,7 @@ AxisArray<std::string> polish_velocity_loops(DataCalibration& out, const std::ve
   }
   for (AxisFromData& ax : out.axis) {
     const State &s = st[index(ax.axis)], &s0 = first[index(ax.axis)];
-    if (!(s.score < 2.0 * (1.0 - 0.5 * kPolishGain))) continue;
+    if (!(s.score < 2.0 - kPolishGain)) continue;
     const controller::CascadeGains g = gains_of(s, machine.axes[index(ax.axis)].loop.cascade);
     const std::string figures =
         fmt::format("Kvp {:.4g}, Tn {:.4g} s replay the fitting rows' {} to {:.4g} and their tracking error to "
@@ -4955,39 +4960,34 @@ void choose_velocity_loops(DataCalibration& out, const std::vector<RunData>& run
   ChannelErrors with_law;
   AxisArray<std::string> polished{};
   if (std::any_of(contest.begin(), contest.end(), [](bool b) { return b; })) {
-    with_law = pooled_on_fit_runs(out, runs, out.identified, false);
     // The law polished on the replay before it stands against the 16.
     AxisArray<bool> polish{};
     for (const AxisFromData& ax : out.axis)
       polish[index(ax.axis)] = contest[index(ax.axis)] && polishes_law(ax, runs.front().run->sample_period_s);
-    if (std::any_of(polish.begin(), polish.end(), [](bool b) { return b; })) {
+    if (std::any_of(polish.begin(), polish.end(), [](bool b) { return b; }))
       polished = polish_velocity_loops(out, runs, polish, out.identified);
-      if (std::any_of(polished.begin(), polished.end(), [](const std::string& t) { return !t.empty(); }))
-        with_law = pooled_on_fit_runs(out, runs, out.identified, false);
-    }
+    with_law = pooled_on_fit_runs(out, runs, out.identified, false);
   }
   const AxisArray<LoopChoice> best = best_velocity_loops(out, runs, base, on);
   for (AxisFromData& ax : out.axis) {
     const LoopChoice& c = best[index(ax.axis)];
     if (!contest[index(ax.axis)]) continue;
     if (!polished[index(ax.axis)].empty()) ax.loop_source += "; " + polished[index(ax.axis)];
-    const auto it = with_law.nrms.find(ax.channel.column);
-    const double law = it == with_law.nrms.end() ? 1e300 : it->second;
+    const double law = nrms_or_none(with_law, ax.channel.column);
     const std::string law_text = law < 1e300 ? fmt::format("{:.4g}", law) : std::string("no figure (its replay fails)");
     // The 16 are chosen on the torque alone; where the law's replay tracks
     // the fitting rows better, the torque's lower error is not taken as the
     // loop's (a P loop without the integral tracked a Stribeck rise at 0.12).
-    const auto tr = with_law.nrms.find(col(ax.axis, "_err_mm"));
-    const double law_track = tr == with_law.nrms.end() ? 1e300 : tr->second;
+    const double law_track = nrms_or_none(with_law, col(ax.axis, "_err_mm"));
     const bool tracks = law < 1e300 && law_track < 1e300 && c.track > law_track * (1.0 + kRiseAllowed);
     if (!(c.score < law) || tracks) {
+      const std::string why_law =
+          tracks && c.score < law
+              ? fmt::format(", and their tracking error to {:.4g} against the best's {:.4g}", law_track, c.track)
+              : std::string();
       ax.loop_source += fmt::format("; it replays the fitting rows' {} to {} against {:.4g} for the best of 16 "
                                     "velocity loops chosen without it{}",
-                                    ax.channel.column, law_text, c.score,
-                                    tracks && c.score < law ? fmt::format(", and their tracking error to {:.4g} against the best's "
-                                                         "{:.4g}",
-                                                         law_track, c.track)
-                                           : std::string());
+                                    ax.channel.column, law_text, c.score, why_law);
       continue;
     }
     // The 16's: the loop as where the log does not show it.
@@ -5185,14 +5185,6 @@ void choose_torque_command(DataCalibration& out, const std::vector<RunData>& run
     set_identified_axis(out.identified.axes[index(ax.axis)], ax);
   }
   out.final_machine = out.identified;
-}
-
-/// The NRMS of channel `k` in `e`, 1e300 where there is no figure (a replay
-/// that failed, or a channel it does not give).
-double nrms_or_none(const std::optional<ChannelErrors>& e, const std::string& k) {
-  if (!e) return 1e300;
-  const auto it = e->nrms.find(k);
-  return it == e->nrms.end() ? 1e300 : it->second;
 }
 
 /// An NRMS of nrms_or_none as a report gives it.
