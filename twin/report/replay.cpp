@@ -621,10 +621,41 @@ std::vector<double> monotone_slopes(const std::vector<double>& r) {
   return slope;
 }
 
-std::vector<double> upsample_reference(const std::vector<double>& r, std::int64_t m) {
+std::vector<double> reference_slopes(const std::vector<double>& r, const std::vector<double>& v_mm_s, double dt_s) {
+  std::vector<double> slope = monotone_slopes(r);
+  const std::size_t n = r.size();
+  for (std::size_t i = 0; i < n && i < v_mm_s.size(); ++i) {
+    const double s = v_mm_s[i] * dt_s;
+    if (!std::isfinite(s)) continue;
+    const double before = i > 0 ? r[i] - r[i - 1] : 0.0, after = i + 1 < n ? r[i + 1] - r[i] : 0.0;
+    const bool along = s == 0.0 || s * before > 0.0 || s * after > 0.0;
+    if (along && std::abs(s) <= 3.0 * std::max(std::abs(before), std::abs(after))) slope[i] = s;
+  }
+  return slope;
+}
+
+std::string reference_speed_column(Axis a) { return std::string(axis_name(a)) + "_ref_v_mm_s"; }
+
+std::vector<double> law_reference_speed(const MeasuredRun& run, Axis a, const sim::AxisDefinition& def) {
+  const std::string n(axis_name(a));
+  const auto* vcmd = run.trace.find(n + "_vcmd_mm_s");
+  const auto* x = run.trace.find(n + "_mm");
+  const auto* ref = run.trace.find(n + "_ref_mm");
+  const controller::CascadeGains& g = def.loop.cascade;
+  if (!(run.sample_period_s > kLawSpeedMinPeriod_s + 1e-12) || vcmd == nullptr || x == nullptr || ref == nullptr ||
+      def.loop.law != controller::LoopLaw::kCascade || !(g.kff >= 0.1) || !(g.Kv_per_s > 0.0) ||
+      g.command_average_s > 0.0 || g.command_lag_s > 0.0 || g.command_delay_s > 0.0)
+    return {};
+  std::vector<double> v(ref->size());
+  for (std::size_t k = 0; k < v.size(); ++k) v[k] = ((*vcmd)[k] - g.Kv_per_s * ((*ref)[k] - (*x)[k])) / g.kff;
+  return v;
+}
+
+std::vector<double> upsample_reference(const std::vector<double>& r, std::int64_t m,
+                                       const std::vector<double>* slopes) {
   const std::size_t n = r.size();
   if (n == 0 || m <= 1) return r;
-  const std::vector<double> slope = monotone_slopes(r);
+  const std::vector<double> slope = slopes != nullptr && slopes->size() == n ? *slopes : monotone_slopes(r);
   std::vector<double> out(static_cast<std::size_t>((static_cast<std::int64_t>(n) - 1) * m + 1));
   for (std::size_t k = 0; k < out.size(); ++k) {
     const std::size_t i = k / static_cast<std::size_t>(m);
@@ -669,6 +700,8 @@ std::int64_t upsampling(const MeasuredRun& run, double Ts) {
 struct Start {
   AxisArray<std::vector<double>> ref{};
   AxisArray<double> x0{};
+  /// Whether an axis's reference was rebuilt through its speed at the samples.
+  bool speed_from_law{false};
 };
 Start replay_start(const MeasuredRun& run, std::size_t n_rows, std::int64_t m, sim::MachineDefinition& machine,
                    ReplayResult& res) {
@@ -676,8 +709,22 @@ Start replay_start(const MeasuredRun& run, std::size_t n_rows, std::int64_t m, s
   for (Axis a : run.axes) {
     const std::string n(axis_name(a));
     const auto& r = run.trace.at(n + "_ref_mm");
-    st.ref[index(a)] =
-        upsample_reference(std::vector<double>(r.begin(), r.begin() + static_cast<std::ptrdiff_t>(n_rows)), m);
+    const std::vector<double> rows(r.begin(), r.begin() + static_cast<std::ptrdiff_t>(n_rows));
+    // The reference's speed at the samples where the log shows it: carried
+    // by the run, else read off a logged velocity command.
+    std::vector<double> speed;
+    if (const auto* v = run.trace.find(reference_speed_column(a)))
+      speed.assign(v->begin(), v->begin() + static_cast<std::ptrdiff_t>(n_rows));
+    else if (m > 1)
+      speed = law_reference_speed(run, a, machine.axes[index(a)]);
+    if (m > 1 && speed.size() >= n_rows) {
+      speed.resize(n_rows);
+      const std::vector<double> slopes = reference_slopes(rows, speed, run.sample_period_s);
+      st.ref[index(a)] = upsample_reference(rows, m, &slopes);
+      st.speed_from_law = true;
+    } else {
+      st.ref[index(a)] = upsample_reference(rows, m);
+    }
     const auto* xm = run.trace.find(n + "_mm");
     st.x0[index(a)] = xm ? (*xm)[0] : r[0];
     if (!xm) continue;
@@ -988,6 +1035,10 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
                                     run.sample_period_s, m, Ts));
   const std::int64_t n_ticks = static_cast<std::int64_t>(n_rows - 1) * m + 1;
   Start st = replay_start(run, n_rows, m, machine, res);
+  if (st.speed_from_law)
+    res.notes.push_back(fmt::format("the reference between samples passes through its speed at each sample as the "
+                                    "logged velocity command shows it under the machine's position loop, (vcmd - Kv "
+                                    "e) / kff, where that goes the way of the samples about it"));
   const RunIn run_in = run_in_before(run, n_rows, st, Ts);
   AxisArray<double> x0 = st.x0;
   if (run_in.ticks > 0)

@@ -112,7 +112,44 @@ struct ReplayResult {
 /// beyond the two samples around it. A straight line between samples would be
 /// off by a dt^2 / 8 in an acceleration (25 um at 10 ms and 2000 mm/s^2),
 /// ten times the tracking error of the FADAL loop.
-std::vector<double> upsample_reference(const std::vector<double>& r_mm, std::int64_t m);
+///
+/// `slopes`, where given, are the slopes to use at the samples (mm per sample
+/// interval) in place of the monotone ones (reference_slopes).
+std::vector<double> upsample_reference(const std::vector<double>& r_mm, std::int64_t m,
+                                       const std::vector<double>* slopes = nullptr);
+
+/// The slopes at the samples (mm per sample interval `dt_s`) of a rebuild
+/// that passes through the reference's speed where the log shows it
+/// (`v_mm_s`, NaN where it does not), and the monotone cubic's elsewhere.
+/// A speed is taken where it goes the way of a neighbouring interval (or is
+/// zero) and is at most three times the larger neighbouring secant; a speed
+/// against both (a law identified wrong, or noise at a turn) keeps the
+/// monotone slope.
+std::vector<double> reference_slopes(const std::vector<double>& r_mm, const std::vector<double>& v_mm_s,
+                                     double dt_s);
+
+/// The logs a reference's speed is read off the law for: slower than this.
+/// Faster, the monotone cubic is within 0.1 % of the tracking error's RMS
+/// (a move's 500 mm/s^2 accelerations sampled every 5 ms).
+inline constexpr double kLawSpeedMinPeriod_s = 5e-3;
+
+/// The column that carries the reference's speed at each sample (mm/s),
+/// where it is known: replay_run rebuilds the reference through it.
+std::string reference_speed_column(Axis a);
+
+/// The reference's speed at each sample as the cascade law of `def` shows
+/// it in the run's logged velocity command, vcmd = Kv e + kff v_ref:
+/// v_ref = (vcmd - Kv (ref - x)) / kff (mm/s). Empty where the run samples
+/// every kLawSpeedMinPeriod_s or faster, logs no velocity command or
+/// position for the axis, or the law is not a cascade with a feedforward of
+/// at least 0.1 (1 / kff scales the encoder's steps) following the
+/// reference as logged (no smoothing or dead time before it). Between
+/// samples 10 to 100 ms apart a move's change of speed takes part of an
+/// interval, which the monotone cubic (zero slope where the samples stop)
+/// spreads over it: at 50 ms that leaves 4 % of the tracking error's RMS in
+/// the rebuilt reference, at 100 ms 21 %; through the speeds at the samples,
+/// 1.4 % and 6.7 % (moves at 500 mm/s^2, docs/calibration.md).
+std::vector<double> law_reference_speed(const MeasuredRun& run, Axis a, const sim::AxisDefinition& def);
 
 /// The slopes at the samples (per sample interval) of that monotone cubic:
 /// the centred difference, zero where the samples turn or stop, limited to
