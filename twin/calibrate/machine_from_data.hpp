@@ -107,6 +107,10 @@ struct AxisFromData {
   bool velocity_loop_from_data{false};  ///< Kvp, Tn from a logged torque against the speed error
   double lag_s{0.0};             ///< lag of the position behind the command
   controller::CascadeGains gains;
+  /// The velocity law as read from the log, where it is then polished on
+  /// the replay (a log slower than 5 ms): the polish fits it to the drive as
+  /// identified, so it stands in for what that drive lacks.
+  std::optional<controller::CascadeGains> law_before_polish;
   controller::CascadeGains default_velocity_loop;  ///< the gains before the velocity loop was chosen
   /// The velocity loop taken where the log does not show it (identify_velocity_loop's
   /// default), kept where the law read from a log slower than 5 ms must
