@@ -1028,17 +1028,18 @@ ReplayResult replay_run(const MeasuredRun& run, const sim::MachineDefinition& ma
   const double Ts = machine.Ts_s;
   const std::int64_t m = upsampling(run, Ts);
   const std::size_t n_rows = rows == 0 ? run.trace.num_rows() : std::min(rows, run.trace.num_rows());
-  if (m > 1)
-    res.notes.push_back(fmt::format("trace sampled every {:.6g} s = {} controller periods: the reference is "
-                                    "interpolated by a monotone cubic to Ts = {} s and the twin's outputs are taken at "
-                                    "the trace's samples",
-                                    run.sample_period_s, m, Ts));
   const std::int64_t n_ticks = static_cast<std::int64_t>(n_rows - 1) * m + 1;
   Start st = replay_start(run, n_rows, m, machine, res);
-  if (st.speed_from_law)
-    res.notes.push_back(fmt::format("the reference between samples passes through its speed at each sample as the "
-                                    "logged velocity command shows it under the machine's position loop, (vcmd - Kv "
-                                    "e) / kff, where that goes the way of the samples about it"));
+  if (m > 1)
+    res.notes.push_back(fmt::format(
+        "trace sampled every {:.6g} s = {} controller periods: the reference is interpolated by {} to Ts = {} s and "
+        "the twin's outputs are taken at the trace's samples",
+        run.sample_period_s, m,
+        st.speed_from_law ? "a cubic through its speed at each sample as the logged velocity command shows it under "
+                            "the machine's position loop, (vcmd - Kv e) / kff, where that goes the way of the "
+                            "samples about it (else a monotone cubic's slope)"
+                          : "a monotone cubic",
+        Ts));
   const RunIn run_in = run_in_before(run, n_rows, st, Ts);
   AxisArray<double> x0 = st.x0;
   if (run_in.ticks > 0)
