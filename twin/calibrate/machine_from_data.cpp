@@ -3104,7 +3104,7 @@ void loop_from_vcmd(const AxisFit& f, AxisFromData& ax) {
     // 0.043): the monotone cubic between rows 50 ms apart left 4 % of the
     // tracking error's RMS in the reference itself. With the reference
     // rebuilt through the speed this law reads off the logged command
-    // (law_reference_speed) it is 1.2 %, and the exact law is taken at any
+    // (law_reference_speed) it is 1.4 %, and the exact law is taken at any
     // rate slower than 5 ms (at 50 ms the other program tracks at a median
     // 0.026 over the sweep).
     const bool straight_only = !resolves_velocity_loop(dt) && !lowpass_after;
@@ -4787,6 +4787,8 @@ struct LoopChoice {
   double Kvp{0.0}, Tn{0.0};
   /// The fitting rows' tracking NRMS with it (1e300 where none).
   double track{1e300};
+  /// Chosen on the torque and the tracking error together (best_velocity_loops).
+  bool on_tracking_too{false};
 };
 AxisArray<LoopChoice> best_velocity_loops(DataCalibration& out, const std::vector<RunData>& runs,
                                           const sim::MachineDefinition& base, const AxisArray<bool>& on) {
@@ -4840,6 +4842,7 @@ AxisArray<LoopChoice> best_velocity_loops(DataCalibration& out, const std::vecto
     };
     best[index(ax.axis)] = *std::min_element(
         c.begin(), c.end(), [&](const LoopChoice& a, const LoopChoice& b) { return rank(a) < rank(b); });
+    best[index(ax.axis)].on_tracking_too = both;
   }
   return best;
 }
@@ -5070,8 +5073,12 @@ void choose_velocity_loops(DataCalibration& out, const std::vector<RunData>& run
     ax.gains.Tn_s = c.Tn;
     out.identified.axes[index(ax.axis)].loop.cascade = ax.gains;
     ax.loop_source += fmt::format("; chosen on the fitting rows among 16 velocity loops: Kvp {:.4g}, Tn {:.4g} s "
-                                  "(fitting-row NRMS {:.4g})",
-                                  c.Kvp, c.Tn, c.score);
+                                  "(fitting-row NRMS {:.4g}{})",
+                                  c.Kvp, c.Tn, c.score,
+                                  c.on_tracking_too ? fmt::format(", tracking {:.4g}: chosen on both, the reference "
+                                                                  "rebuilt through the speed the logged command shows",
+                                                                  c.track)
+                                                    : std::string());
   }
   out.final_machine = out.identified;
 }
