@@ -340,6 +340,17 @@ double noise_as_fitted(const std::vector<RunData>& runs, const std::string& chan
 /// the saturation detector asks for).
 constexpr std::size_t kClippedRows = 10;
 
+/// The rows a limit must hold for the law's fit to leave them out and for
+/// the saturation detector to look at it: kClippedRows (10 ms at 1 kHz), and
+/// 4 on a log slower than 5 ms that the law is read from (up to
+/// kLawFitMaxPeriod_s), where a limit reached in a move holds for a few rows
+/// only: 6 fitting rows at 20 ms on the cascade sweep's run of twice the
+/// middle limit, whose law was then not read and whose limit was not looked
+/// at (the other program tracked at 0.034; 0.020 now, the limit named).
+std::size_t clipped_rows(double dt_s) {
+  return resolves_velocity_loop(dt_s) || dt_s > kLawFitMaxPeriod_s + 1e-12 ? kClippedRows : 4;
+}
+
 /// A torque limit seen in the log: a row is held by it where its |torque| is
 /// within 10 % of the largest (less three times the white noise on the log:
 /// the largest value of a noisy log sits some noise above the limit, and the
@@ -2065,7 +2076,8 @@ void detect_current_saturation_in_data(DataSearch& s) {
     const double v = std::abs(s.runs[run].run->trace.at(ax.channel.column)[row]);
     if (v >= log_max - band) top.push_back(v);
   }
-  if (!(held_max > 0.0 && model_max > 1.05 * held_max && top.size() >= 10)) {
+  if (!(held_max > 0.0 && model_max > 1.05 * held_max &&
+        top.size() >= clipped_rows(s.runs.front().run->sample_period_s))) {
     if (ax.torque_command_logged || s.fast) current_limit_from_motion(s);
     return;
   }
@@ -4223,7 +4235,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
     // law is fitted on the rest.
     std::optional<TorqueClip> clip;
     std::string clipped;
-    if (vl.ls.ok && vl.held_by_limit >= kClippedRows && !ax.law_holds_integral_at_limit()) {
+    if (vl.ls.ok && vl.held_by_limit >= clipped_rows(f.r0.sample_period_s) && !ax.law_holds_integral_at_limit()) {
       const std::size_t held = vl.held_by_limit;
       // The rows held are found with the law fitted so far; a fit without
       // them asks for the unlimited torque more nearly, so twice more.
@@ -4239,6 +4251,7 @@ void identify_velocity_loop(const AxisFit& f, AxisFromData& ax, bool have_vcmd) 
         c.c_seg = inside.c_seg;
       }
       if (clip) {
+        ax.law_clip_level = c.T_abs_max;
         clipped = fmt::format("; the logged torque flattens near {:.4g} where the law asks for more ({} rows): the "
                               "rows a limit holds are left out of the law's fit",
                               c.T_abs_max, held);
@@ -4870,10 +4883,19 @@ AxisArray<std::string> polish_velocity_loops(DataCalibration& out, const std::ve
   // Replayed with the limit a law that holds its integral shows (its level
   // from the log), so that the gains do not stand in for it.
   sim::MachineDefinition base = machine;
-  for (const AxisFromData& ax : out.axis)
-    if (on[index(ax.axis)] && ax.law_holds_integral_at_limit() &&
-        !base.axes[index(ax.axis)].drive.effects.current_saturation.enabled)
+  for (const AxisFromData& ax : out.axis) {
+    if (!on[index(ax.axis)] || base.axes[index(ax.axis)].drive.effects.current_saturation.enabled) continue;
+    if (ax.law_holds_integral_at_limit()) {
       base.axes[index(ax.axis)].loop.cascade.T_max = ax.law_limit_level;
+    } else if (ax.law_clip_level > 0.0) {
+      // A limit behind the loop (the law's fit left its rows out): the
+      // motor's current clamped there.
+      Trial limit;
+      limit.kind = EffectKind::kCurrentSaturation;
+      limit.sets = {{{EffectParam::current_saturation_i_max_A, ax.law_clip_level}}};
+      base = with_trial(base, ax.axis, limit, 0);
+    }
+  }
   const ChannelErrors start = pooled_on_fit_runs(out, runs, base, false);
   constexpr double kFirstStep = 0.25, kLastStep = 0.01, kPolishGain = 0.02;
   constexpr int kMaxReplays = 64;
@@ -5061,6 +5083,7 @@ void choose_velocity_loops(DataCalibration& out, const std::vector<RunData>& run
     ax.law_gap_mm = 0.0;
     ax.law_limit_rows.clear();
     ax.law_limit_level = 0.0;
+    ax.law_clip_level = 0.0;
     ax.loop_source += fmt::format("; not kept: it replays the fitting rows' {} to {}, the best of 16 velocity "
                                   "loops chosen without it to {:.4g}",
                                   ax.channel.column, law_text, c.score);

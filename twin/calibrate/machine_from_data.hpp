@@ -182,6 +182,10 @@ struct AxisFromData {
   /// the integral alike) as well as the current.
   std::vector<std::vector<char>> law_limit_rows;
   double law_limit_level{0.0};  ///< the median |torque| the log holds at the limit
+  /// Where the law's fit left out the rows a limit behind the loop holds:
+  /// the |torque| the log flattens at (0: none). The law's polish replays
+  /// with the motor's current clamped there.
+  double law_clip_level{0.0};
   bool law_holds_integral_at_limit() const { return !law_limit_rows.empty(); }
   /// Where the law shows no lag of its own: the lag and dead time the drive
   /// fits the motion best at behind the logged torque (the drive's residual
