@@ -4782,9 +4782,6 @@ ChannelErrors pooled_on_fit_runs(DataCalibration& out, const std::vector<RunData
   return errors_from(pools);
 }
 
-/// The best of 16 velocity loops per axis where `on`: bandwidths 0.25 to 2
-/// times the default's, integral times 0 (none) to 16 over the bandwidth,
-/// each replayed on `base` and scored on the fitting rows.
 /// The NRMS of channel `k` in `e`, 1e300 where there is no figure (a replay
 /// that failed, or a channel it does not give).
 double nrms_or_none(const ChannelErrors& e, const std::string& k) {
@@ -4795,7 +4792,9 @@ double nrms_or_none(const std::optional<ChannelErrors>& e, const std::string& k)
   return e ? nrms_or_none(*e, k) : 1e300;
 }
 
+/// One of the 16 velocity loops with its fitting rows' errors.
 struct LoopChoice {
+  /// The fitting rows' torque NRMS with it (1e300 where none).
   double score{1e300};
   double Kvp{0.0}, Tn{0.0};
   /// The fitting rows' tracking NRMS with it (1e300 where none).
@@ -4803,6 +4802,12 @@ struct LoopChoice {
   /// Chosen on the torque and the tracking error together (best_velocity_loops).
   bool on_tracking_too{false};
 };
+
+/// The best of 16 velocity loops per axis where `on`: bandwidths 0.25 to 2
+/// times the default's, integral times 0 (none) to 16 over the bandwidth,
+/// each replayed on `base` and scored on the fitting rows: on the torque,
+/// or on the torque and the tracking error together where the replay
+/// rebuilds the reference through the speed the logged command shows.
 AxisArray<LoopChoice> best_velocity_loops(DataCalibration& out, const std::vector<RunData>& runs,
                                           const sim::MachineDefinition& base, const AxisArray<bool>& on) {
   AxisArray<LoopChoice> best{};
@@ -4816,9 +4821,8 @@ AxisArray<LoopChoice> best_velocity_loops(DataCalibration& out, const std::vecto
   // times the truth's was taken, which tracked the other program at 0.14.
   AxisArray<bool> weigh_tracking{};
   for (const AxisFromData& ax : out.axis)
-    weigh_tracking[index(ax.axis)] =
-        on[index(ax.axis)] && !runs.empty() &&
-        !law_reference_speed(*runs.front().smooth, ax.axis, base.axes[index(ax.axis)]).empty();
+    weigh_tracking[index(ax.axis)] = on[index(ax.axis)] && !runs.empty() &&
+                                     shows_reference_speed(*runs.front().smooth, ax.axis, base.axes[index(ax.axis)]);
   AxisArray<std::vector<LoopChoice>> all{};
   for (double fw : {0.25, 0.5, 1.0, 2.0}) {
     for (double ft : {0.0, 2.0, 4.0, 16.0}) {
@@ -4860,7 +4864,6 @@ AxisArray<LoopChoice> best_velocity_loops(DataCalibration& out, const std::vecto
   return best;
 }
 
-
 /// The law's gains polished on the replay, where they were read from a log
 /// slower than 5 ms. There the law is fitted on rows 10 or 20 loop periods
 /// apart, and without the motor's speed on a speed differentiated from the
@@ -4880,8 +4883,9 @@ AxisArray<LoopChoice> best_velocity_loops(DataCalibration& out, const std::vecto
 /// choose_torque_command. Returns what it says per axis.
 AxisArray<std::string> polish_velocity_loops(DataCalibration& out, const std::vector<RunData>& runs,
                                              const AxisArray<bool>& on, sim::MachineDefinition& machine) {
-  // Replayed with the limit a law that holds its integral shows (its level
-  // from the log), so that the gains do not stand in for it.
+  // Replayed with the limit the law shows (its level from the log), so that
+  // the gains do not stand in for it: on the loop's command where the law
+  // holds its integral there, else on the motor's current.
   sim::MachineDefinition base = machine;
   for (const AxisFromData& ax : out.axis) {
     if (!on[index(ax.axis)] || base.axes[index(ax.axis)].drive.effects.current_saturation.enabled) continue;
@@ -5057,9 +5061,10 @@ void choose_velocity_loops(DataCalibration& out, const std::vector<RunData>& run
     if (!polished[index(ax.axis)].empty()) ax.loop_source += "; " + polished[index(ax.axis)];
     const double law = nrms_or_none(with_law, ax.channel.column);
     const std::string law_text = law < 1e300 ? fmt::format("{:.4g}", law) : std::string("no figure (its replay fails)");
-    // The 16 are chosen on the torque alone; where the law's replay tracks
-    // the fitting rows better, the torque's lower error is not taken as the
-    // loop's (a P loop without the integral tracked a Stribeck rise at 0.12).
+    // The 16 stand against the law on the torque; where the law's replay
+    // tracks the fitting rows better, the torque's lower error is not taken
+    // as the loop's (a P loop without the integral tracked a Stribeck rise
+    // at 0.12).
     const double law_track = nrms_or_none(with_law, col(ax.axis, "_err_mm"));
     const bool tracks = law < 1e300 && law_track < 1e300 && c.track > law_track * (1.0 + kRiseAllowed);
     if (!(c.score < law) || tracks) {

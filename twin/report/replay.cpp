@@ -636,18 +636,24 @@ std::vector<double> reference_slopes(const std::vector<double>& r, const std::ve
 
 std::string reference_speed_column(Axis a) { return std::string(axis_name(a)) + "_ref_v_mm_s"; }
 
-std::vector<double> law_reference_speed(const MeasuredRun& run, Axis a, const sim::AxisDefinition& def) {
+bool shows_reference_speed(const MeasuredRun& run, Axis a, const sim::AxisDefinition& def) {
   const std::string n(axis_name(a));
-  const auto* vcmd = run.trace.find(n + "_vcmd_mm_s");
-  const auto* x = run.trace.find(n + "_mm");
-  const auto* ref = run.trace.find(n + "_ref_mm");
   const controller::CascadeGains& g = def.loop.cascade;
-  if (!(run.sample_period_s > kLawSpeedMinPeriod_s + 1e-12) || vcmd == nullptr || x == nullptr || ref == nullptr ||
-      def.loop.law != controller::LoopLaw::kCascade || !(g.kff >= 0.1) || !(g.Kv_per_s > 0.0) ||
-      g.command_average_s > 0.0 || g.command_lag_s > 0.0 || g.command_delay_s > 0.0)
-    return {};
-  std::vector<double> v(ref->size());
-  for (std::size_t k = 0; k < v.size(); ++k) v[k] = ((*vcmd)[k] - g.Kv_per_s * ((*ref)[k] - (*x)[k])) / g.kff;
+  return run.sample_period_s > kLawSpeedMinPeriod_s + 1e-12 && run.trace.find(n + "_vcmd_mm_s") != nullptr &&
+         run.trace.find(n + "_mm") != nullptr && run.trace.find(n + "_ref_mm") != nullptr &&
+         def.loop.law == controller::LoopLaw::kCascade && g.kff >= 0.1 && g.Kv_per_s > 0.0 &&
+         g.command_average_s == 0.0 && g.command_lag_s == 0.0 && g.command_delay_s == 0.0;
+}
+
+std::vector<double> law_reference_speed(const MeasuredRun& run, Axis a, const sim::AxisDefinition& def) {
+  if (!shows_reference_speed(run, a, def)) return {};
+  const std::string n(axis_name(a));
+  const auto& vcmd = run.trace.at(n + "_vcmd_mm_s");
+  const auto& x = run.trace.at(n + "_mm");
+  const auto& ref = run.trace.at(n + "_ref_mm");
+  const controller::CascadeGains& g = def.loop.cascade;
+  std::vector<double> v(ref.size());
+  for (std::size_t k = 0; k < v.size(); ++k) v[k] = (vcmd[k] - g.Kv_per_s * (ref[k] - x[k])) / g.kff;
   return v;
 }
 

@@ -137,13 +137,18 @@ inline constexpr double kLawSpeedMinPeriod_s = 5e-3;
 /// where it is known: replay_run rebuilds the reference through it.
 std::string reference_speed_column(Axis a);
 
+/// Whether the run shows the reference's speed of axis `a` under the law of
+/// `def` (law_reference_speed): it samples slower than
+/// kLawSpeedMinPeriod_s, logs the axis's velocity command and position, and
+/// the law is a cascade with a feedforward of at least 0.1 (1 / kff scales
+/// the encoder's steps) following the reference as logged (no smoothing or
+/// dead time before it).
+bool shows_reference_speed(const MeasuredRun& run, Axis a, const sim::AxisDefinition& def);
+
 /// The reference's speed at each sample as the cascade law of `def` shows
 /// it in the run's logged velocity command, vcmd = Kv e + kff v_ref:
-/// v_ref = (vcmd - Kv (ref - x)) / kff (mm/s). Empty where the run samples
-/// every kLawSpeedMinPeriod_s or faster, logs no velocity command or
-/// position for the axis, or the law is not a cascade with a feedforward of
-/// at least 0.1 (1 / kff scales the encoder's steps) following the
-/// reference as logged (no smoothing or dead time before it). Between
+/// v_ref = (vcmd - Kv (ref - x)) / kff (mm/s); empty where the run does not
+/// show it (shows_reference_speed). Between
 /// samples 10 to 100 ms apart a move's change of speed takes part of an
 /// interval, which the monotone cubic (zero slope where the samples stop)
 /// spreads over it: at 50 ms that leaves 4 % of the tracking error's RMS in
