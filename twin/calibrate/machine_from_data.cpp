@@ -1098,6 +1098,96 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
   return segs;
 }
 
+namespace {
+
+/// A value a rounded position holds over rows [s, e].
+struct HeldValue {
+  std::size_t s, e;
+  double v;
+};
+
+/// A segment of a stitched log is cut from a longer program: it can begin
+/// or end in the middle of a move. A slow move (under half a quantum a
+/// sample: the short side of a diagonal line) holds its rounded value at the
+/// segment's ends not because it stands but because it has not reached the
+/// next rounding boundary. Held flat there, the rebuild makes it a step of
+/// one quantum within a sample and rest about it, a move the axis's own
+/// current says it did not make (on umich04, 7-row stretches at the x
+/// axis's Coulomb level, 3 to 4.6 A, that the flat rebuild put at rest).
+/// The ends are carried on at a constant speed where the values allow it:
+/// the speed of the one-quantum ramp next to the end, or, where the segment
+/// crosses a single boundary, half the largest speed that keeps both held
+/// values within their quantum; a move seen crossing is carried on after
+/// it, and carried back before it only where the value held before is the
+/// shorter (held longer, the axis may have set off from rest there: on
+/// umich10, two such stretches held the other way's current). An end is
+/// left flat where that speed would carry it past the next boundary within
+/// the held rows (the axis stopped there), or where the values turn back
+/// next to it.
+template <typename OneQuantum>
+void extend_held_ends(const std::vector<double>& t, const std::vector<HeldValue>& runs, OneQuantum one_quantum,
+                      std::vector<double>& kt, std::vector<double>& kv) {
+  const std::size_t R = runs.size();
+  if (R < 2 || kt.empty()) return;
+  auto crossing_t = [&](std::size_t j) { return 0.5 * (t[runs[j].e] + t[runs[j + 1].s]); };
+  auto crossing_v = [&](std::size_t j) { return 0.5 * (runs[j].v + runs[j + 1].v); };
+  auto ramp = [&](std::size_t j) {  // runs j, j+1, j+2 step one quantum each, the same way
+    return one_quantum(runs[j].v, runs[j + 1].v) && one_quantum(runs[j + 1].v, runs[j + 2].v) &&
+           (runs[j + 1].v - runs[j].v) * (runs[j + 2].v - runs[j + 1].v) > 0.0;
+  };
+  const double t0 = t[runs.front().s], t1 = t[runs.back().e];
+  std::optional<double> s_first, s_last;
+  if (R == 2) {
+    if (one_quantum(runs[0].v, runs[1].v)) {
+      const double before = crossing_t(0) - t0, after = t1 - crossing_t(0);
+      const double L = std::max(before, after);
+      if (L > 0.0) s_last = 0.5 * std::abs(runs[1].v - runs[0].v) / L;
+      if (before <= after) s_first = s_last;
+    }
+  } else {
+    if (ramp(0)) s_first = std::abs(crossing_v(1) - crossing_v(0)) / (crossing_t(1) - crossing_t(0));
+    if (ramp(R - 3))
+      s_last = std::abs(crossing_v(R - 2) - crossing_v(R - 3)) / (crossing_t(R - 2) - crossing_t(R - 3));
+  }
+  // Only a slow move: under half a quantum a sample. A faster one holds a
+  // value for a row or so at an end, and the rebuild's stop there is half a
+  // sample from its crossing at most.
+  const double dt = (t1 - t0) / static_cast<double>(std::max<std::size_t>(1, runs.back().e - runs.front().s));
+  auto slow = [&](const std::optional<double>& s, double q) { return s && *s * dt < 0.5 * q; };
+  if (slow(s_first, std::abs(runs[1].v - runs[0].v))) {
+    const double tc = crossing_t(0), vc = crossing_v(0), q = std::abs(runs[1].v - runs[0].v);
+    const double L = tc - t0;
+    if (*s_first * L <= q) {
+      const double dir = runs[1].v > runs[0].v ? 1.0 : -1.0;
+      std::size_t k = 0;
+      while (k < kt.size() && kt[k] < tc) ++k;
+      kt.erase(kt.begin(), kt.begin() + static_cast<std::ptrdiff_t>(k));
+      kv.erase(kv.begin(), kv.begin() + static_cast<std::ptrdiff_t>(k));
+      if (L > 0.0) {
+        kt.insert(kt.begin(), t0);
+        kv.insert(kv.begin(), vc - dir * *s_first * L);
+      }
+    }
+  }
+  if (slow(s_last, std::abs(runs[R - 1].v - runs[R - 2].v))) {
+    const double tc = crossing_t(R - 2), vc = crossing_v(R - 2), q = std::abs(runs[R - 1].v - runs[R - 2].v);
+    const double L = t1 - tc;
+    if (*s_last * L <= q) {
+      const double dir = runs[R - 1].v > runs[R - 2].v ? 1.0 : -1.0;
+      while (!kt.empty() && kt.back() > tc) {
+        kt.pop_back();
+        kv.pop_back();
+      }
+      if (L > 0.0) {
+        kt.push_back(t1);
+        kv.push_back(vc + dir * *s_last * L);
+      }
+    }
+  }
+}
+
+}  // namespace
+
 std::vector<double> dequantize_reference(const std::vector<double>& t, const std::vector<double>& r0,
                                          const PositionRounding& rounding) {
   const std::size_t n0 = r0.size();
@@ -1109,11 +1199,7 @@ std::vector<double> dequantize_reference(const std::vector<double>& t, const std
   for (std::size_t k = 1; k + 1 < n0; ++k)
     if (r0[k - 1] == r0[k + 1] && std::abs(r0[k] - r0[k - 1]) > 1.5 * rounding.quantum_mm) r[k] = r0[k - 1];
   const std::size_t n = n0;
-  struct Run {
-    std::size_t s, e;
-    double v;
-  };
-  std::vector<Run> runs;
+  std::vector<HeldValue> runs;
   for (std::size_t k = 0; k < n; ++k) {
     if (runs.empty() || r[k] != runs.back().v) runs.push_back({k, k, r[k]});
     runs.back().e = k;
@@ -1132,7 +1218,7 @@ std::vector<double> dequantize_reference(const std::vector<double>& t, const std
     }
   };
   for (std::size_t j = 0; j < runs.size(); ++j) {
-    const Run& u = runs[j];
+    const HeldValue& u = runs[j];
     const bool has_prev = j > 0, has_next = j + 1 < runs.size();
     const bool through = has_prev && has_next && (u.v - runs[j - 1].v) * (runs[j + 1].v - u.v) > 0.0;
     const bool small_in = has_prev && one_quantum(runs[j - 1].v, u.v);
@@ -1148,6 +1234,7 @@ std::vector<double> dequantize_reference(const std::vector<double>& t, const std
     }
     if (has_next && small_out) knot(0.5 * (t[u.e] + t[runs[j + 1].s]), 0.5 * (u.v + runs[j + 1].v));
   }
+  extend_held_ends(t, runs, one_quantum, kt, kv);
   std::vector<double> out(n);
   std::size_t j = 0;
   for (std::size_t k = 0; k < n; ++k) {

@@ -73,7 +73,8 @@ PositionRounding detect_rounding(const MeasuredRun& run);
 /// the first of the next. This rebuilds it: knots at those crossings (the
 /// mid-time, the mid-value) where consecutive values differ by about one
 /// quantum, the samples themselves where they differ by more, flat where
-/// the values turn back or the segment begins or ends, linear in between. A
+/// the values turn back or the segment begins or ends (but for a slow move
+/// that a stitch cut: carried on to the end at its speed), linear in between. A
 /// single row off by more than a quantum between two equal neighbours is
 /// taken as a logging glitch and given their value.
 /// Applied to each segment on its own.

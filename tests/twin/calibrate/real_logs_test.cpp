@@ -159,6 +159,60 @@ TEST(RealLogs, RoundedRampIsRebuiltWithinHalfASampleOfMotion) {
   EXPECT_LT(worst, 0.5 * 0.037 + 1e-9);
 }
 
+PositionRounding whole_millimetres() {
+  PositionRounding q;
+  q.kind = PositionRounding::Kind::kDecimals;
+  q.digits = 0;
+  q.quantum_mm = 1.0;
+  return q;
+}
+
+// A segment of 1 s cut by a stitch from a slow diagonal move: the axis runs
+// at -0.8 mm/s from 141.7 mm, logged every 0.1 s to whole millimetres (142
+// for three rows, 141 for seven). The line is the truth. Rebuilt flat at
+// the segment's ends, the axis steps 1 mm within one sample and stands
+// still for the other nine; carried on from the crossing at a speed the
+// held values allow, it moves the truth's way at every row, and stays
+// within the rounding's half quantum of the truth.
+TEST(RealLogs, ASlowMoveCutByAStitchIsRebuiltMovingToItsEnds) {
+  std::vector<double> t, r, truth;
+  for (int k = 0; k < 10; ++k) {
+    t.push_back(0.1 * k);
+    truth.push_back(141.7 - 0.8 * t.back());
+    r.push_back(std::round(truth.back()));
+  }
+  ASSERT_EQ(r[2], 142.0);
+  ASSERT_EQ(r[3], 141.0);
+  const std::vector<double> d = dequantize_reference(t, r, whole_millimetres());
+  for (std::size_t k = 0; k + 1 < d.size(); ++k) EXPECT_LT(d[k + 1], d[k]) << "row " << k;
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    EXPECT_LE(std::abs(d[k] - r[k]), 0.5 + 1e-9) << "row " << k;
+    EXPECT_LT(std::abs(d[k] - truth[k]), 0.5) << "row " << k;
+  }
+}
+
+// What the held values do not show is not made up: a value held for most of
+// a segment before its only crossing (the axis may have set off from rest
+// there), and a ramp of a quantum every 0.3 s that then holds its value for
+// 1 s (longer than the ramp's speed allows within one quantum: it stopped)
+// are rebuilt flat there.
+TEST(RealLogs, AHeldValueBeforeAMoveOrAfterAStopStaysFlat) {
+  std::vector<double> t, late, stop;
+  for (int k = 0; k < 10; ++k) {
+    t.push_back(0.1 * k);
+    late.push_back(k < 9 ? 141.0 : 142.0);
+  }
+  const std::vector<double> d = dequantize_reference(t, late, whole_millimetres());
+  for (std::size_t k = 0; k < 8; ++k) EXPECT_DOUBLE_EQ(d[k], 141.0) << "row " << k;
+  std::vector<double> ts;
+  for (int k = 0; k < 22; ++k) {
+    ts.push_back(0.1 * k);
+    stop.push_back(50.0 + std::min(k / 3, 4));
+  }
+  const std::vector<double> e = dequantize_reference(ts, stop, whole_millimetres());
+  for (std::size_t k = 13; k < e.size(); ++k) EXPECT_DOUBLE_EQ(e[k], 54.0) << "row " << k;
+}
+
 TEST(RealLogs, RoundingIsFoundAsTheLogShowsIt) {
   std::string csv = "t_s,x_ref_mm,x_mm,x_i_A\n";
   for (int k = 0; k < 50; ++k) {
