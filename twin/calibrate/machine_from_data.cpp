@@ -1046,8 +1046,45 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
     limit_max = std::max(limit_max, ac.limit);
     axes.push_back(ac);
   }
+  // The same columns taken together, per kind (references, positions): a
+  // row where several axes step at once and the path's step is over 4 times
+  // the steps either side is a jump even where no single axis's step exceeds
+  // what it holds (umich13, t = 136.3 s: x 158 to 162 mm, y 75.8 to 79.9 mm
+  // and z 27.7 to 29.7 mm in one row, 0.2 and 0.3 mm steps either side, y
+  // turning back after it). Over 3 quanta: two axes stepping one quantum in
+  // the same row, as a rounded slow move does, make a path step of 1.4.
+  std::vector<std::vector<const std::vector<double>*>> path_cols;
+  for (const char* s : {"_ref_mm", "_mm"}) {
+    std::vector<const std::vector<double>*> cs;
+    for (Axis a : run.axes)
+      if (const auto* c = run.trace.find(col(a, s))) cs.push_back(c);
+    if (cs.size() >= 2) path_cols.push_back(std::move(cs));
+  }
+  auto path_step = [&](const std::vector<const std::vector<double>*>& cs, std::size_t k) {
+    if (k < 1 || k >= n) return 0.0;
+    double s2 = 0.0;
+    for (const auto* c : cs) s2 += ((*c)[k] - (*c)[k - 1]) * ((*c)[k] - (*c)[k - 1]);
+    return std::sqrt(s2);
+  };
+  // Only on a staircase log (rounded coarser than 5 um, sampled slower than
+  // 2 ms, as prepare_run rebuilds): there a slow axis's steps round to zero
+  // about a jump, and the other axes' give no scale. On a fine log the
+  // noise of a few counts on two axes at once would read as jumps.
+  const bool staircase = quantum_mm > 0.005 && run.sample_period_s > 2e-3;
+  auto path_jump = [&](std::size_t k) {
+    if (v_max_mm_per_s || !staircase) return false;
+    for (const auto& cs : path_cols) {
+      int moving = 0;
+      for (const auto* c : cs)
+        if ((*c)[k] != (*c)[k - 1]) ++moving;
+      const double d = path_step(cs, k);
+      if (moving >= 2 && d > 3.0 * quantum_mm && d > 4.0 * std::max(path_step(cs, k - 1), path_step(cs, k + 1)))
+        return true;
+    }
+    return false;
+  };
   std::vector<Segment> segs;
-  std::size_t start = 0, jumps = 0;
+  std::size_t start = 0, jumps = 0, path_jumps = 0;
   double largest = 0.0;
   auto next_break = run.time_breaks.begin();
   for (std::size_t k = 1; k < n; ++k) {
@@ -1075,6 +1112,11 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
           step = std::max(step, d);
         }
       }
+    if (!jump && path_jump(k)) {
+      jump = true;
+      ++path_jumps;
+      for (const auto& cs : path_cols) step = std::max(step, path_step(cs, k));
+    }
     if (jump) {
       segs.push_back({start, k});
       start = k;
@@ -1090,9 +1132,13 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
       if (s.end - s.begin < 5) short_rows += s.end - s.begin;
     *note = fmt::format(
         "stitched from {} segments: {} jumps of up to {:.4g} mm between two rows, beyond the {:.4g} mm a sample "
-        "allows on the axis that jumps, at most ({}; or a step of over 1.5 times that held step standing alone (4 times its neighbours) or turning back at twice the speed it came); each segment is replayed from its own start{}",
+        "allows on the axis that jumps, at most ({}; or a step of over 1.5 times that held step standing alone (4 times its neighbours) or turning back at twice the speed it came){}; each segment is replayed from its own start{}",
         segs.size(), jumps, largest, limit,
         v_max_mm_per_s ? "the machine's rapid" : "3 times the largest step the axis holds over 3 samples",
+        path_jumps ? fmt::format("; {} of them where several axes step at once, the path's step over 3 quanta and 4 times "
+                                 "the steps either side",
+                                 path_jumps)
+                   : "",
         short_rows ? fmt::format(", {} rows in segments under 5 rows are not compared", short_rows) : "");
   }
   return segs;

@@ -49,8 +49,11 @@ struct Segment {
 /// move in one sample (3 times the largest step held over three consecutive
 /// samples on any axis, and at least 5 times the position quantum). With
 /// `v_max_mm_per_s` (a known machine's rapid) the limit is that speed's step
-/// with 20 % margin instead. A gap in the log's clock (run.time_breaks)
-/// starts a segment too. `note` says what was found.
+/// with 20 % margin instead. On a log rounded coarser than 5 um and sampled
+/// slower than 2 ms, a row where two or more axes step at once and the
+/// path's step is over 3 quanta and 4 times the path's steps either side
+/// starts a segment too. A gap in the log's clock (run.time_breaks) starts
+/// a segment too. `note` says what was found.
 std::vector<Segment> find_segments(const MeasuredRun& run, double position_quantum_mm,
                                    std::optional<double> v_max_mm_per_s, std::string* note);
 

@@ -251,6 +251,38 @@ TEST(RealLogs, StitchedSegmentsAreFoundWhereThePositionJumps) {
   EXPECT_THAT(note, HasSubstr("stitched from 3 segments"));
 }
 
+// A stitch on a path: in one row x steps 4 mm and y 4.1 mm (y then turns
+// back), each within what the axis holds in its rapids (6 mm a row), so
+// neither axis's own rule finds it; the path's step (5.7 mm) is over 4 times
+// the steps either side (0.2 and 0.3 mm) with two axes stepping at once,
+// which a move of the machine cannot do within one sample and start and end
+// at the slow speeds around it. The rapid itself (8.5 mm a row on the path
+// for 10 rows, ramping in and out at full step) is not a stitch: its steps
+// are matched by their neighbours. Oracle: the row the log was built with.
+TEST(RealLogs, AJumpOfSeveralAxesAtOnceWithinWhatEachHoldsIsAStitch) {
+  std::string csv = "t_s,x_ref_mm,x_mm,y_ref_mm,y_mm\n";
+  double x = 40.0, y = 20.0;
+  for (int k = 0; k < 60; ++k) {
+    if (k >= 1 && k <= 10) {
+      x += 6.0;
+      y += 6.0;
+    } else if (k >= 20 && k < 40) {
+      y += 0.2;
+    } else if (k == 40) {
+      x += 4.0;
+      y += 4.1;
+    } else if (k > 40) {
+      y -= 0.3;
+    }
+    csv += fmt::format("{:.1f},{:.1f},{:.1f},{:.1f},{:.1f}\n", 0.1 * k, x, x, y, y);
+  }
+  std::string note;
+  const auto segs = find_segments(run_from_csv("path_stitch", csv), 0.1, std::nullopt, &note);
+  ASSERT_EQ(segs.size(), 2u) << note;
+  EXPECT_EQ(segs[1].begin, 40u);
+  EXPECT_THAT(note, HasSubstr("1 of them where several axes step at once"));
+}
+
 // A log whose position leaves its command by more than a metre (an unstable
 // loop's, or columns that do not belong together) is refused in one line
 // that names the run, the axis and the row, before anything is fitted.
