@@ -235,6 +235,14 @@ double percentile_abs(const std::vector<double>& v, double q) {
   return a[k];
 }
 
+/// A log whose rounding is coarser than the motion between two samples: its
+/// positions rounded coarser than 5 um and sampled slower than 2 ms. A slow
+/// move reads there as a staircase (prepare_run rebuilds it), and a slow
+/// axis's steps round to zero about a jump (find_segments).
+bool staircase_log(const MeasuredRun& run, double quantum_mm) {
+  return quantum_mm > 0.005 && run.sample_period_s > 2e-3 + 1e-12;
+}
+
 /// Everything derived from one run that the fits and the errors use.
 struct RunData {
   const MeasuredRun* run{nullptr};
@@ -278,7 +286,7 @@ RunData prepare_run(const MeasuredRun& run, const std::vector<Axis>& axes, const
       auto& dst = d.smooth->trace.columns[static_cast<std::size_t>(it - d.smooth->trace.names.begin())];
       dst = lowpass_in_segments(dst, d.segments, run.sample_period_s);
     }
-  } else if (rounding.kind != PositionRounding::Kind::kNone && rounding.quantum_mm > 0.005) {
+  } else if (rounding.kind != PositionRounding::Kind::kNone && staircase_log(run, rounding.quantum_mm)) {
     const auto& t = run.trace.at("t_s");
     for (Axis a : axes) {
       const std::string name = col(a, "_ref_mm");
@@ -1066,11 +1074,10 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
     for (const auto* c : cs) s2 += ((*c)[k] - (*c)[k - 1]) * ((*c)[k] - (*c)[k - 1]);
     return std::sqrt(s2);
   };
-  // Only on a staircase log (rounded coarser than 5 um, sampled slower than
-  // 2 ms, as prepare_run rebuilds): there a slow axis's steps round to zero
-  // about a jump, and the other axes' give no scale. On a fine log the
-  // noise of a few counts on two axes at once would read as jumps.
-  const bool staircase = quantum_mm > 0.005 && run.sample_period_s > 2e-3;
+  // Only on a staircase log: there a slow axis's steps round to zero about
+  // a jump, and the other axes' give no scale. On a fine log the noise of a
+  // few counts on two axes at once would read as jumps.
+  const bool staircase = staircase_log(run, quantum_mm);
   auto path_jump = [&](std::size_t k) {
     if (v_max_mm_per_s || !staircase) return false;
     for (const auto& cs : path_cols) {
