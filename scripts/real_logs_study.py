@@ -50,6 +50,10 @@ def table(rows, keys):
                 continue
             d = entry.get("twin_minus_regression", {}).get(k)
             iv = f"{d['interval_90'][0]:+.3f} to {d['interval_90'][1]:+.3f}" if d else "not computed"
+            # Where the twin loses the run, the second of rows it loses most in.
+            loss = d.get("largest_loss") if d and tw >= rg else None
+            if loss:
+                iv += f"; loses most {loss['from_s']:.1f} to {loss['to_s']:.1f} s"
             print(f"| {name} | {k} | {n} | {tw:.4g} | {rg:.4g} | {zr:.4g} | {'yes' if tw < rg else 'no'} | {iv} |")
             p = pooled.setdefault(k, [0.0, 0.0, 0])
             p[0] += tw * tw * n

@@ -6207,16 +6207,22 @@ void versus_regression(const DataCalibration& out, const AxisArray<Regression>& 
     const std::vector<double>* model = model_channel(twin, ax.axis, ch, true);
     if (model == nullptr) continue;
     const auto& meas = rd.run->trace.at(ch.column);
-    std::vector<double> m, a, b;
+    const auto& t = rd.run->trace.at("t_s");
+    std::vector<double> m, a, b, tm;
     for (std::size_t k = from; k < std::min(to, compared.size()); ++k) {
       if (!compared[k]) continue;
       m.push_back(meas[k]);
       a.push_back((*model)[k]);
       b.push_back(regression_torque(reg[i], rd, i, k));
+      tm.push_back(t[k]);
     }
     if (m.size() < 2 * block_rows) continue;
     try {
-      re.twin_minus_regression[ch.column] = paired_nrms_difference(m, a, b, block_rows);
+      const PairedDifference p = paired_nrms_difference(m, a, b, block_rows);
+      re.twin_minus_regression[ch.column] = p;
+      if (p.largest_loss_rows > 0)
+        re.largest_loss_s[ch.column] = {tm[p.largest_loss_first_row],
+                                        tm[p.largest_loss_first_row + p.largest_loss_rows - 1]};
     } catch (const ConfigError&) {
       // a measured signal of zeros: the NRMS table says so already
     }
@@ -7379,8 +7385,14 @@ nlohmann::json run_errors_json(const RunErrors& e) {
   j["baseline"] = {{"zero", e.zero.to_json()}, {"rigid_body_regression", e.regression.to_json()}};
   if (!e.twin_minus_regression.empty()) {
     nlohmann::json d = nlohmann::json::object();
-    for (const auto& [k, p] : e.twin_minus_regression)
+    for (const auto& [k, p] : e.twin_minus_regression) {
       d[k] = {{"nrms_difference", p.difference}, {"interval_90", {p.lo, p.hi}}, {"blocks", p.blocks}};
+      if (const auto it = e.largest_loss_s.find(k); it != e.largest_loss_s.end())
+        d[k]["largest_loss"] = {{"from_s", it->second[0]},
+                                {"to_s", it->second[1]},
+                                {"rows", p.largest_loss_rows},
+                                {"nrms_difference_without", p.difference_without_largest_loss}};
+    }
     j["twin_minus_regression"] = d;
   }
   nlohmann::json why = nlohmann::json::object();
@@ -7525,8 +7537,17 @@ std::string data_calibration_report_markdown(const DataCalibration& r, const std
         const std::string verdict = p.hi < 0.0   ? "the twin is better beyond the scatter of these rows"
                                     : p.lo > 0.0 ? "the regression is better beyond the scatter of these rows"
                                                  : "within the scatter of these rows (they cannot tell the two apart)";
-        o << fmt::format("- {} {}: the twin's NRMS is {} the regression's (from {} to {}, {} blocks): {}\n", e.run, k,
+        o << fmt::format("- {} {}: the twin's NRMS is {} the regression's (from {} to {}, {} blocks): {}", e.run, k,
                          side(p.difference), side(p.lo), side(p.hi), p.blocks, verdict);
+        // Where the twin loses, the rows that lose most: on a short log one
+        // stop can decide the comparison, and a reader looks there first.
+        if (const auto it = e.largest_loss_s.find(k); it != e.largest_loss_s.end() && p.difference > 0.0)
+          o << fmt::format("; it loses most in the log from {:.1f} s to {:.1f} s ({} rows), the place to look "
+                           "first; without those rows its NRMS would be {} the regression's (a pointer, not a "
+                           "verdict: any model's worst rows taken out favour it)",
+                           it->second[0], it->second[1], p.largest_loss_rows,
+                           side(p.difference_without_largest_loss));
+        o << "\n";
       }
   };
   if (!r.effects.empty()) {

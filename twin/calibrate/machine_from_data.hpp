@@ -26,6 +26,7 @@
 ///    T = m a_cmd + Fc sgn(v_cmd) + b v_cmd + c fitted on the same rows.
 #include <cstddef>
 #include <filesystem>
+#include <array>
 #include <map>
 #include <optional>
 #include <string>
@@ -259,6 +260,10 @@ struct RunErrors {
   /// (paired_nrms_difference): whether a win or a loss is beyond the scatter
   /// of the rows. Absent where the rows are fewer than two blocks.
   std::map<std::string, PairedDifference> twin_minus_regression;
+  /// Per torque channel of twin_minus_regression with a block where the twin
+  /// loses: the log's times of that block's first and last rows, in s
+  /// (PairedDifference::largest_loss_first_row), for a reader to look at.
+  std::map<std::string, std::array<double, 2>> largest_loss_s;
   std::size_t rows{0}, rows_compared{0};
 };
 

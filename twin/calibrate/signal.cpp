@@ -268,6 +268,17 @@ PairedDifference paired_nrms_difference(std::span<const double> meas, std::span<
   PairedDifference out;
   out.difference = difference(all);
   out.blocks = sums.size();
+  double largest = 0.0;
+  for (std::size_t i = 0; i < sums.size(); ++i) {
+    const double excess = sums[i][1] - sums[i][2];
+    if (excess <= largest) continue;
+    largest = excess;
+    out.largest_loss_first_row = i * block_rows;
+    out.largest_loss_rows = std::min(n, (i + 1) * block_rows) - i * block_rows;
+    std::array<double, 3> rest = all;
+    for (int c = 0; c < 3; ++c) rest[c] -= sums[i][c];
+    out.difference_without_largest_loss = difference(rest);
+  }
   std::mt19937_64 gen(20261127);
   std::uniform_int_distribution<std::size_t> pick(0, sums.size() - 1);
   std::vector<double> d(std::max<std::size_t>(resamples, 1));

@@ -93,6 +93,13 @@ struct PairedDifference {
   double difference{0.0};      ///< NRMS(a) - NRMS(b) on all rows
   double lo{0.0}, hi{0.0};     ///< its 90 % interval
   std::size_t blocks{0};       ///< blocks resampled
+  /// The block where a's squared error exceeds b's by the most: a's largest
+  /// loss to b, which on a short log can decide the comparison alone (one
+  /// stop whose braking a 10 Hz sample caught). Its first row and its rows
+  /// (0 where a is at least as good as b on every block), and
+  /// NRMS(a) - NRMS(b) on all rows but that block.
+  std::size_t largest_loss_first_row{0}, largest_loss_rows{0};
+  double difference_without_largest_loss{0.0};
 };
 /// `meas`, `a`, `b`: one value per row, in order; `block_rows`: rows per
 /// block (the last block may be shorter). Throws ConfigError where the rows

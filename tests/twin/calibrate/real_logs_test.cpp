@@ -461,6 +461,19 @@ TEST(RealLogs, CoarseRoundedStitchedCurrentLog) {
   EXPECT_GE(p.hi, p.difference);
   EXPECT_GE(p.blocks, 2u);
   EXPECT_TRUE(j["fit_runs"][0]["twin_minus_regression"].contains("x_i_A"));
+  // The block where the twin loses most, where it loses on any: its times
+  // are the log's, inside the held-out part, and the row count the block's;
+  // none in the report where it loses on none.
+  if (p.largest_loss_rows > 0) {
+    const auto& loss = j["fit_runs"][0]["twin_minus_regression"]["x_i_A"]["largest_loss"];
+    const auto& t = run.trace.at("t_s");
+    EXPECT_GE(loss["from_s"].get<double>(), t[r.fit_runs[0].rows * 6 / 10 - 1]);
+    EXPECT_LE(loss["from_s"].get<double>(), loss["to_s"].get<double>());
+    EXPECT_LE(loss["to_s"].get<double>(), t.back());
+    EXPECT_EQ(loss["rows"].get<std::size_t>(), p.largest_loss_rows);
+  } else {
+    EXPECT_FALSE(j["fit_runs"][0]["twin_minus_regression"]["x_i_A"].contains("largest_loss"));
+  }
   EXPECT_THAT(data_calibration_report_markdown(r, "coarse_stitched"), HasSubstr("The twin against the regression, with the scatter"));
 }
 

@@ -323,5 +323,35 @@ TEST(Signal, PairedDifferenceOfTwoModelsAgainstClosedForms) {
   EXPECT_THROW(paired_nrms_difference(zero, half, half, 20), ConfigError);
 }
 
+// The block where one model loses most to the other, against the sums by
+// hand: a is off by 0.1 everywhere but in block 7 (rows 140 to 159), where
+// it is off by 1; b by 0.2 everywhere. Block 7 is the only one where a loses,
+// and without it a's NRMS is sqrt(380 * 0.01 / S) against b's
+// sqrt(380 * 0.04 / S), S the measured signal's sum of squares on the other
+// rows. Exact sums, so the tolerance is rounding. Where a wins on every
+// block, no block is named.
+TEST(Signal, PairedDifferenceNamesTheBlockWhereOneModelLosesMost) {
+  std::vector<double> meas, a, b;
+  double S = 0.0;
+  for (std::size_t k = 0; k < 400; ++k) {
+    meas.push_back(std::sin(2.0 * std::numbers::pi * static_cast<double>(k % 20) / 20.0) + 0.3);
+    const bool loses = k >= 140 && k < 160;
+    a.push_back(meas.back() + (loses ? 1.0 : 0.1));
+    b.push_back(meas.back() + 0.2);
+    if (!loses) S += meas.back() * meas.back();
+  }
+  const PairedDifference p = paired_nrms_difference(meas, a, b, 20);
+  EXPECT_GT(p.difference, 0.0);
+  EXPECT_EQ(p.largest_loss_first_row, 140u);
+  EXPECT_EQ(p.largest_loss_rows, 20u);
+  EXPECT_NEAR(p.difference_without_largest_loss, std::sqrt(380.0 * 0.01 / S) - std::sqrt(380.0 * 0.04 / S), 1e-12);
+  EXPECT_LT(p.difference_without_largest_loss, 0.0);
+
+  std::vector<double> better;
+  for (double m : meas) better.push_back(m + 0.1);
+  const PairedDifference none = paired_nrms_difference(meas, better, b, 20);
+  EXPECT_EQ(none.largest_loss_rows, 0u);
+}
+
 }  // namespace
 }  // namespace twin::analysis
