@@ -24,9 +24,9 @@
 ///    rounded as the log rounds them; errors on the held-out rows against the
 ///    zero model and the rigid-body regression
 ///    T = m a_cmd + Fc sgn(v_cmd) + b v_cmd + c fitted on the same rows.
+#include <array>
 #include <cstddef>
 #include <filesystem>
-#include <array>
 #include <map>
 #include <optional>
 #include <string>

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <complex>
 #include <numbers>
+#include <optional>
 #include <random>
 
 #include <Eigen/Dense>
@@ -268,15 +269,16 @@ PairedDifference paired_nrms_difference(std::span<const double> meas, std::span<
   PairedDifference out;
   out.difference = difference(all);
   out.blocks = sums.size();
-  double largest = 0.0;
-  for (std::size_t i = 0; i < sums.size(); ++i) {
-    const double excess = sums[i][1] - sums[i][2];
-    if (excess <= largest) continue;
-    largest = excess;
-    out.largest_loss_first_row = i * block_rows;
-    out.largest_loss_rows = std::min(n, (i + 1) * block_rows) - i * block_rows;
+  std::optional<std::size_t> worst;
+  for (std::size_t i = 0; i < sums.size(); ++i)
+    if (const double excess = sums[i][1] - sums[i][2];
+        excess > 0.0 && (!worst || excess > sums[*worst][1] - sums[*worst][2]))
+      worst = i;
+  if (worst) {
+    out.largest_loss_first_row = *worst * block_rows;
+    out.largest_loss_rows = std::min(n, out.largest_loss_first_row + block_rows) - out.largest_loss_first_row;
     std::array<double, 3> rest = all;
-    for (int c = 0; c < 3; ++c) rest[c] -= sums[i][c];
+    for (int c = 0; c < 3; ++c) rest[c] -= sums[*worst][c];
     out.difference_without_largest_loss = difference(rest);
   }
   std::mt19937_64 gen(20261127);
