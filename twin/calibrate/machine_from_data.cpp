@@ -1023,6 +1023,88 @@ PositionRounding detect_rounding_of(const MeasuredRun& run, std::initializer_lis
 
 PositionRounding detect_rounding(const MeasuredRun& run) { return detect_rounding_of(run, {"_ref_mm", "_mm"}); }
 
+namespace {
+
+/// The largest change of an axis's step at row k against both neighbouring
+/// steps: a speed held for one row only, as a stitch leaves it. 0 where row k
+/// has no step on both sides.
+double one_row_speed_change(const std::vector<double>& c, std::size_t k) {
+  if (k < 2 || k + 1 >= c.size()) return 0.0;
+  const double s = c[k] - c[k - 1];
+  return std::min(std::abs(s - (c[k - 1] - c[k - 2])), std::abs(s - (c[k + 1] - c[k])));
+}
+
+/// A logger that writes its samples in blocks of P rows and drops some blocks
+/// leaves jumps every P rows (or P + 1, where its clock drifts by a row); on
+/// the U-Mich logs most intervals between the jumps found are 10 rows and
+/// most of the rest 11, 20 or 21. Between two jumps a block or more apart, the
+/// boundary a dropped block left can be a smaller jump than the rules above
+/// see: a speed held for one row only (umich10, t = 113.0 s: x steps 1, 6
+/// then -2 mm while y and z step for that row alone). There, at least P - 1
+/// rows from either jump, the row whose one-row speed change is largest
+/// starts a segment where that change is over 3 quanta and over any the axis
+/// shows inside a block bounded by two jumps P or P + 1 rows apart (the
+/// axis's own moves, its rapids' starts and stops among them) by more than
+/// the rounding can add to it (2 quanta: each of the three rows is off by
+/// half a quantum at most, the middle one counting twice). Adds the rows
+/// to `cuts` (kept in order) and returns how many; `block_rows` is P.
+std::size_t block_boundary_jumps(std::size_t n, const std::vector<std::vector<const std::vector<double>*>>& axis_cols,
+                                 double quantum_mm, std::vector<std::size_t>& cuts, std::size_t& block_rows) {
+  block_rows = 0;
+  if (cuts.size() < 6) return 0;
+  std::map<std::size_t, std::size_t> intervals;
+  for (std::size_t i = 1; i < cuts.size(); ++i) ++intervals[cuts[i] - cuts[i - 1]];
+  std::size_t P = 0, best = 0;
+  for (const auto& [len, count] : intervals)
+    if (count > best) best = count, P = len;
+  const auto count_of = [&](std::size_t len) {
+    const auto it = intervals.find(len);
+    return it == intervals.end() ? std::size_t{0} : it->second;
+  };
+  if (P < 4 || 2 * (count_of(P) + count_of(P + 1)) < cuts.size() - 1) return 0;
+  // What each axis shows inside the blocks the jumps found bound.
+  std::vector<double> inside(axis_cols.size(), 0.0);
+  for (std::size_t i = 1; i < cuts.size(); ++i) {
+    if (cuts[i] - cuts[i - 1] > P + 1) continue;
+    for (std::size_t k = cuts[i - 1] + 2; k + 2 <= cuts[i]; ++k)
+      for (std::size_t a = 0; a < axis_cols.size(); ++a)
+        for (const auto* c : axis_cols[a]) inside[a] = std::max(inside[a], one_row_speed_change(*c, k));
+  }
+  const auto excess = [&](std::size_t k) {
+    double e = 0.0;
+    for (std::size_t a = 0; a < axis_cols.size(); ++a) {
+      const double limit = std::max(inside[a] + 2.0 * quantum_mm, 3.0 * quantum_mm);
+      for (const auto* c : axis_cols[a]) e = std::max(e, one_row_speed_change(*c, k) / limit);
+    }
+    return e;
+  };
+  std::vector<std::size_t> found;
+  // Between boundaries a and b: the most telling row at least P - 1 from both.
+  std::function<void(std::size_t, std::size_t)> split = [&](std::size_t a, std::size_t b) {
+    if (b < a + 2 * (P - 1)) return;
+    std::size_t k_best = 0;
+    double e_best = 1.0;
+    for (std::size_t k = a + P - 1; k + P - 1 <= b; ++k)
+      if (const double e = excess(k); e > e_best) e_best = e, k_best = k;
+    if (k_best == 0) return;
+    found.push_back(k_best);
+    split(a, k_best);
+    split(k_best, b);
+  };
+  std::size_t a = 0;
+  for (std::size_t c : cuts) {
+    split(a, c);
+    a = c;
+  }
+  split(a, n);
+  cuts.insert(cuts.end(), found.begin(), found.end());
+  std::sort(cuts.begin(), cuts.end());
+  block_rows = P;
+  return found.size();
+}
+
+}  // namespace
+
 std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, std::optional<double> v_max_mm_per_s,
                                    std::string* note) {
   const std::size_t n = run.trace.num_rows();
@@ -1090,16 +1172,16 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
     }
     return false;
   };
-  std::vector<Segment> segs;
-  std::size_t start = 0, jumps = 0, path_jumps = 0;
+  // Rows that start a segment, in order.
+  std::vector<std::size_t> cuts;
+  std::size_t jumps = 0, path_jumps = 0;
   double largest = 0.0;
   auto next_break = run.time_breaks.begin();
   for (std::size_t k = 1; k < n; ++k) {
     // A gap in the log's clock ends a segment too (load_run's note says so).
     if (next_break != run.time_breaks.end() && *next_break == k) {
       ++next_break;
-      segs.push_back({start, k});
-      start = k;
+      cuts.push_back(k);
       continue;
     }
     double step = 0.0;
@@ -1125,11 +1207,22 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
       for (const auto& cs : path_cols) step = std::max(step, path_step(cs, k));
     }
     if (jump) {
-      segs.push_back({start, k});
-      start = k;
+      cuts.push_back(k);
       ++jumps;
       largest = std::max(largest, step);
     }
+  }
+  std::size_t block_rows = 0;
+  std::vector<std::vector<const std::vector<double>*>> axis_columns;
+  for (const auto& ac : axes) axis_columns.push_back(ac.cols);
+  const std::size_t block_jumps =
+      (v_max_mm_per_s || !staircase) ? 0 : block_boundary_jumps(n, axis_columns, quantum_mm, cuts, block_rows);
+  jumps += block_jumps;
+  std::vector<Segment> segs;
+  std::size_t start = 0;
+  for (std::size_t k : cuts) {
+    segs.push_back({start, k});
+    start = k;
   }
   segs.push_back({start, n});
   const double limit = limit_max;
@@ -1139,13 +1232,18 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
       if (s.end - s.begin < 5) short_rows += s.end - s.begin;
     *note = fmt::format(
         "stitched from {} segments: {} jumps of up to {:.4g} mm between two rows, beyond the {:.4g} mm a sample "
-        "allows on the axis that jumps, at most ({}; or a step of over 1.5 times that held step standing alone (4 times its neighbours) or turning back at twice the speed it came){}; each segment is replayed from its own start{}",
+        "allows on the axis that jumps, at most ({}; or a step of over 1.5 times that held step standing alone (4 times its neighbours) or turning back at twice the speed it came){}{}; each segment is replayed from its own start{}",
         segs.size(), jumps, largest, limit,
         v_max_mm_per_s ? "the machine's rapid" : "3 times the largest step the axis holds over 3 samples",
         path_jumps ? fmt::format("; {} of them where several axes step at once, the path's step over 3 quanta and 4 times "
                                  "the steps either side",
                                  path_jumps)
                    : "",
+        block_jumps ? fmt::format("; the jumps recur every {} rows (a logger writing blocks of that many rows and "
+                                  "dropping some), and {} more at a block's boundary where an axis's speed "
+                                  "changes for one row by more than it does inside any block",
+                                  block_rows, block_jumps)
+                    : "",
         short_rows ? fmt::format(", {} rows in segments under 5 rows are not compared", short_rows) : "");
   }
   return segs;

@@ -53,8 +53,13 @@ struct Segment {
 /// with 20 % margin instead. On a log rounded coarser than 5 um and sampled
 /// slower than 2 ms, a row where two or more axes step at once and the
 /// path's step is over 3 quanta and 4 times the path's steps either side
-/// starts a segment too. A gap in the log's clock (run.time_breaks) starts
-/// a segment too. `note` says what was found.
+/// starts a segment too. On such a log, where the jumps found recur every P
+/// rows (a logger writing blocks of P rows and dropping some; at least half
+/// the intervals P or P + 1), a row at least P - 1 rows from the jumps
+/// either side starts a segment where an axis's speed changes for that row
+/// alone by more than it does inside any block, plus 2 quanta of rounding.
+/// A gap in the log's clock (run.time_breaks) starts a segment too. `note`
+/// says what was found.
 std::vector<Segment> find_segments(const MeasuredRun& run, double position_quantum_mm,
                                    std::optional<double> v_max_mm_per_s, std::string* note);
 

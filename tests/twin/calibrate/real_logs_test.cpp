@@ -283,6 +283,106 @@ TEST(RealLogs, AJumpOfSeveralAxesAtOnceWithinWhatEachHoldsIsAStitch) {
   EXPECT_THAT(note, HasSubstr("1 of them where several axes step at once"));
 }
 
+// A logger that writes its samples in blocks of 10 rows (1 s at 100 ms) and
+// drops every other block, with a continuous clock, as the U-Mich logs are.
+// The truth: x and y at 30 and 25 mm/s, turning back at 200 mm/s^2 (a speed
+// change of 2 mm a row at most) inside kept blocks, rounded to 0.1 mm. Where
+// a dropped block hid 1 s of rapid motion the rows jump 25 to 33 mm, which
+// the axis's own rule finds. Across dropped block 21, y stands still and x
+// slows to 10 mm/s and turns back: the kept rows step 1, 4 and -1 mm there, a
+// step under what x holds in its rapids (3 mm a row, 1.5 times is 4.5 mm)
+// and under 4 times its neighbours, on one axis only; a speed held for one
+// row only (3 mm off both neighbours against the 2 mm the axis changes by
+// inside a block) at a block's boundary is the stitch. Blocks 30, 31 and 32
+// are all kept, and x turns back about 31.0 s, across that boundary: a
+// change of speed the axis shows inside blocks, not a stitch. Oracle: the
+// rows where the log was built with a block dropped before them.
+TEST(RealLogs, AStitchAtTheBoundaryOfALoggersBlocksIsFoundWhereASpeedHoldsForOneRow) {
+  // Speed keyframes (t_s, v_mm_s), linear between: the truth's motion.
+  const std::vector<std::pair<double, double>> vx_key = [] {
+    std::vector<std::pair<double, double>> k{{0.0, 0.0}, {0.15, 30.0}};
+    double v = 30.0;
+    for (double tr : {4.5, 8.5, 12.5, 16.5}) {
+      k.push_back({tr, v});
+      v = -v;
+      k.push_back({tr + 0.3, v});
+    }
+    // Block 20 slows x to 10 mm/s; it turns back in dropped block 21.
+    k.insert(k.end(), {{20.3, v}, {20.4, 10.0}, {21.6, 10.0}, {21.7, -10.0}, {22.5, -10.0}, {22.6, -30.0}});
+    v = -30.0;
+    for (double tr : {24.5, 28.5, 30.85, 34.5, 38.5}) {
+      k.push_back({tr, v});
+      v = -v;
+      k.push_back({tr + 0.3, v});
+    }
+    k.push_back({42.0, v});
+    return k;
+  }();
+  const std::vector<std::pair<double, double>> vy_key = [] {
+    std::vector<std::pair<double, double>> k{{0.0, 0.0}, {0.125, 25.0}};
+    double v = 25.0;
+    for (double tr : {2.5, 6.5, 10.5, 14.5, 18.5}) {
+      k.push_back({tr, v});
+      v = -v;
+      k.push_back({tr + 0.25, v});
+    }
+    k.insert(k.end(), {{20.2, v}, {20.325, 0.0}, {22.3, 0.0}, {22.425, 25.0}});
+    v = 25.0;
+    for (double tr : {26.5, 30.5, 34.5, 38.5}) {
+      k.push_back({tr, v});
+      v = -v;
+      k.push_back({tr + 0.25, v});
+    }
+    k.push_back({42.0, v});
+    return k;
+  }();
+  // Positions every 0.1 s, integrating the piecewise-linear speed exactly.
+  const auto positions = [](const std::vector<std::pair<double, double>>& key, double x0_mm) {
+    std::vector<double> x{x0_mm};
+    double pos = x0_mm;
+    std::size_t i = 0;
+    for (int r = 1; r <= 420; ++r) {
+      const double t0 = 0.1 * (r - 1);
+      const auto v_at = [&](double t) {
+        while (i + 1 < key.size() && key[i + 1].first < t) ++i;
+        const auto& [ta, va] = key[i];
+        const auto& [tb, vb] = key[std::min(i + 1, key.size() - 1)];
+        return tb > ta ? va + (vb - va) * (t - ta) / (tb - ta) : va;
+      };
+      // Exact for piecewise-linear speed: Simpson's rule on every millisecond.
+      for (int m = 0; m < 100; ++m) {
+        const double a = t0 + 0.001 * m, b = a + 0.001;
+        pos += 0.001 / 6.0 * (v_at(a) + 4.0 * v_at(0.5 * (a + b)) + v_at(b));
+      }
+      x.push_back(pos);
+    }
+    return x;
+  };
+  const std::vector<double> x = positions(vx_key, 300.0), y = positions(vy_key, 150.0);
+  std::string csv = "t_s,x_ref_mm,x_mm,y_ref_mm,y_mm\n";
+  std::vector<std::size_t> expected;
+  std::size_t row = 0;
+  bool dropped_before = false;
+  for (int block = 0; block < 42; ++block) {
+    if (block % 2 == 1 && block != 31) {
+      dropped_before = true;
+      continue;
+    }
+    if (dropped_before) expected.push_back(row);
+    dropped_before = false;
+    for (int r = 10 * block; r < 10 * block + 10; ++r, ++row)
+      csv += fmt::format("{:.1f},{:.1f},{:.1f},{:.1f},{:.1f}\n", 0.1 * static_cast<double>(row), x[r], x[r], y[r], y[r]);
+  }
+  std::string note;
+  const auto segs = find_segments(run_from_csv("logger_blocks", csv), 0.1, std::nullopt, &note);
+  std::vector<std::size_t> found;
+  for (std::size_t s = 1; s < segs.size(); ++s) found.push_back(segs[s].begin);
+  EXPECT_EQ(found, expected) << note;
+  // The stitch after block 21 is the one only the blocks' rule finds.
+  EXPECT_THAT(note, HasSubstr("the jumps recur every 10 rows"));
+  EXPECT_THAT(note, HasSubstr("1 more at a block's boundary"));
+}
+
 // A log whose position leaves its command by more than a metre (an unstable
 // loop's, or columns that do not belong together) is refused in one line
 // that names the run, the axis and the row, before anything is fitted.
