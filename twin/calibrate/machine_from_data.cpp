@@ -1056,7 +1056,10 @@ std::size_t block_boundary_jumps(std::size_t n, const std::vector<std::vector<co
   for (std::size_t i = 1; i < cuts.size(); ++i) ++intervals[cuts[i] - cuts[i - 1]];
   std::size_t P = 0, best = 0;
   for (const auto& [len, count] : intervals)
-    if (count > best) best = count, P = len;
+    if (count > best) {
+      best = count;
+      P = len;
+    }
   const auto count_of = [&](std::size_t len) {
     const auto it = intervals.find(len);
     return it == intervals.end() ? std::size_t{0} : it->second;
@@ -1085,7 +1088,10 @@ std::size_t block_boundary_jumps(std::size_t n, const std::vector<std::vector<co
     std::size_t k_best = 0;
     double e_best = 1.0;
     for (std::size_t k = a + P - 1; k + P - 1 <= b; ++k)
-      if (const double e = excess(k); e > e_best) e_best = e, k_best = k;
+      if (const double e = excess(k); e > e_best) {
+        e_best = e;
+        k_best = k;
+      }
     if (k_best == 0) return;
     found.push_back(k_best);
     split(a, k_best);
