@@ -349,7 +349,8 @@ TEST(RealLogs, AStitchAtTheBoundaryOfALoggersBlocksIsFoundWhereASpeedHoldsForOne
         const auto& [tb, vb] = key[std::min(i + 1, key.size() - 1)];
         return tb > ta ? va + (vb - va) * (t - ta) / (tb - ta) : va;
       };
-      // Exact for piecewise-linear speed: Simpson's rule on every millisecond.
+      // Simpson's rule on every millisecond: exact for a speed linear within
+      // each one, as here (every keyframe falls on a whole millisecond).
       for (int m = 0; m < 100; ++m) {
         const double a = t0 + 0.001 * m, b = a + 0.001;
         pos += 0.001 / 6.0 * (v_at(a) + 4.0 * v_at(0.5 * (a + b)) + v_at(b));
