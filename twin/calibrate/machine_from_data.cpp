@@ -5836,10 +5836,13 @@ DataEffect* smooth_friction_trial(DataCalibration& out, Axis a) {
 /// friction, under which the integral holds what the axis stopped at; with
 /// friction that creeps at rest, the loop's gains set how the held torque
 /// settles (too soft a loop rings for a second at every stop). With each
-/// axis's speed scale, the 16 loops are replayed and chosen on the fitting
-/// rows; the pair is kept where it lowers the held-out error of the fitting
-/// runs against the machine so far (smooth_friction kept or not: the rule
-/// of every change to the machine).
+/// axis's speed scale (the one its fitting rows chose, or, where none
+/// lowered their error under the first loop, the one that raised it least:
+/// with another loop it may lower it), the 16
+/// loops are replayed and chosen on the fitting rows; the pair is kept where
+/// it lowers the held-out error of the fitting runs against the machine so
+/// far (smooth_friction kept or not: the rule of every change to the
+/// machine).
 void rechoose_velocity_loops(DataCalibration& out, const std::vector<RunData>& runs) {
   const std::string ws_key = param_key(EffectKind::kSmoothFriction, EffectParam::smooth_friction_ws);
   AxisArray<bool> on{};
@@ -5998,18 +6001,28 @@ void try_smooth_friction_on_axis(DataCalibration& out, const std::vector<RunData
   // rg = 1 mm/rad in a machine identified from data: rad/s are mm/s.
   double v_move = 0.0;
   for (const RunData& rd : runs) v_move = std::max(v_move, rd.v_move[index(ax.axis)]);
-  double best_ws = 0.0, best_fit = bf->second;
+  double least_ws = 0.0, least_fit = 1e300;
   for (double f : {0.1, 0.3, 1.0}) {
     const sim::MachineDefinition trial = with_smooth_friction(out.identified, ax.axis, f * v_move);
     const ChannelErrors e = pooled_on_fit_runs(out, runs, trial, false);
     const auto it = e.nrms.find(key);
-    if (it != e.nrms.end() && it->second < best_fit) {
-      best_fit = it->second;
-      best_ws = f * v_move;
+    if (it != e.nrms.end() && it->second < least_fit) {
+      least_fit = it->second;
+      least_ws = f * v_move;
     }
   }
+  const double best_ws = least_fit < bf->second ? least_ws : 0.0;
+  const double best_fit = least_fit < bf->second ? least_fit : bf->second;
   if (best_ws <= 0.0) {
-    eff.evidence = fmt::format("no speed scale lowers the fitting rows' {} error ({:.4g})", key, bf->second);
+    eff.evidence = fmt::format("no speed scale lowers the fitting rows' {} error ({:.4g}) with the velocity loop "
+                               "chosen under stick/slip friction",
+                               key, bf->second);
+    // The loop was chosen with stick/slip friction; with friction that
+    // relaxes another loop may settle the held torque better. The speed
+    // scale that did least harm is left for the joint choice of the two
+    // (rechoose_velocity_loops), which keeps it only with a loop that
+    // lowers the held-out error.
+    if (least_ws > 0.0) eff.params[param_key(EffectKind::kSmoothFriction, EffectParam::smooth_friction_ws)] = least_ws;
     out.effects.push_back(eff);
     return;
   }
