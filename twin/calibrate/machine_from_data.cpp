@@ -1426,7 +1426,7 @@ nlohmann::json ChannelErrors::to_json() const {
 
 ReplayResult replay_segments(const MeasuredRun& run, const sim::MachineDefinition& machine,
                              const std::vector<Segment>& segments, const PositionRounding& rounding,
-                             std::vector<char>* compared) {
+                             std::vector<char>* compared, Segment rows) {
   const std::size_t n = run.trace.num_rows();
   ReplayResult out;
   for (Axis a : run.axes)
@@ -1458,7 +1458,7 @@ ReplayResult replay_segments(const MeasuredRun& run, const sim::MachineDefinitio
   const ChannelSampling sampling =
       every_speed && !out.axes.empty() ? ChannelSampling::kInstant : ChannelSampling::kMeanOverNeighbours;
   for (const Segment& s : segments) {
-    if (s.end - s.begin < 5) continue;
+    if (s.end - s.begin < 5 || s.end <= rows.begin || s.begin >= rows.end) continue;
     MeasuredRun sub = rows_of(run, s.begin, s.end, reference_columns);
     sub.axes = out.axes;
     for (Axis a : out.axes) {
@@ -4993,7 +4993,10 @@ void errors_on(DataCalibration& out, const sim::MachineDefinition& machine, cons
   PoolSet pools;
   std::vector<char> cmp;
   try {
-    ReplayResult rr = replay_segments(*rd.smooth, machine, rd.segments, out.rounding, &cmp);
+    // Where neither the replay nor the rows compared are kept, only the
+    // segments that reach into [from, to) are replayed.
+    const Segment rows = keep == nullptr && compared == nullptr ? Segment{from, to} : Segment{0, SIZE_MAX};
+    ReplayResult rr = replay_segments(*rd.smooth, machine, rd.segments, out.rounding, &cmp, rows);
     ++out.replays;
     for (std::size_t k = 0; k < cmp.size(); ++k) cmp[k] = static_cast<char>(cmp[k] && rd.interior[k]);
     std::map<std::string, std::string> nc;
@@ -5383,7 +5386,8 @@ std::optional<ChannelErrors> held_out_lowpassed(DataCalibration& out, const std:
   try {
     for (const RunData& rd : runs) {
       std::vector<char> cmp;
-      const ReplayResult rr = replay_segments(*rd.smooth, machine, rd.segments, out.rounding, &cmp);
+      const ReplayResult rr =
+          replay_segments(*rd.smooth, machine, rd.segments, out.rounding, &cmp, Segment{rd.n_fit, rd.n});
       const double dt = rd.run->sample_period_s;
       for (Axis a : out.axes) {
         const std::size_t i = index(a);
@@ -5838,11 +5842,10 @@ DataEffect* smooth_friction_trial(DataCalibration& out, Axis a) {
 /// settles (too soft a loop rings for a second at every stop). With each
 /// axis's speed scale (the one its fitting rows chose, or, where none
 /// lowered their error under the first loop, the one that raised it least:
-/// with another loop it may lower it), the 16
-/// loops are replayed and chosen on the fitting rows; the pair is kept where
-/// it lowers the held-out error of the fitting runs against the machine so
-/// far (smooth_friction kept or not: the rule of every change to the
-/// machine).
+/// with another loop it may lower it), the 16 loops are replayed and chosen
+/// on the fitting rows; the pair is kept where it lowers the held-out error
+/// of the fitting runs against the machine so far (smooth_friction kept or
+/// not: the rule of every change to the machine).
 void rechoose_velocity_loops(DataCalibration& out, const std::vector<RunData>& runs) {
   const std::string ws_key = param_key(EffectKind::kSmoothFriction, EffectParam::smooth_friction_ws);
   AxisArray<bool> on{};
@@ -6001,19 +6004,18 @@ void try_smooth_friction_on_axis(DataCalibration& out, const std::vector<RunData
   // rg = 1 mm/rad in a machine identified from data: rad/s are mm/s.
   double v_move = 0.0;
   for (const RunData& rd : runs) v_move = std::max(v_move, rd.v_move[index(ax.axis)]);
-  double least_ws = 0.0, least_fit = 1e300;
+  double ws_chosen = 0.0, fit_chosen = 1e300;
   for (double f : {0.1, 0.3, 1.0}) {
     const sim::MachineDefinition trial = with_smooth_friction(out.identified, ax.axis, f * v_move);
     const ChannelErrors e = pooled_on_fit_runs(out, runs, trial, false);
     const auto it = e.nrms.find(key);
-    if (it != e.nrms.end() && it->second < least_fit) {
-      least_fit = it->second;
-      least_ws = f * v_move;
+    if (it != e.nrms.end() && it->second < fit_chosen) {
+      fit_chosen = it->second;
+      ws_chosen = f * v_move;
     }
   }
-  const double best_ws = least_fit < bf->second ? least_ws : 0.0;
-  const double best_fit = least_fit < bf->second ? least_fit : bf->second;
-  if (best_ws <= 0.0) {
+  const bool lowers_fit = ws_chosen > 0.0 && fit_chosen < bf->second;
+  if (!lowers_fit) {
     eff.evidence = fmt::format("no speed scale lowers the fitting rows' {} error ({:.4g}) with the velocity loop "
                                "chosen under stick/slip friction",
                                key, bf->second);
@@ -6022,13 +6024,13 @@ void try_smooth_friction_on_axis(DataCalibration& out, const std::vector<RunData
     // scale that did least harm is left for the joint choice of the two
     // (rechoose_velocity_loops), which keeps it only with a loop that
     // lowers the held-out error.
-    if (least_ws > 0.0) eff.params[param_key(EffectKind::kSmoothFriction, EffectParam::smooth_friction_ws)] = least_ws;
+    if (ws_chosen > 0.0) eff.params[param_key(EffectKind::kSmoothFriction, EffectParam::smooth_friction_ws)] = ws_chosen;
     out.effects.push_back(eff);
     return;
   }
-  eff.params[param_key(EffectKind::kSmoothFriction, EffectParam::smooth_friction_ws)] = best_ws;
+  eff.params[param_key(EffectKind::kSmoothFriction, EffectParam::smooth_friction_ws)] = ws_chosen;
   const ChannelErrors held =
-      pooled_on_fit_runs(out, runs, with_smooth_friction(out.identified, ax.axis, best_ws), true);
+      pooled_on_fit_runs(out, runs, with_smooth_friction(out.identified, ax.axis, ws_chosen), true);
   const auto hh = held.nrms.find(key);
   eff.after = hh != held.nrms.end() ? hh->second : bh->second;
   eff.kept = eff.after < eff.before;
@@ -6036,8 +6038,8 @@ void try_smooth_friction_on_axis(DataCalibration& out, const std::vector<RunData
       "a stopped axis holds {:.4g} off the constant load in the log (its rest periods' means, weighted by their "
       "rows), the stick/slip model {:.4g}: friction smoothed below {:.3g} mm/s takes the {} error from {:.4g} to "
       "{:.4g} on the fitting rows and from {:.4g} to {:.4g} on the held-out rows{}",
-      h.log, h.model, best_ws, key, bf->second, best_fit, eff.before, eff.after, eff.kept ? "" : " (not kept)");
-  if (eff.kept) final_machine = with_smooth_friction(final_machine, ax.axis, best_ws);
+      h.log, h.model, ws_chosen, key, bf->second, fit_chosen, eff.before, eff.after, eff.kept ? "" : " (not kept)");
+  if (eff.kept) final_machine = with_smooth_friction(final_machine, ax.axis, ws_chosen);
   out.effects.push_back(eff);
 }
 

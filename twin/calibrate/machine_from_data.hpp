@@ -26,6 +26,7 @@
 ///    T = m a_cmd + Fc sgn(v_cmd) + b v_cmd + c fitted on the same rows.
 #include <array>
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -311,10 +312,13 @@ DataCalibration calibrate_from_data(const std::vector<MeasuredRun>& fit, const s
 /// Replays `run` on `machine` segment by segment (each from its own start,
 /// never across a jump), the twin's positions rounded as `rounding` says.
 /// Rows of segments too short to replay keep the measured reference and are
-/// flagged in `compared` = 0.
+/// flagged in `compared` = 0. Segments wholly outside `rows` are not
+/// replayed either (their rows flagged 0 too): a segment's replay starts from
+/// its own first row and never reads another's, so the rows in `rows` come
+/// out as in the replay of every segment.
 ReplayResult replay_segments(const MeasuredRun& run, const sim::MachineDefinition& machine,
                              const std::vector<Segment>& segments, const PositionRounding& rounding,
-                             std::vector<char>* compared);
+                             std::vector<char>* compared, Segment rows = {0, SIZE_MAX});
 
 /// The errors of `machine` (identified by calibrate_from_data, in the log's
 /// torque unit) on the whole of `run`, computed as calibrate's validation

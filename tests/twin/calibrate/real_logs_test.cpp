@@ -251,6 +251,38 @@ TEST(RealLogs, StitchedSegmentsAreFoundWhereThePositionJumps) {
   EXPECT_THAT(note, HasSubstr("stitched from 3 segments"));
 }
 
+// The replay of some rows: segments wholly outside them are not replayed.
+// Each segment's replay starts from its own first row, so the rows of a
+// segment replayed come out as in the replay of every segment (exactly: the
+// same computation), and the rows of one left out are flagged not compared.
+TEST(RealLogs, ReplayingSomeRowsGivesThemAsTheWholeReplayDoes) {
+  std::string csv = "t_s,x_ref_mm,x_mm,x_i_A\n";
+  for (int k = 0; k < 90; ++k) {
+    double x = 10.0 + 2.0 * (k % 30);
+    if (k >= 30) x += 40.0;
+    if (k >= 60) x -= 25.0;
+    csv += std::to_string(0.1 * k) + "," + std::to_string(x) + "," + std::to_string(x) + ",1\n";
+  }
+  const MeasuredRun run = run_from_csv("stitched_rows", csv);
+  const auto segs = find_segments(run, 0.0, std::nullopt, nullptr);
+  ASSERT_EQ(segs.size(), 3u);
+  const sim::MachineDefinition machine = machine_for_run(run, "", nullptr);
+  const PositionRounding rounding = detect_rounding(run);
+  std::vector<char> all, some;
+  const ReplayResult whole = replay_segments(run, machine, segs, rounding, &all);
+  // Rows 35 to 44: inside the second segment only.
+  const ReplayResult part = replay_segments(run, machine, segs, rounding, &some, Segment{35, 45});
+  ASSERT_EQ(some.size(), all.size());
+  for (std::size_t k = 0; k < all.size(); ++k) {
+    const bool in_second = k >= segs[1].begin && k < segs[1].end;
+    EXPECT_EQ(all[k], 1) << k;
+    EXPECT_EQ(some[k], in_second ? 1 : 0) << k;
+    if (!in_second) continue;
+    EXPECT_EQ(part.x_mm[index(Axis::kX)][k], whole.x_mm[index(Axis::kX)][k]) << k;
+    EXPECT_EQ(part.i_A[index(Axis::kX)][k], whole.i_A[index(Axis::kX)][k]) << k;
+  }
+}
+
 // A stitch on a path: in one row x steps 4 mm and y 4.1 mm (y then turns
 // back), each within what the axis holds in its rapids (6 mm a row), so
 // neither axis's own rule finds it; the path's step (5.7 mm) is over 4 times
