@@ -232,9 +232,9 @@ TEST(RealLogs, RoundingIsFoundAsTheLogShowsIt) {
   EXPECT_EQ(dec.digits, 3);
 }
 
-// A log stitched from three pieces: the axis moves 2 mm a sample where it
-// moves, and jumps 40 mm (and back 25 mm) between pieces.
-TEST(RealLogs, StitchedSegmentsAreFoundWhereThePositionJumps) {
+/// A log stitched from three pieces of 30 rows: the axis moves 2 mm a
+/// sample where it moves, and jumps 40 mm (and back 25 mm) between pieces.
+std::string three_piece_csv() {
   std::string csv = "t_s,x_ref_mm,x_mm,x_i_A\n";
   for (int k = 0; k < 90; ++k) {
     double x = 10.0 + 2.0 * (k % 30);
@@ -242,8 +242,13 @@ TEST(RealLogs, StitchedSegmentsAreFoundWhereThePositionJumps) {
     if (k >= 60) x -= 25.0;
     csv += std::to_string(0.1 * k) + "," + std::to_string(x) + "," + std::to_string(x) + ",1\n";
   }
+  return csv;
+}
+
+// The three pieces of three_piece_csv are found.
+TEST(RealLogs, StitchedSegmentsAreFoundWhereThePositionJumps) {
   std::string note;
-  const auto segs = find_segments(run_from_csv("stitched", csv), 0.0, std::nullopt, &note);
+  const auto segs = find_segments(run_from_csv("stitched", three_piece_csv()), 0.0, std::nullopt, &note);
   ASSERT_EQ(segs.size(), 3u);
   EXPECT_EQ(segs[0].end, 30u);
   EXPECT_EQ(segs[1].begin, 30u);
@@ -256,14 +261,7 @@ TEST(RealLogs, StitchedSegmentsAreFoundWhereThePositionJumps) {
 // segment replayed come out as in the replay of every segment (exactly: the
 // same computation), and the rows of one left out are flagged not compared.
 TEST(RealLogs, ReplayingSomeRowsGivesThemAsTheWholeReplayDoes) {
-  std::string csv = "t_s,x_ref_mm,x_mm,x_i_A\n";
-  for (int k = 0; k < 90; ++k) {
-    double x = 10.0 + 2.0 * (k % 30);
-    if (k >= 30) x += 40.0;
-    if (k >= 60) x -= 25.0;
-    csv += std::to_string(0.1 * k) + "," + std::to_string(x) + "," + std::to_string(x) + ",1\n";
-  }
-  const MeasuredRun run = run_from_csv("stitched_rows", csv);
+  const MeasuredRun run = run_from_csv("stitched_rows", three_piece_csv());
   const auto segs = find_segments(run, 0.0, std::nullopt, nullptr);
   ASSERT_EQ(segs.size(), 3u);
   const sim::MachineDefinition machine = machine_for_run(run, "", nullptr);
