@@ -1047,11 +1047,14 @@ double one_row_speed_change(const std::vector<double>& c, std::size_t k) {
 /// axis's own moves, its rapids' starts and stops among them) by more than
 /// the rounding can add to it (2 quanta: each of the three rows is off by
 /// half a quantum at most, the middle one counting twice). Adds the rows
-/// to `cuts` (kept in order) and returns how many; `block_rows` is P.
-std::size_t block_boundary_jumps(std::size_t n, const std::vector<std::vector<const std::vector<double>*>>& axis_cols,
-                                 double quantum_mm, std::vector<std::size_t>& cuts, std::size_t& block_rows) {
-  block_rows = 0;
-  if (cuts.size() < 6) return 0;
+/// to `cuts` (kept in order) and says how many, and P.
+struct BlockJumps {
+  std::size_t added{0};       ///< rows added to the cuts
+  std::size_t block_rows{0};  ///< P: the logger's block (0 where none recurs)
+};
+BlockJumps block_boundary_jumps(std::size_t n, const std::vector<std::vector<const std::vector<double>*>>& axis_cols,
+                                double quantum_mm, std::vector<std::size_t>& cuts) {
+  if (cuts.size() < 6) return {};
   std::map<std::size_t, std::size_t> intervals;
   for (std::size_t i = 1; i < cuts.size(); ++i) ++intervals[cuts[i] - cuts[i - 1]];
   std::size_t P = 0, best = 0;
@@ -1064,7 +1067,7 @@ std::size_t block_boundary_jumps(std::size_t n, const std::vector<std::vector<co
     const auto it = intervals.find(len);
     return it == intervals.end() ? std::size_t{0} : it->second;
   };
-  if (P < 4 || 2 * (count_of(P) + count_of(P + 1)) < cuts.size() - 1) return 0;
+  if (P < 4 || 2 * (count_of(P) + count_of(P + 1)) < cuts.size() - 1) return {};
   // What each axis shows inside the blocks the jumps found bound.
   std::vector<double> inside(axis_cols.size(), 0.0);
   for (std::size_t i = 1; i < cuts.size(); ++i) {
@@ -1105,8 +1108,7 @@ std::size_t block_boundary_jumps(std::size_t n, const std::vector<std::vector<co
   split(a, n);
   cuts.insert(cuts.end(), found.begin(), found.end());
   std::sort(cuts.begin(), cuts.end());
-  block_rows = P;
-  return found.size();
+  return {found.size(), P};
 }
 
 }  // namespace
@@ -1218,12 +1220,11 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
       largest = std::max(largest, step);
     }
   }
-  std::size_t block_rows = 0;
   std::vector<std::vector<const std::vector<double>*>> axis_columns;
   for (const auto& ac : axes) axis_columns.push_back(ac.cols);
-  const std::size_t block_jumps =
-      (v_max_mm_per_s || !staircase) ? 0 : block_boundary_jumps(n, axis_columns, quantum_mm, cuts, block_rows);
-  jumps += block_jumps;
+  const BlockJumps blocks =
+      (v_max_mm_per_s || !staircase) ? BlockJumps{} : block_boundary_jumps(n, axis_columns, quantum_mm, cuts);
+  jumps += blocks.added;
   std::vector<Segment> segs;
   std::size_t start = 0;
   for (std::size_t k : cuts) {
@@ -1245,10 +1246,10 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
                                  "the steps either side",
                                  path_jumps)
                    : "",
-        block_jumps ? fmt::format("; the jumps recur every {} rows (a logger writing blocks of that many rows and "
+        blocks.added ? fmt::format("; the jumps recur every {} rows (a logger writing blocks of that many rows and "
                                   "dropping some), and {} more at a block's boundary where an axis's speed "
                                   "changes for one row by more than it does inside any block",
-                                  block_rows, block_jumps)
+                                  blocks.block_rows, blocks.added)
                     : "",
         short_rows ? fmt::format(", {} rows in segments under 5 rows are not compared", short_rows) : "");
   }
