@@ -6035,11 +6035,21 @@ void try_smooth_friction_on_axis(DataCalibration& out, const std::vector<RunData
   const auto hh = held.nrms.find(key);
   eff.after = hh != held.nrms.end() ? hh->second : bh->second;
   eff.kept = eff.after < eff.before;
-  eff.evidence = fmt::format(
-      "a stopped axis holds {:.4g} off the constant load in the log (its rest periods' means, weighted by their "
-      "rows), the stick/slip model {:.4g}: friction smoothed below {:.3g} mm/s takes the {} error from {:.4g} to "
-      "{:.4g} on the fitting rows and from {:.4g} to {:.4g} on the held-out rows{}",
-      h.log, h.model, ws_chosen, key, bf->second, fit_chosen, eff.before, eff.after, eff.kept ? "" : " (not kept)");
+  // Where the rest is not resolved, what the log holds there is said as
+  // read, not as the signature: the replay's errors alone decide.
+  const std::string rest =
+      resolves_rest
+          ? fmt::format("a stopped axis holds {:.4g} off the constant load in the log (its rest periods' means, "
+                        "weighted by their rows), the stick/slip model {:.4g}",
+                        h.log, h.model)
+          : fmt::format("a log sampled every {:g} s does not resolve how the held torque settles at rest (the log "
+                        "holds {:.4g} off the constant load there, the stick/slip model {:.4g}), so the replay's "
+                        "errors alone decide",
+                        runs.front().run->sample_period_s, h.log, h.model);
+  eff.evidence = fmt::format("{}: friction smoothed below {:.3g} mm/s takes the {} error from {:.4g} to {:.4g} on "
+                             "the fitting rows and from {:.4g} to {:.4g} on the held-out rows{}",
+                             rest, ws_chosen, key, bf->second, fit_chosen, eff.before, eff.after,
+                             eff.kept ? "" : " (not kept)");
   if (eff.kept) final_machine = with_smooth_friction(final_machine, ax.axis, ws_chosen);
   out.effects.push_back(eff);
 }
