@@ -531,6 +531,19 @@ TEST(RealLogs, CascadeAtOneKilohertzWithRawTorque) {
   }
 }
 
+/// The cascade truth logged as the U-Mich mill logs: every 100 ms, positions
+/// to 3 significant figures, the current in A and no velocity channel; no
+/// feedforward.
+truth::RunSpec coarse_current_spec(double Ts_s) {
+  truth::RunSpec sp = cascade_spec(Ts_s);
+  sp.cascade.raw_per_Nm = 0.0;
+  sp.cascade.log_velocities = false;
+  sp.cascade.kff = 0.0;
+  sp.log_every = 100;
+  sp.log_significant_figures = 3;
+  return sp;
+}
+
 // 100 ms, positions to 3 significant figures, current only, stitched from
 // two recordings: the calibration finishes, finds the stitch and the
 // rounding, reports the lag of the position (1 - kff) / Kv within 25 % (the
@@ -541,12 +554,7 @@ TEST(RealLogs, CascadeAtOneKilohertzWithRawTorque) {
 // interval, and said in report.md.
 TEST(RealLogs, CoarseRoundedStitchedCurrentLog) {
   const double Ts = 1e-3;
-  truth::RunSpec sp = cascade_spec(Ts);
-  sp.cascade.raw_per_Nm = 0.0;
-  sp.cascade.log_velocities = false;
-  sp.cascade.kff = 0.0;
-  sp.log_every = 100;
-  sp.log_significant_figures = 3;
+  truth::RunSpec sp = coarse_current_spec(Ts);
   std::vector<double> ref = program(Ts, 0.4, 60.0);
   sp.reference_mm = ref;
   const auto a = work("coarse_a");
@@ -609,6 +617,40 @@ TEST(RealLogs, CoarseRoundedStitchedCurrentLog) {
 }
 
 // Logs without the position loop's output: the 1 kHz runs of
+// A log shaped like the U-Mich mill's: 100 ms, positions to 3 significant
+// figures, the current in A and no velocity channel, of the truth's cascade
+// (Kvp 0.4 N m s/rad, Tn 10 ms, no feedforward) without an effect. The
+// acceptance's cross-program check: calibrated on one program, the machine
+// predicts another program's current (0.7 times the speeds, 40 s, another
+// seed) better than the rigid-body regression fitted on the first and than
+// the machine as identified. Oracle: the truth simulator's run of the other
+// program. Measured: 0.579 against the regression's 0.620 and the identified
+// machine's 0.593; the check is the order, not a margin. (The fitting run's
+// own held-out rows are lost to the regression there, 0.671 against 0.619,
+// and effects the truth does not hold are kept: docs/calibration.md, "Not
+// resolved".)
+TEST(RealLogs, ACoarseCurrentLogPredictsAnotherProgramBetterThanTheRegression) {
+  const double Ts = 1e-3;
+  truth::RunSpec sp = coarse_current_spec(Ts);
+  sp.cascade.Kvp = 0.4;
+  sp.cascade.Tn = 0.01;
+  sp.reference_mm = program(Ts, 0.4, 60.0);
+  const auto fit_dir = work("coarse_fit");
+  truth::write_truth_run(fit_dir, sp);
+  sp.reference_mm = program(Ts, 0.7, 40.0);
+  sp.seed = 7;
+  const auto val_dir = work("coarse_val");
+  truth::write_truth_run(val_dir, sp);
+  const MeasuredRun run = load_run(fit_dir);
+  const MeasuredRun val = load_run(val_dir);
+  const DataCalibration r = calibrate_from_data({run}, {val}, machine_for_run(run, "", nullptr));
+  ASSERT_EQ(r.validation_runs.size(), 1u);
+  const RunErrors& v = r.validation_runs[0];
+  ASSERT_TRUE(v.calibrated.nrms.count("x_i_A") && v.regression.nrms.count("x_i_A"));
+  EXPECT_LT(v.calibrated.nrms.at("x_i_A"), v.regression.nrms.at("x_i_A"));
+  EXPECT_LE(v.calibrated.nrms.at("x_i_A"), v.identified.nrms.at("x_i_A"));
+}
+
 // CascadeAtOneKilohertzWithRawTorque with a Stribeck rise in the truth's
 // friction (which the identified drive does not have), the velocity command
 // held at 0 on every row (a dead channel), and once without the speed too.
