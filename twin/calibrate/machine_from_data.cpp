@@ -1247,10 +1247,10 @@ std::vector<Segment> find_segments(const MeasuredRun& run, double quantum_mm, st
                                  path_jumps)
                    : "",
         blocks.added ? fmt::format("; the jumps recur every {} rows (a logger writing blocks of that many rows and "
-                                  "dropping some), and {} more at a block's boundary where an axis's speed "
-                                  "changes for one row by more than it does inside any block",
-                                  blocks.block_rows, blocks.added)
-                    : "",
+                                   "dropping some), and {} more at a block's boundary where an axis's speed "
+                                   "changes for one row by more than it does inside any block",
+                                   blocks.block_rows, blocks.added)
+                     : "",
         short_rows ? fmt::format(", {} rows in segments under 5 rows are not compared", short_rows) : "");
   }
   return segs;

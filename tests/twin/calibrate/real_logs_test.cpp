@@ -616,7 +616,6 @@ TEST(RealLogs, CoarseRoundedStitchedCurrentLog) {
   EXPECT_THAT(data_calibration_report_markdown(r, "coarse_stitched"), HasSubstr("The twin against the regression, with the scatter"));
 }
 
-// Logs without the position loop's output: the 1 kHz runs of
 // A log shaped like the U-Mich mill's: 100 ms, positions to 3 significant
 // figures, the current in A and no velocity channel, of the truth's cascade
 // (Kvp 0.4 N m s/rad, Tn 10 ms, no feedforward) without an effect. The
@@ -651,6 +650,7 @@ TEST(RealLogs, ACoarseCurrentLogPredictsAnotherProgramBetterThanTheRegression) {
   EXPECT_LE(v.calibrated.nrms.at("x_i_A"), v.identified.nrms.at("x_i_A"));
 }
 
+// Logs without the position loop's output: the 1 kHz runs of
 // CascadeAtOneKilohertzWithRawTorque with a Stribeck rise in the truth's
 // friction (which the identified drive does not have), the velocity command
 // held at 0 on every row (a dead channel), and once without the speed too.
