@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include <fmt/format.h>
@@ -98,6 +99,9 @@ struct AxisConst {
   // solution of J dw/dt = F - B w, dtheta/dt = w over h = Ts with F held.
   bool linear{false};
   LinearTick tick;
+  // Smooth friction: the speed above which the group's coarse step is short
+  // enough for this axis (0: any speed, or no smooth friction).
+  double sf_guard_rad_per_s{0.0};
 };
 
 // Per-tick and per-segment values of one axis, set by the bank.
@@ -265,12 +269,19 @@ void axis_roots(const AxisConst& a, const AxisRun& r, const double* y, double* g
   }
 }
 
-// Fastest linearised rate of an axis [1/s], to bound a fixed explicit step.
-double fastest_rate_per_s(const AxisConst& a) {
+// The largest rate smooth friction adds [1/s]: max |d/dw Tc tanh(w/ws)| / J
+// = Tc / (ws J), at w = 0 (0 without it).
+double smooth_friction_rate_per_s(const AxisConst& a) {
+  const DriveParams& p = a.p;
+  if (!p.effects.smooth_friction.enabled) return 0.0;
+  return std::max(p.Tc_pos_Nm, p.Tc_neg_Nm) / p.effects.smooth_friction.ws_rad_per_s / a.Jm_kg_m2;
+}
+
+// Fastest linearised rate of an axis [1/s], to bound a fixed explicit step,
+// smooth friction's left out (smooth_friction_rate_per_s).
+double rate_but_smooth_friction_per_s(const AxisConst& a) {
   const DriveParams& p = a.p;
   double rate = p.B_kg_m2_per_s / a.Jm_kg_m2;
-  if (p.effects.smooth_friction.enabled)  // max |d/dw Tc tanh(w/ws)| = Tc / ws
-    rate += std::max(p.Tc_pos_Nm, p.Tc_neg_Nm) / p.effects.smooth_friction.ws_rad_per_s / a.Jm_kg_m2;
   if (p.effects.stribeck.enabled) {
     const double slope = stribeck_max_slope(p.effects.stribeck.Ts_static_Nm, std::min(p.Tc_pos_Nm, p.Tc_neg_Nm),
                                             p.effects.stribeck.ws_rad_per_s);
@@ -290,6 +301,48 @@ double fastest_rate_per_s(const AxisConst& a) {
   return rate;
 }
 
+// The explicit fixed step for the rate [1/s]: Ts / n, with n at least the
+// options' steps per tick and enough that step x rate <= 0.25.
+double fixed_step_for_s(double Ts_s, double rate_per_s, int steps_per_tick) {
+  const double n_rate = std::ceil(Ts_s * rate_per_s / 0.25);
+  return Ts_s / std::max(static_cast<double>(steps_per_tick), n_rate);
+}
+
+// The speed above which `step` integrates smooth friction as well as the
+// fine step does near rest: 0 where step x (rate_but_smooth_friction + Tc /
+// (ws J)) <= 0.25 already holds at w = 0. Else 10 ws, where tanh(w / ws) is
+// 1 to 4e-9, so the friction is the Coulomb level and the drive linear (the
+// slope condition alone is not enough: at 3.8 ws, where it held, one step
+// that took w through one ws erred by 4e-6 of that change, against the 1e-9
+// of steps at the fine length), or further out if the slope needs it.
+double smooth_friction_guard_rad_per_s(const AxisConst& a, double step_s) {
+  const double top = smooth_friction_rate_per_s(a);
+  if (top <= 0.0) return 0.0;
+  const double q = (0.25 / step_s - rate_but_smooth_friction_per_s(a)) / top;  // the sech^2 allowed
+  if (q >= 1.0) return 0.0;
+  if (q <= 0.0) return std::numeric_limits<double>::infinity();
+  return a.p.effects.smooth_friction.ws_rad_per_s * std::max(10.0, std::acosh(1.0 / std::sqrt(q)));
+}
+
+// A bound on how much a rigid axis's speed can change over a tick of h
+// seconds, starting at |w| = w0 with the tick's inputs held: every torque on
+// it at its largest (the motor's, the load, the Coulomb level with a band of
+// position-dependent friction and load-dependent friction on top, cogging,
+// and damping at the speed reached), J dw = T0 + B (w0 + dw) over h.
+// Infinity where damping alone could outrun the inertia within the tick.
+double largest_speed_change_rad_per_s(const AxisConst& a, const AxisRun& r, double w0, double h_s) {
+  const DriveParams& p = a.p;
+  const auto& fx = p.effects;
+  double friction_Nm = std::max(p.Tc_pos_Nm, p.Tc_neg_Nm);
+  if (fx.position_dependent_friction.enabled) friction_Nm += std::abs(fx.position_dependent_friction.dTc_Nm);
+  if (fx.load_dependent_friction.enabled)
+    friction_Nm += feeddrive::load_friction_Nm(fx.load_dependent_friction.fraction, r.Tm_Nm);
+  const double cogging_Nm = fx.cogging.enabled ? std::abs(fx.cogging.amplitude_Nm) : 0.0;
+  const double T0_Nm = std::abs(r.Tm_Nm) + std::abs(r.Tload_Nm) + friction_Nm + cogging_Nm + p.B_kg_m2_per_s * w0;
+  const double room = a.Jm_kg_m2 - h_s * p.B_kg_m2_per_s;
+  return room > 0.0 ? h_s * T0_Nm / room : std::numeric_limits<double>::infinity();
+}
+
 }  // namespace
 
 struct DriveBank::Impl {
@@ -301,6 +354,11 @@ struct DriveBank::Impl {
     std::size_t size{0};
     std::vector<double> y;
     std::unique_ptr<OdeSolver> solver;
+    // Smooth friction's slope is steep only near zero speed: where every
+    // axis with it moves faster than its guard, the group steps at the
+    // coarse step, else at the fine one (equal where nothing is guarded).
+    double fine_step_s{0.0}, coarse_step_s{0.0};
+    bool coarse{false};
     bool dirty{true};        // solver state does not match the bank: restart
     double t_solver_s{0.0};  // time the solver state belongs to
 
@@ -338,9 +396,20 @@ void DriveBank::Impl::build_groups() {
   groups.clear();
   std::vector<std::vector<std::size_t>> sets;
   if (options.one_instance_for_all_axes) {
-    std::vector<std::size_t> all(consts.size());
-    for (std::size_t i = 0; i < all.size(); ++i) all[i] = i;
-    sets.push_back(all);
+    // An axis whose smooth friction asks a finer fixed step near rest gets
+    // an instance of its own, so that the others do not take that step with
+    // it while it rests.
+    const bool fixed = options.method == IntegratorOptions::Method::kArkodeErk && options.erk_fixed_steps_per_tick > 0;
+    std::vector<std::size_t> rest;
+    for (std::size_t i = 0; i < consts.size(); ++i) {
+      const double r = rate_but_smooth_friction_per_s(consts[i]);
+      const int n = options.erk_fixed_steps_per_tick;
+      if (fixed && fixed_step_for_s(Ts_s, r + smooth_friction_rate_per_s(consts[i]), n) < fixed_step_for_s(Ts_s, r, n))
+        sets.push_back({i});
+      else
+        rest.push_back(i);
+    }
+    if (!rest.empty()) sets.push_back(rest);
   } else {
     for (std::size_t i = 0; i < consts.size(); ++i) sets.push_back({i});
   }
@@ -349,7 +418,7 @@ void DriveBank::Impl::build_groups() {
     g->bank = this;
     g->axes = set;
     std::vector<double> atol;
-    double rate = 0.0;
+    double rate = 0.0, rate_coarse = 0.0;
     for (std::size_t i : set) {
       g->offset.push_back(g->size);
       const bool c = consts[i].compliant;
@@ -364,13 +433,19 @@ void DriveBank::Impl::build_groups() {
       // Energy quadratures ride along without steering the step size.
       atol.push_back(1e6);
       atol.push_back(1e6);
-      rate = std::max(rate, fastest_rate_per_s(consts[i]));
+      const double r = rate_but_smooth_friction_per_s(consts[i]);
+      rate = std::max(rate, r + smooth_friction_rate_per_s(consts[i]));
+      rate_coarse = std::max(rate_coarse, r);
     }
     double fixed_step_s = 0.0;
     if (options.method == IntegratorOptions::Method::kArkodeErk && options.erk_fixed_steps_per_tick > 0) {
-      const double n_rate = std::ceil(Ts_s * rate / 0.25);
-      const double n = std::max(static_cast<double>(options.erk_fixed_steps_per_tick), n_rate);
-      fixed_step_s = Ts_s / n;
+      fixed_step_s = fixed_step_for_s(Ts_s, rate, options.erk_fixed_steps_per_tick);
+      g->fine_step_s = g->coarse_step_s = fixed_step_s;
+      const double coarse_s = fixed_step_for_s(Ts_s, rate_coarse, options.erk_fixed_steps_per_tick);
+      if (coarse_s > fixed_step_s) {
+        g->coarse_step_s = coarse_s;
+        for (std::size_t i : set) consts[i].sf_guard_rad_per_s = smooth_friction_guard_rad_per_s(consts[i], coarse_s);
+      }
     }
     g->y.assign(g->size, 0.0);
     g->solver = std::make_unique<OdeSolver>(*g, g->size, kRootsPerAxis * set.size(), options, atol,
@@ -563,6 +638,23 @@ void DriveBank::Impl::advance_group(Group& g, double t_from_s, double t_to_s) {
   if (!any_moving) {
     g.dirty = true;
     return;
+  }
+  if (g.coarse_step_s > g.fine_step_s) {
+    // The coarse step where no moving axis with smooth friction can fall to
+    // its guard within the tick.
+    bool coarse = true;
+    for (std::size_t i : g.axes) {
+      const AxisConst& a = consts[i];
+      const AxisRun& r = runs[i];
+      if (r.frozen || r.exact || a.sf_guard_rad_per_s <= 0.0) continue;
+      const double w0 = std::abs(states[i].w_rad_per_s);
+      if (!(w0 - largest_speed_change_rad_per_s(a, r, w0, t_to_s - t_from_s) > a.sf_guard_rad_per_s)) coarse = false;
+    }
+    if (coarse != g.coarse) {
+      g.solver->set_fixed_step(coarse ? g.coarse_step_s : g.fine_step_s);
+      g.coarse = coarse;
+      restart = true;
+    }
   }
   double t_s = t_from_s;
   if (restart) {

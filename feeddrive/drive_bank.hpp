@@ -59,11 +59,14 @@ struct IntegratorOptions {
   bool reinit_every_tick{true};  ///< restart the multistep history at each ZOH jump
   /// One SUNDIALS instance integrating every moving axis together (true), or
   /// one instance per axis (false). Either way an axis held by static friction
-  /// for a whole tick is not integrated at all.
+  /// for a whole tick is not integrated at all, and with fixed ERK steps an
+  /// axis whose smooth friction asks a finer step near rest has its own.
   bool one_instance_for_all_axes{true};
   /// ARKODE ERK only: 0 = adaptive steps under rtol/atol; n > 0 = fixed steps
   /// of Ts/n, refined further if an axis's fastest rate (compliance, Stribeck
-  /// slope) would make Ts/n longer than 0.25 / rate.
+  /// slope) would make Ts/n longer than 0.25 / rate. Smooth friction's slope
+  /// Tc / (ws J) counts only on ticks where the axis can come within 10 ws
+  /// of rest; on the others the step is the one without it.
   int erk_fixed_steps_per_tick{1};
   /// Advance a rigid axis that slides through the whole tick with no
   /// nonlinear effect in closed form (the zero-order-hold matrix exponential

@@ -159,6 +159,12 @@ long OdeSolver::num_steps() const noexcept {
   return steps_done_ + (n >= steps_last_seen_ ? n - steps_last_seen_ : n);
 }
 
+void OdeSolver::set_fixed_step(double step_s) {
+  if (h_->is_cvode || !(step_s > 0.0))
+    throw SolverError(fmt::format("feeddrive: a fixed step of {} s asked of an integrator without fixed steps", step_s));
+  check(ERKStepSetFixedStep(h_->mem, step_s), "ERKStepSetFixedStep");
+}
+
 void OdeSolver::restart(double t0_s, std::span<const double> y0) {
   harvest_steps();
   double* y = N_VGetArrayPointer(h_->y);

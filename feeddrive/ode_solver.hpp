@@ -35,6 +35,10 @@ class OdeSolver {
   OdeSolver(const OdeSolver&) = delete;
   OdeSolver& operator=(const OdeSolver&) = delete;
 
+  /// ARKODE ERK with fixed steps only: the step from the next advance on
+  /// (call restart() before it).
+  /// @throws SolverError on any other method or a step that is not > 0.
+  void set_fixed_step(double step_s);
   /// Drops all history and restarts from (t0_s, y0) (CVodeReInit / ERKStepReset).
   void restart(double t0_s, std::span<const double> y0);
   /// Integrates towards t_stop_s, never past it; writes the state at the

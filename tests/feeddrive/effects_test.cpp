@@ -440,5 +440,56 @@ TEST(LoadDependentFriction, FrictionRisesWithTheMotorsTorque) {
   EXPECT_THROW(bad.validate("x"), ConfigError);
 }
 
+// Oracle: the same closed loop integrated at the fine step on every tick,
+// which is how the bank integrated smooth friction before it took coarse
+// steps away from rest. With a speed scale of 0.002 rad/s, smooth
+// friction's slope Tc / (ws J) = 12 900 1/s asks ceil(Ts (B + Tc / ws) / J
+// / 0.25) = 6 ERK steps per 0.1 ms tick near zero speed; the bank now takes
+// one where no torque on the axis can bring |w| to 10 ws within the tick
+// (there tanh is 1 to 4e-9 and the drive linear). The reference is told to
+// take those 6 steps on every tick. The loop is the FADAL PID on an
+// unquantised position, tracking 4 mm sines at 0.5 and 3 Hz with a dwell
+// between (20 000 ticks, reversals and a hard stop): each difference feeds
+// back through the loop as in the co-simulation. Tolerance 1e-9 mm and
+// 1e-6 rad/s: one step of a linear drive errs by (h B / J)^5 / 120 of the
+// tick's motion, below 1e-15 here, and the friction by 4e-9 of Tc (found
+// 5e-11 mm and 1.3e-8 rad/s, the speed's from the loop's hunting about the
+// dwell); a coarse step taken into the tanh's knee errs by 1e-7 rad/s in a
+// tick and, through the loop, by 1e-4 mm (tried: a guard at the slope's
+// limit alone, 3.8 ws here, or a switch to the fine step at a root within
+// the tick, which restarts from the step's interpolant).
+TEST(SmoothFriction, CoarseStepsAwayFromRestMatchFineStepsEverywhere) {
+  DriveParams p = fadal_x();
+  p.effects.smooth_friction = {true, 0.002};
+  IntegratorOptions fine;
+  fine.erk_fixed_steps_per_tick = static_cast<int>(
+      std::ceil(kTs_s * (p.B_kg_m2_per_s + p.Tc_pos_Nm / p.effects.smooth_friction.ws_rad_per_s) / p.J_kg_m2 / 0.25));
+  ASSERT_EQ(fine.erk_fixed_steps_per_tick, 6);
+  DriveBank bank = axis_at_rest(p);
+  DriveBank ref = axis_at_rest(p, fine);
+  HandPid pid(fadal_x_gains(), kTs_s), pid_ref(fadal_x_gains(), kTs_s);
+  const auto x_ref_mm = [](double t_s) {
+    const double hold_mm = 4.0 * std::sin(2.0 * std::numbers::pi * 0.4);
+    if (t_s < 0.8) return 4.0 * std::sin(2.0 * std::numbers::pi * 0.5 * t_s);
+    if (t_s < 1.2) return hold_mm;
+    return hold_mm + 4.0 * std::sin(2.0 * std::numbers::pi * 3.0 * (t_s - 1.2));
+  };
+  double max_dx_mm = 0.0, max_dw = 0.0;
+  for (int k = 0; k < 20000; ++k) {
+    const double r = x_ref_mm(k * kTs_s);
+    const double u = pid.step(r, bank.output(0).x_meas_mm);
+    const double u_ref = pid_ref.step(r, ref.output(0).x_meas_mm);
+    bank.advance(k * kTs_s, (k + 1) * kTs_s, {{u, 0.0}});
+    ref.advance(k * kTs_s, (k + 1) * kTs_s, {{u_ref, 0.0}});
+    max_dx_mm = std::max(max_dx_mm, std::abs(bank.output(0).x_mm - ref.output(0).x_mm));
+    max_dw = std::max(max_dw, std::abs(bank.output(0).w_rad_per_s - ref.output(0).w_rad_per_s));
+  }
+  EXPECT_LT(max_dx_mm, 1e-9);
+  EXPECT_LT(max_dw, 1e-6);
+  // It moves, and the coarse step saves most of the steps (a third is taken).
+  EXPECT_GT(std::abs(ref.output(0).x_mm), 1.0);
+  EXPECT_LT(bank.num_steps(), ref.num_steps() / 2);
+}
+
 }  // namespace
 }  // namespace twin::feeddrive
