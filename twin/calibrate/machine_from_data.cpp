@@ -71,6 +71,13 @@ std::string velocity_command_column(const io::TraceTable& t, Axis a) {
 /// runs of one magnitude (2 since).
 bool resolves_velocity_loop(double dt_s) { return dt_s <= 5e-3 + 1e-12; }
 
+/// A log at 2 ms or faster resolves how the held torque settles at rest;
+/// on a slower one a rest period is a handful of samples of a loop that
+/// still settles, so what the log holds there is not read as an effect's
+/// signature (smooth_friction, rising_friction) and the replay rule alone
+/// decides.
+bool resolves_rest(double dt_s) { return dt_s <= 2e-3 + 1e-12; }
+
 /// The slowest log the velocity loop's PI law is fitted from: a loop of
 /// 10 Hz (the cascade sweep's 59 rad/s, its integral's zero at 125 rad/s)
 /// sampled at 50 Hz. At 50 ms the law's misfit from row to row is near the
@@ -5988,11 +5995,8 @@ void try_smooth_friction_on_axis(DataCalibration& out, const std::vector<RunData
   eff.set_kind(EffectKind::kSmoothFriction);
   eff.axis = ax.axis;
   eff.before = eff.after = bh->second;
-  // Where the log samples slower than 2 ms, a rest period is a handful of
-  // samples of a loop that still settles: the signature is not read there,
-  // and the replay rule alone decides.
-  const bool resolves_rest = runs.front().run->sample_period_s <= 2e-3 + 1e-12;
-  if (resolves_rest && !(h.rows >= 10 && h.log < 0.5 * h.model)) {
+  const bool rest_resolved = resolves_rest(runs.front().run->sample_period_s);
+  if (rest_resolved && !(h.rows >= 10 && h.log < 0.5 * h.model)) {
     eff.evidence = h.rows < 10
                        ? fmt::format("not tried: {} fitting rows at rest, too few to see what the axis holds there",
                                      h.rows)
@@ -6038,7 +6042,7 @@ void try_smooth_friction_on_axis(DataCalibration& out, const std::vector<RunData
   // Where the rest is not resolved, what the log holds there is said as
   // read, not as the signature: the replay's errors alone decide.
   const std::string rest =
-      resolves_rest
+      rest_resolved
           ? fmt::format("a stopped axis holds {:.4g} off the constant load in the log (its rest periods' means, "
                         "weighted by their rows), the stick/slip model {:.4g}",
                         h.log, h.model)
@@ -6209,10 +6213,18 @@ void try_rising_friction(DataCalibration& out, const std::vector<RunData>& runs,
     auto hold = [](double mean, std::size_t rows) {
       return rows == 0 ? std::string("no settled rest row") : fmt::format("{:+.3g} ({} rows)", mean, rows);
     };
-    const std::string held_in_log = fmt::format(
-        "a stopped axis holds, off the constant load in the log: after moving + {}, after moving - {}; its Coulomb "
-        "levels are {:.3g} / {:.3g} {}",
-        hold(h.after_pos, h.rows_pos), hold(h.after_neg, h.rows_neg), ax->Tc_pos, ax->Tc_neg, ax->channel.unit);
+    const std::string holds = fmt::format(
+        "after moving + {}, after moving - {}; its Coulomb levels are {:.3g} / {:.3g} {}", hold(h.after_pos, h.rows_pos),
+        hold(h.after_neg, h.rows_neg), ax->Tc_pos, ax->Tc_neg, ax->channel.unit);
+    // Where the rest is not resolved, what the log holds there is said as
+    // read, not as the signature.
+    const double dt_s = runs.front().run->sample_period_s;
+    const std::string held_in_log =
+        resolves_rest(dt_s)
+            ? fmt::format("a stopped axis holds, off the constant load in the log: {}", holds)
+            : fmt::format("a log sampled every {:g} s does not resolve how the held torque settles at rest (off the "
+                          "constant load the log holds there: {}), so the replay's errors alone decide",
+                          dt_s, holds);
     if (b.fit >= ff->second) {
       eff.evidence = fmt::format("{}: no breakaway share lowers the fitting rows' {} error ({:.4g})", held_in_log, key,
                                  ff->second);
