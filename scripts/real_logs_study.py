@@ -12,7 +12,8 @@ model, per run and pooled (root of the row-weighted mean square), and the
 the rows (report.json's twin_minus_regression). With
 --cross RUN: calibrated on RUN alone and validated on every other run (whole
 runs, never fitted on), the same table. --jobs N calibrates N runs at once.
-Prints markdown tables.
+Prints markdown tables; each calibration's lag and wall time go to stderr
+(with --jobs above 1 the runs share the cores, so their times do too).
 """
 import argparse
 import concurrent.futures
@@ -21,17 +22,20 @@ import math
 import os
 import subprocess
 import sys
+import time
 
 
 def calibrate(twin, runs, out, validate=()):
     cmd = [twin, "calibrate", *runs, "-o", out, "--no-plots"]
     if validate:
         cmd += ["--validate", *validate]
+    start = time.monotonic()
     p = subprocess.run(cmd, capture_output=True, text=True)
+    wall_s = time.monotonic() - start
     if p.returncode != 0:
         raise SystemExit(f"twin calibrate failed on {runs}: {p.stderr.strip().splitlines()[-1:]}")
     with open(os.path.join(out, "report.json")) as f:
-        return json.load(f)
+        return json.load(f), wall_s
 
 
 def table(rows, keys):
@@ -78,17 +82,20 @@ def main():
     os.makedirs(a.out_dir, exist_ok=True)
     if a.cross:
         others = [os.path.join(a.runs_dir, r) for r in runs if r != a.cross]
-        rep = calibrate(a.twin, [os.path.join(a.runs_dir, a.cross)], os.path.join(a.out_dir, "cross_" + a.cross), others)
+        rep, wall_s = calibrate(a.twin, [os.path.join(a.runs_dir, a.cross)], os.path.join(a.out_dir, "cross_" + a.cross),
+                                others)
+        print(f"{a.cross}: calibrated and validated in {wall_s:.0f} s", file=sys.stderr)
         print(f"Calibrated on {a.cross}, validated on the {len(others)} other runs (whole runs):\n")
         table([(os.path.basename(v["run"]), v) for v in rep["validation_runs"]], keys)
         return
     rows = []
     with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, a.jobs)) as pool:
         reports = pool.map(lambda r: calibrate(a.twin, [os.path.join(a.runs_dir, r)], os.path.join(a.out_dir, r)), runs)
-    for r, rep in zip(runs, reports):
+    for r, (rep, wall_s) in zip(runs, reports):
         rows.append((r, rep["fit_runs"][0]))
         lag = {ax: p.get("lag_s") for ax, p in rep["parameters_identified"].items()}
-        print(f"{r}: lag " + ", ".join(f"{ax} {1e3 * v:.1f} ms" for ax, v in lag.items() if v), file=sys.stderr)
+        print(f"{r}: lag " + ", ".join(f"{ax} {1e3 * v:.1f} ms" for ax, v in lag.items() if v) +
+              f"; calibrated in {wall_s:.0f} s", file=sys.stderr)
     print("Held-out rows of each run (fitted on its first 60 %):\n")
     table(rows, keys)
 
