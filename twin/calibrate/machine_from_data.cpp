@@ -3769,11 +3769,25 @@ std::vector<double> direction_signs(const DriveRows& d) {
 
 /// The drive with one Coulomb level for both directions (columns a, v,
 /// sgn v, 1) on the same rows, under the same floors; not ok where the axis
-/// moves one way only or the fit is rank deficient.
-AxisFromData::OneLevel fit_one_level(const DriveRows& d, double Ts, const AxisFromData& two) {
+/// moves one way only or the fit is rank deficient; with J held at
+/// `J_held` where fit_drive took it from the windows.
+AxisFromData::OneLevel fit_one_level(const DriveRows& d, double Ts, const AxisFromData& two,
+                                     std::optional<double> J_held = std::nullopt) {
   AxisFromData::OneLevel one;
   const std::vector<double> sgn = direction_signs(d);
-  const LsqResult ls = least_squares({&d.acc, &d.vel, &sgn, &d.one}, d.T, d.rows);
+  LsqResult ls;
+  if (J_held) {
+    // J held (fit_drive): the torque less J a on the other columns.
+    std::vector<double> T = d.T;
+    for (std::size_t k = 0; k < T.size(); ++k) T[k] -= *J_held * d.acc[k];
+    ls = least_squares({&d.vel, &sgn, &d.one}, T, d.rows);
+    if (ls.ok) {
+      ls.theta.insert(ls.theta.begin(), *J_held);
+      ls.stderr_theta.insert(ls.stderr_theta.begin(), two.J_se);
+    }
+  } else {
+    ls = least_squares({&d.acc, &d.vel, &sgn, &d.one}, d.T, d.rows);
+  }
   if (!ls.ok) return one;
   AxisFromData ax = two;
   ax.J = ls.theta[0];
@@ -3811,24 +3825,162 @@ DriveColumns drive_columns(const DriveRows& d, bool moving = false) {
   return c;
 }
 
+/// The inertia from the torque's integral between rows where the command
+/// holds its speed (a cruise or a rest): over such a window [a, b] the
+/// rigid body gives int T dt = J (v_b - v_a) + B (x_b - x_a) + Tc+ t+ -
+/// Tc- t- + c (t_b - t_a), t+ and t- the time moving each way. No row's
+/// acceleration enters, only the commanded speeds at the window's ends,
+/// where they are steady (each the slope of the line it holds to), and the
+/// distance travelled. Where the positions are rounded coarser than the
+/// motion between rows, the acceleration at a row (of the reference rebuilt
+/// from the rounding staircase, or low-passed) is mostly the rebuild's, and
+/// a loop that rings after every change of speed puts its torque on rows
+/// the command does not accelerate: on a 10 ms log rounded to 0.1 mm of the
+/// cascade truth (J 0.01107 A per mm/s^2, a loop ringing at 10 Hz for
+/// 0.3 s) the rows gave J 0.001, the windows 0.0107.
+/// Steady at row k: the rebuilt reference within a quantum (or 1e-6 mm) of
+/// its line through k - S and k + S, S = 0.1 s of rows (at least 2), all
+/// those rows interior and fitting rows; windows run from one steady row to
+/// the next at least S rows on in the same segment. nullopt where fewer than
+/// 20 windows are found or the fit is rank deficient.
+struct WindowDrive {
+  double J{0.0}, J_se{0.0};
+  std::size_t windows{0};
+  /// The windows' first and second halves give J within 3 standard errors
+  /// of their difference (a few windows that carry the fit disagree).
+  bool halves_agree{false};
+};
+std::optional<WindowDrive> drive_from_windows(const AxisFit& f, const AxisFromData& ax) {
+  const std::size_t i = index(ax.axis);
+  std::vector<double> dv, dx, tp, tn, tt, y;
+  for (const RunData& rd : f.runs) {
+    const double dt = rd.run->sample_period_s;
+    const auto S = static_cast<std::size_t>(std::max(2L, std::lround(0.1 / dt)));
+    const std::vector<double>& ref = rd.smooth->trace.at(col(ax.axis, "_ref_mm"));
+    const std::vector<double>* x = rd.run->trace.find(col(ax.axis, "_mm"));
+    const std::vector<double>* T = rd.run->trace.find(ax.channel.column);
+    if (T == nullptr) continue;
+    const double tol_mm = std::max(f.position_quantum_mm, 1e-6);
+    const auto steady = [&](std::size_t k) {
+      if (k < S || k + S >= rd.n_fit) return false;
+      for (std::size_t j = k - S; j <= k + S; ++j)
+        if (!rd.interior[j]) return false;
+      const double r0 = ref[k - S], slope = (ref[k + S] - ref[k - S]) / static_cast<double>(2 * S);
+      for (std::size_t j = k - S; j <= k + S; ++j)
+        if (std::abs(ref[j] - r0 - slope * static_cast<double>(j - (k - S))) > tol_mm) return false;
+      return true;
+    };
+    const auto segment_of = [&](std::size_t k) {
+      for (std::size_t s = 0; s < rd.segments.size(); ++s)
+        if (k >= rd.segments[s].begin && k < rd.segments[s].end) return s;
+      return rd.segments.size();
+    };
+    std::optional<std::size_t> start;
+    for (std::size_t k = 0; k < rd.n_fit; ++k) {
+      if (!steady(k)) continue;
+      if (start && (k < *start + S)) continue;
+      if (start && segment_of(*start) == segment_of(k)) {
+        const std::size_t a = *start, b = k;
+        double Tint = 0.0, pos = 0.0, neg = 0.0;
+        for (std::size_t j = a; j <= b; ++j) {
+          const double w = (j == a || j == b) ? 0.5 * dt : dt;  // the trapezoid
+          Tint += w * (*T)[j];
+          const int d = direction(rd.kin[i].v_mm_per_s[j], rd.v_move[i]);
+          pos += d > 0 ? w : 0.0;
+          neg += d < 0 ? w : 0.0;
+        }
+        const std::vector<double>& pos_mm = x != nullptr ? *x : ref;
+        // Each end's speed from the line it is steady on (a row's own,
+        // off a rebuilt or low-passed staircase, carries the rounding).
+        const auto line_speed = [&](std::size_t m) {
+          return (ref[m + S] - ref[m - S]) / (static_cast<double>(2 * S) * dt);
+        };
+        dv.push_back(line_speed(b) - line_speed(a));
+        dx.push_back(pos_mm[b] - pos_mm[a]);
+        tp.push_back(pos);
+        tn.push_back(-neg);
+        tt.push_back(static_cast<double>(b - a) * dt);
+        y.push_back(Tint);
+      }
+      start = k;
+    }
+  }
+  if (y.size() < 20) return std::nullopt;
+  std::vector<const std::vector<double>*> X{&dv, &dx};
+  if (std::any_of(tp.begin(), tp.end(), [](double v) { return v != 0.0; })) X.push_back(&tp);
+  if (std::any_of(tn.begin(), tn.end(), [](double v) { return v != 0.0; })) X.push_back(&tn);
+  X.push_back(&tt);
+  std::vector<std::size_t> rows(y.size()), first, second;
+  for (std::size_t k = 0; k < rows.size(); ++k) {
+    rows[k] = k;
+    (2 * k < rows.size() ? first : second).push_back(k);
+  }
+  const LsqResult ls = least_squares(X, y, rows);
+  const LsqResult l1 = least_squares(X, y, first), l2 = least_squares(X, y, second);
+  if (!ls.ok || !l1.ok || !l2.ok) return std::nullopt;
+  return WindowDrive{ls.theta[0], ls.stderr_theta[0], y.size(),
+                     std::abs(l1.theta[0] - l2.theta[0]) <= 3.0 * std::hypot(l1.stderr_theta[0], l2.stderr_theta[0])};
+}
+
 /// The drive fitted on drive_rows(f, ax, o): J, B, the Coulomb
 /// levels and the constant under clamp_drive's floors, the one-level fit
 /// beside it; false where it cannot be (why in `why_not`). The floors applied
 /// are in ax.note.
+///
+/// Where the drive is fitted on the commanded kinematics and the windows
+/// between steady rows (drive_from_windows) resolve J (to a tenth, their two
+/// halves alike) apart from the rows' J beyond both scatters (3 standard
+/// errors of the difference) and by more than half the smaller (a few per
+/// cent between two good estimates is the windows' own bias: an axis's lag
+/// behind a cruise), J is the windows' and the rest is fitted on the rows
+/// with J held (said in ax.note).
 bool fit_drive(const AxisFit& f, AxisFromData& ax, const DriveRowsOptions& o, std::string& why_not) {
   const DriveRows d = drive_rows(f, ax, o);
   const DriveColumns c = drive_columns(d);
   const bool moves_pos = c.pos, moves_neg = c.neg;
-  const LsqResult ls = least_squares(c.X, d.T, d.rows);
+  LsqResult ls = least_squares(c.X, d.T, d.rows);
   ax.fit_rows = d.rows.size();
   if (!ls.ok || !(moves_pos || moves_neg)) {
     why_not = fmt::format("{} rows, {}", d.rows.size(),
                           moves_pos || moves_neg ? "rank deficient" : "the axis does not move");
     return false;
   }
+  std::string from_windows;
+  std::optional<double> J_held;
+  if (!drive_on_logged_speed(f, ax.axis)) {
+    const std::optional<WindowDrive> w = drive_from_windows(f, ax);
+    const double J_rows = ls.theta[0], J_rows_se = ls.stderr_theta[0];
+    if (w && w->J > 0.0 && w->J >= 10.0 * w->J_se && w->halves_agree &&
+        std::abs(w->J - J_rows) > 3.0 * std::hypot(w->J_se, J_rows_se) &&
+        !(J_rows > 0.0 && w->J < 1.5 * J_rows && J_rows < 1.5 * w->J)) {
+      // The rows' fit again with J held: the torque less J a, without the
+      // acceleration's column.
+      DriveRows held = d;
+      for (std::size_t k = 0; k < held.T.size(); ++k) held.T[k] -= w->J * held.acc[k];
+      DriveColumns hc = drive_columns(held);
+      hc.X.erase(hc.X.begin());
+      const LsqResult hls = least_squares(hc.X, held.T, held.rows);
+      if (hls.ok) {
+        LsqResult with_J = hls;
+        with_J.theta.insert(with_J.theta.begin(), w->J);
+        with_J.stderr_theta.insert(with_J.stderr_theta.begin(), w->J_se);
+        ls = with_J;
+        J_held = w->J;
+        from_windows = fmt::format(
+            "J {:.4g} +- {:.2g} from the torque's integral over {} windows between rows where the command holds its "
+            "speed (the rows' accelerations gave {:.4g} +- {:.2g}: they do not resolve it)",
+            w->J, w->J_se, w->windows, J_rows, J_rows_se);
+      }
+    }
+  }
   take_drive_fit(ls, moves_pos, moves_neg, ax);
-  const std::vector<std::string> clamped = clamp_drive(d, f.Ts, ax);
-  ax.one_level = moves_pos && moves_neg ? fit_one_level(d, f.Ts, ax) : AxisFromData::OneLevel{};
+  std::vector<std::string> clamped = clamp_drive(d, f.Ts, ax);
+  ax.one_level = moves_pos && moves_neg ? fit_one_level(d, f.Ts, ax, J_held) : AxisFromData::OneLevel{};
+  if (!from_windows.empty()) {
+    // In the note of whichever drive the Coulomb choice takes.
+    clamped.insert(clamped.begin(), from_windows);
+    if (ax.one_level.ok) ax.one_level.clamped.insert(ax.one_level.clamped.begin(), from_windows);
+  }
   ax.note = clamped.empty() ? "" : fmt::format("axis {}: {}", axis_name(ax.axis), fmt::join(clamped, "; "));
   return true;
 }

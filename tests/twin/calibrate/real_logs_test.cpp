@@ -650,6 +650,54 @@ TEST(RealLogs, ACoarseCurrentLogPredictsAnotherProgramBetterThanTheRegression) {
   EXPECT_LE(v.calibrated.nrms.at("x_i_A"), v.identified.nrms.at("x_i_A"));
 }
 
+// The same truth logged every 10 ms, and every 1 ms (positions to 3
+// significant figures: 0.1 mm here), current only. Its loop rings at about
+// 10 Hz for 0.3 s after every change of speed, so the current at a row is
+// mostly the ringing's, which the command's acceleration at the row does
+// not show: fitted on the rows, J came out at 0.001 (10 ms) and 5e-5 (1 ms)
+// A per mm/s^2, every velocity loop was chosen about that J, and the twin
+// lost to the regression (held out 0.784 against 0.766 at 10 ms). Oracle:
+// the truth's J, 0.0084 kg m^2 over Kt rg = 0.4769 N m/A x 1.5915 mm/rad,
+// i.e. 0.01107 A per mm/s^2; the windows between steady rows must give it
+// within 10 % (found 3.7 % and 7 % low: the axis's lag behind a cruise adds
+// B times it, and the line speeds carry the rounding), say so in the
+// axis's note, and the twin must then beat the regression on the run's
+// held-out rows and on the other program (measured 0.609 against 0.766 and
+// 0.627 against 0.755 at 10 ms; 0.571 against 0.800 and 0.631 against
+// 0.802 at 1 ms). The 100 ms log of the test above keeps the rows' J: its
+// windows do not resolve J to a tenth.
+TEST(RealLogs, InertiaAStaircaseLogDoesNotResolveIsTakenFromTheTorquesIntegral) {
+  const double Ts = 1e-3;
+  const double J_truth = 0.0084 / (0.4769 * 1.5915);
+  for (const int every : {10, 1}) {
+    truth::RunSpec sp = coarse_current_spec(Ts);
+    sp.log_every = every;
+    sp.cascade.Kvp = 0.4;
+    sp.cascade.Tn = 0.01;
+    sp.reference_mm = program(Ts, 0.4, 60.0);
+    const auto fit_dir = work(fmt::format("windows_fit_{}", every));
+    truth::write_truth_run(fit_dir, sp);
+    sp.reference_mm = program(Ts, 0.7, 40.0);
+    sp.seed = 7;
+    const auto val_dir = work(fmt::format("windows_val_{}", every));
+    truth::write_truth_run(val_dir, sp);
+    const MeasuredRun run = load_run(fit_dir);
+    const MeasuredRun val = load_run(val_dir);
+    const DataCalibration r = calibrate_from_data({run}, {val}, machine_for_run(run, "", nullptr));
+    ASSERT_EQ(r.axis.size(), 1u);
+    EXPECT_NEAR(r.axis[0].J, J_truth, 0.1 * J_truth) << every;
+    EXPECT_THAT(r.axis[0].note, HasSubstr("from the torque's integral over")) << every;
+    ASSERT_EQ(r.fit_runs.size(), 1u);
+    ASSERT_EQ(r.validation_runs.size(), 1u);
+    const RunErrors& f = r.fit_runs[0];
+    const RunErrors& v = r.validation_runs[0];
+    ASSERT_TRUE(f.calibrated.nrms.count("x_i_A") && f.regression.nrms.count("x_i_A"));
+    ASSERT_TRUE(v.calibrated.nrms.count("x_i_A") && v.regression.nrms.count("x_i_A"));
+    EXPECT_LT(f.calibrated.nrms.at("x_i_A"), f.regression.nrms.at("x_i_A")) << every;
+    EXPECT_LT(v.calibrated.nrms.at("x_i_A"), v.regression.nrms.at("x_i_A")) << every;
+  }
+}
+
 // Logs without the position loop's output: the 1 kHz runs of
 // CascadeAtOneKilohertzWithRawTorque with a Stribeck rise in the truth's
 // friction (which the identified drive does not have), the velocity command
