@@ -455,7 +455,7 @@ TEST(LoadDependentFriction, FrictionRisesWithTheMotorsTorque) {
 // tick's motion, below 1e-15 here, and the friction by 4e-9 of Tc (found
 // 5e-11 mm and 1.3e-8 rad/s, the speed's from the loop's hunting about the
 // dwell); a coarse step taken into the tanh's knee errs by 1e-7 rad/s in a
-// tick and, through the loop, by 1e-4 mm (tried: a guard at the slope's
+// tick and, through the loop, by about 2e-4 mm (tried: a guard at the slope's
 // limit alone, 3.8 ws here, or a switch to the fine step at a root within
 // the tick, which restarts from the step's interpolant).
 TEST(SmoothFriction, CoarseStepsAwayFromRestMatchFineStepsEverywhere) {
