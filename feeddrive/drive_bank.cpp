@@ -301,6 +301,11 @@ double rate_but_smooth_friction_per_s(const AxisConst& a) {
   return rate;
 }
 
+// Whether the options integrate with fixed ERK steps.
+bool fixed_erk_steps(const IntegratorOptions& o) {
+  return o.method == IntegratorOptions::Method::kArkodeErk && o.erk_fixed_steps_per_tick > 0;
+}
+
 // The explicit fixed step for the rate [1/s]: Ts / n, with n at least the
 // options' steps per tick and enough that step x rate <= 0.25.
 double fixed_step_for_s(double Ts_s, double rate_per_s, int steps_per_tick) {
@@ -399,7 +404,7 @@ void DriveBank::Impl::build_groups() {
     // An axis whose smooth friction asks a finer fixed step near rest gets
     // an instance of its own, so that the others do not take that step with
     // it while it rests.
-    const bool fixed = options.method == IntegratorOptions::Method::kArkodeErk && options.erk_fixed_steps_per_tick > 0;
+    const bool fixed = fixed_erk_steps(options);
     std::vector<std::size_t> rest;
     for (std::size_t i = 0; i < consts.size(); ++i) {
       const double r = rate_but_smooth_friction_per_s(consts[i]);
@@ -438,7 +443,7 @@ void DriveBank::Impl::build_groups() {
       rate_coarse = std::max(rate_coarse, r);
     }
     double fixed_step_s = 0.0;
-    if (options.method == IntegratorOptions::Method::kArkodeErk && options.erk_fixed_steps_per_tick > 0) {
+    if (fixed_erk_steps(options)) {
       fixed_step_s = fixed_step_for_s(Ts_s, rate, options.erk_fixed_steps_per_tick);
       g->fine_step_s = g->coarse_step_s = fixed_step_s;
       const double coarse_s = fixed_step_for_s(Ts_s, rate_coarse, options.erk_fixed_steps_per_tick);

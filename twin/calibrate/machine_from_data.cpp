@@ -3767,6 +3767,14 @@ std::vector<double> direction_signs(const DriveRows& d) {
   return sgn;
 }
 
+/// The rows' torque less J a: what is left for the other columns where J is
+/// held.
+std::vector<double> torque_less_inertia(const DriveRows& d, double J) {
+  std::vector<double> T = d.T;
+  for (std::size_t k = 0; k < T.size(); ++k) T[k] -= J * d.acc[k];
+  return T;
+}
+
 /// The drive with one Coulomb level for both directions (columns a, v,
 /// sgn v, 1) on the same rows, under the same floors; not ok where the axis
 /// moves one way only or the fit is rank deficient; with J held at
@@ -3778,9 +3786,7 @@ AxisFromData::OneLevel fit_one_level(const DriveRows& d, double Ts, const AxisFr
   LsqResult ls;
   if (J_held) {
     // J held (fit_drive): the torque less J a on the other columns.
-    std::vector<double> T = d.T;
-    for (std::size_t k = 0; k < T.size(); ++k) T[k] -= *J_held * d.acc[k];
-    ls = least_squares({&d.vel, &sgn, &d.one}, T, d.rows);
+    ls = least_squares({&d.vel, &sgn, &d.one}, torque_less_inertia(d, *J_held), d.rows);
     if (ls.ok) {
       ls.theta.insert(ls.theta.begin(), *J_held);
       ls.stderr_theta.insert(ls.stderr_theta.begin(), two.J_se);
@@ -3953,13 +3959,10 @@ bool fit_drive(const AxisFit& f, AxisFromData& ax, const DriveRowsOptions& o, st
     if (w && w->J > 0.0 && w->J >= 10.0 * w->J_se && w->halves_agree &&
         std::abs(w->J - J_rows) > 3.0 * std::hypot(w->J_se, J_rows_se) &&
         !(J_rows > 0.0 && w->J < 1.5 * J_rows && J_rows < 1.5 * w->J)) {
-      // The rows' fit again with J held: the torque less J a, without the
-      // acceleration's column.
-      DriveRows held = d;
-      for (std::size_t k = 0; k < held.T.size(); ++k) held.T[k] -= w->J * held.acc[k];
-      DriveColumns hc = drive_columns(held);
-      hc.X.erase(hc.X.begin());
-      const LsqResult hls = least_squares(hc.X, held.T, held.rows);
+      // The rows' fit again with J held: the torque less J a, on the
+      // columns but the acceleration's.
+      const std::vector<const std::vector<double>*> others(c.X.begin() + 1, c.X.end());
+      const LsqResult hls = least_squares(others, torque_less_inertia(d, w->J), d.rows);
       if (hls.ok) {
         LsqResult with_J = hls;
         with_J.theta.insert(with_J.theta.begin(), w->J);
